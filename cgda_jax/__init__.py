@@ -16,6 +16,37 @@ __all__: list[str] = ["__version__"]
 
 # --- core (data, generalization, distances, recognition) ---------------------
 # (section owned by the core work; keep one import per line, extend __all__)
+from cgda_jax.data import Demonstration as Demonstration
+from cgda_jax.data import load_csv as load_csv
+from cgda_jax.data import load_npz as load_npz
+from cgda_jax.data import load_xgnitive as load_xgnitive
+from cgda_jax.data import save_csv as save_csv
+from cgda_jax.data import save_npz as save_npz
+from cgda_jax.data import validate_demonstrations as validate_demonstrations
+from cgda_jax.distance import dtw as dtw
+from cgda_jax.distance import dtw_multi as dtw_multi
+from cgda_jax.distance import euclidean as euclidean
+from cgda_jax.distance import resample as resample
+from cgda_jax.generalize import GeneralizedAction as GeneralizedAction
+from cgda_jax.generalize import generalize as generalize
+from cgda_jax.generalize import rbf_interpolate as rbf_interpolate
+
+__all__ += [
+    "Demonstration",
+    "validate_demonstrations",
+    "load_csv",
+    "load_npz",
+    "save_csv",
+    "save_npz",
+    "load_xgnitive",
+    "dtw",
+    "dtw_multi",
+    "euclidean",
+    "resample",
+    "GeneralizedAction",
+    "generalize",
+    "rbf_interpolate",
+]
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
 
