@@ -1,0 +1,259 @@
+"""Waypoints -> feature trajectories: the simulator the strategies evaluate.
+
+`Simulator` moves a `Robot` through joint waypoints and lets a scene turn the marker
+path into object features.  All methods are pure and jittable; the model is on the
+device already and every shape (waypoints, sub-steps, physics steps) is static.
+
+Modes:
+    kinematic (default): from the current posture to the waypoint in ``substeps``
+        equally spaced joint-space sub-steps (the last one is the waypoint); forward
+        kinematics of the marker at each, the scene updated at each, so the marker
+        sweeps the path (a wall is painted along it).  No dynamics.
+    dynamic: position actuators track the waypoint for ``physics_steps`` ``mjx.step``
+        calls with gravity on; the scene is updated at every physics step.  Every
+        evolved joint needs a position actuator; joints held by ``fixed`` (or at 0)
+        are held by theirs.
+
+Waypoints outside the joint limits are clipped into them (the robot cannot go there).
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from cgda_jax import MarkerScene, Robot, Simulator, model_path
+    >>> robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+    ...                         "marker")
+    >>> sim = Simulator(robot, MarkerScene(), substeps=4)
+    >>> sim.execute(jnp.zeros((5, 3))).shape
+    (5, 3)
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from flax import struct
+from jax import Array
+from mujoco import mjx
+
+from cgda_jax.sim.robot import Robot
+
+__all__ = ["MODES", "SimState", "Simulator"]
+
+MODES = ("kinematic", "dynamic")
+
+
+@struct.dataclass
+class SimState:
+    """What the simulator carries between waypoints.
+
+    Attributes:
+        genes: (DoF,) current values of the evolved joints.
+        scene: the scene's state (e.g. painted (S,) bool).
+        data: the ``mjx.Data`` in dynamic mode, ``None`` in kinematic mode.
+    """
+
+    genes: Array
+    scene: Any
+    data: Any = None
+
+
+class Simulator:
+    """Execute joint waypoints on a robot and return the scene's features.
+
+    Args:
+        robot: the `Robot` (model, evolved joints, marker site).
+        scene: a scene (`MarkerScene`, `PaintWall`, or anything with the same methods).
+        mode: "kinematic" (default) or "dynamic".
+        substeps: kinematic mode: forward-kinematics evaluations per waypoint, equally
+            spaced in joint space from the previous posture, the last one at the
+            waypoint (1 = jump straight to it).
+        physics_steps: dynamic mode: ``mjx.step`` calls per waypoint
+            (x ``robot.mj_model.opt.timestep`` seconds).
+
+    Attributes:
+        n_dof, n_features, feature_names, lower (DoF,), upper (DoF,).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        scene,
+        mode: str = "kinematic",
+        substeps: int = 8,
+        physics_steps: int = 100,
+    ):
+        if mode not in MODES:
+            raise ValueError(f"mode={mode!r}; expected one of {MODES}")
+        if int(substeps) < 1:
+            raise ValueError(f"substeps must be >= 1, got {substeps}")
+        if int(physics_steps) < 1:
+            raise ValueError(f"physics_steps must be >= 1, got {physics_steps}")
+        self.robot = robot
+        self.scene = scene
+        self.mode = mode
+        self.substeps = int(substeps)
+        self.physics_steps = int(physics_steps)
+        self.n_dof = robot.n_dof
+        self.n_features = scene.n_features
+        self.feature_names = tuple(scene.feature_names)
+        self.lower = robot.lower
+        self.upper = robot.upper
+        self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
+        if mode == "dynamic":
+            self._act_qadr = self._actuated_qpos()
+        self.n_traces = 0  # how often execute_population was traced (tests read it)
+        self._execute_population = jax.jit(jax.vmap(self._execute_traced))
+
+    def __repr__(self) -> str:
+        return (
+            f"Simulator({self.robot!r}, {type(self.scene).__name__}, mode={self.mode!r}, "
+            f"substeps={self.substeps}, physics_steps={self.physics_steps})"
+        )
+
+    # -- set-up ------------------------------------------------------------------
+    def _actuated_qpos(self) -> np.ndarray:
+        """(nu,) qpos address each position actuator drives; checks coverage."""
+        m = self.robot.mj_model
+        joint_trn = int(mujoco.mjtTrn.mjTRN_JOINT)
+        adr = []
+        for a in range(m.nu):
+            if int(m.actuator_trntype[a]) != joint_trn:
+                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+                raise ValueError(f"actuator {name!r} does not drive a joint")
+            adr.append(int(m.jnt_qposadr[m.actuator_trnid[a, 0]]))
+        missing = [
+            name for name, q in zip(self.robot.joint_names, self.robot.qpos_adr)
+            if int(q) not in adr
+        ]
+        if missing:
+            raise ValueError(
+                f"dynamic mode needs a position actuator on every evolved joint; "
+                f"joints {missing} have none"
+            )
+        return np.asarray(adr, dtype=np.int32)
+
+    # -- the one-example functions -----------------------------------------------
+    def init_state(self, genes0: Array | None = None) -> SimState:
+        """Start state: posture ``genes0`` (default all evolved joints at 0, clipped
+        into the limits), the scene updated with the marker there.
+
+        Args:
+            genes0: (DoF,) start values of the evolved joints, or None.
+        """
+        if genes0 is None:
+            genes0 = jnp.zeros(self.n_dof, jnp.float32)
+        self.robot.check_genes(genes0, "genes0")
+        genes0 = self.robot.clip(jnp.asarray(genes0, jnp.float32))
+        data = None
+        if self.mode == "dynamic":
+            qpos = self.robot.qpos(genes0)
+            data = self.robot.make_data(qpos).replace(ctrl=qpos[self._act_qadr])
+            data = mjx.forward(self.robot.mjx_model, data)
+            marker = data.site_xpos[self.robot.site_id]
+        else:
+            marker = self.robot.marker_position(genes0)
+        scene = self.scene.update(self.scene.init_state(), marker)
+        return SimState(genes=genes0, scene=scene, data=data)
+
+    def step(self, state: SimState, waypoint: Array) -> tuple[SimState, Array]:
+        """Move to one waypoint.
+
+        Args:
+            state: the current `SimState`.
+            waypoint: (DoF,) target joint values (clipped into the limits).
+
+        Returns:
+            (new state, features (F,) at the waypoint).
+        """
+        self.robot.check_genes(waypoint, "waypoint")
+        target = self.robot.clip(jnp.asarray(waypoint, jnp.float32))
+        if self.mode == "dynamic":
+            return self._step_dynamic(state, target)
+        return self._step_kinematic(state, target)
+
+    def _step_kinematic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+        alphas = jnp.asarray(self._alphas)[:, None]
+        path = state.genes + alphas * (target - state.genes)  # (K, DoF)
+        markers = jax.vmap(self.robot.marker_position)(path)  # (K, 3)
+
+        def paint(scene_state, marker):
+            return self.scene.update(scene_state, marker), None
+
+        scene_state, _ = jax.lax.scan(paint, state.scene, markers)
+        features = self.scene.features(scene_state, markers[-1])
+        return state.replace(genes=target, scene=scene_state), features
+
+    def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+        model, site = self.robot.mjx_model, self.robot.site_id
+        ctrl = self.robot.qpos(target)[self._act_qadr]
+
+        def physics(carry, _):
+            data, scene_state = carry
+            data = mjx.step(model, data)
+            # site_xpos holds the posture at the start of this step (mj_step order).
+            return (data, self.scene.update(scene_state, data.site_xpos[site])), None
+
+        data0 = state.data.replace(ctrl=ctrl)
+        (data, scene_state), _ = jax.lax.scan(
+            physics, (data0, state.scene), None, length=self.physics_steps
+        )
+        data = mjx.kinematics(model, data)  # place the marker at the final posture
+        marker = data.site_xpos[site]
+        scene_state = self.scene.update(scene_state, marker)
+        features = self.scene.features(scene_state, marker)
+        genes = self.robot.genes_of(data.qpos)
+        return SimState(genes=genes, scene=scene_state, data=data), features
+
+    def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:
+        shape = tuple(jnp.shape(waypoints))
+        want = "(P, N, DoF)" if batched else "(N, DoF)"
+        ndim = 3 if batched else 2
+        if len(shape) != ndim or shape[-1] != self.n_dof or 0 in shape:
+            raise ValueError(
+                f"waypoints has shape {shape}, expected {want} with DoF = {self.n_dof} "
+                f"(joints {self.robot.joint_names})"
+            )
+
+    def rollout(
+        self, waypoints: Array, state: SimState | None = None
+    ) -> tuple[Array, SimState]:
+        """Execute waypoints in order (``lax.scan`` of `step`).
+
+        Args:
+            waypoints: (N, DoF) joint values.
+            state: start state; default `init_state()`.
+
+        Returns:
+            (features (N, F), final state).
+        """
+        self._check_waypoints(waypoints)
+        if state is None:
+            state = self.init_state()
+        state, features = jax.lax.scan(
+            self.step, state, jnp.asarray(waypoints, jnp.float32)
+        )
+        return features, state
+
+    def execute(self, waypoints: Array, state: SimState | None = None) -> Array:
+        """Features (N, F) of executing (N, DoF) waypoints from ``state`` (default:
+        `init_state()`)."""
+        return self.rollout(waypoints, state)[0]
+
+    def _execute_traced(self, waypoints: Array) -> Array:
+        self.n_traces += 1
+        return self.execute(waypoints)
+
+    def execute_population(self, population: Array) -> Array:
+        """Execute a population of trajectories at once (jitted ``vmap`` of `execute`).
+
+        Args:
+            population: (P, N, DoF) waypoints, each starting from `init_state()`.
+
+        Returns:
+            (P, N, F) features.
+        """
+        self._check_waypoints(population, batched=True)
+        return self._execute_population(jnp.asarray(population, jnp.float32))

@@ -1,0 +1,244 @@
+"""A robot model: MJCF -> MjModel -> MJX model once, and the evolved joint subset.
+
+`Robot.from_mjcf` parses the model, resolves joint and site names to ids, reads the
+joint limits and puts the MJX model on the device, all once.  Nothing here is specific
+to one robot: any MJCF arm with hinge/slide joints and a marker site works by naming
+its joints and site.
+
+Genes are raw ``qpos`` values of the evolved joints (radians for hinges, metres for
+slides), in the order the joints are listed.
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from cgda_jax import Robot, model_path
+    >>> robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+    ...                         "marker")
+    >>> [round(float(v), 3) for v in robot.marker_position(jnp.zeros(3))]
+    [0.0, 0.0, 0.6]
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+from collections.abc import Callable, Mapping, Sequence
+
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from jax import Array
+from mujoco import mjx
+
+__all__ = ["KINEMATICS", "Robot", "model_path"]
+
+_MODELS = pathlib.Path(__file__).resolve().parents[2] / "models"
+_HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
+_SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+
+#: Forward-kinematics back-ends: "chain" folds the marker's kinematic chain into a few
+#: constant transforms (`cgda_jax.sim.chain`); "mjx" runs ``mjx.kinematics`` on the
+#: whole model and reads ``site_xpos``.  Both equal ``mujoco.mj_kinematics``.
+KINEMATICS = ("chain", "mjx")
+
+
+def model_path(name: str) -> pathlib.Path:
+    """Path of a built-in model in the repository's ``models/`` folder.
+
+    Args:
+        name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
+
+    Raises:
+        FileNotFoundError: no such built-in model (the message lists the ones there).
+    """
+    path = _MODELS / name
+    if not path.is_file():
+        have = sorted(p.name for p in _MODELS.glob("*.xml")) if _MODELS.is_dir() else []
+        raise FileNotFoundError(f"no built-in model {name!r} in {_MODELS}; have {have}")
+    return path
+
+
+def _id(mj_model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, what: str, src) -> int:
+    idx = mujoco.mj_name2id(mj_model, kind, name)
+    if idx < 0:
+        names = [
+            mujoco.mj_id2name(mj_model, kind, i)
+            for i in range(
+                mj_model.njnt if kind == mujoco.mjtObj.mjOBJ_JOINT else mj_model.nsite
+            )
+        ]
+        raise KeyError(f"{what} {name!r} not found in {src}; it has {names}")
+    return idx
+
+
+class Robot:
+    """A MuJoCo model with a chosen set of evolved joints and a marker site.
+
+    Build with `Robot.from_mjcf` (or `Robot.from_model` for a compiled ``MjModel``).
+
+    Attributes:
+        joint_names: (DoF,) evolved joints, in gene order.
+        n_dof: number of evolved joints.
+        lower, upper: (DoF,) joint limits from the model (radians / metres).
+        mj_model: the compiled ``mujoco.MjModel``.
+        mjx_model: the same model on the device (``mjx.put_model``, JAX impl).
+        qpos0: (nq,) posture with the fixed values applied; every other joint at 0.
+        qpos_adr: (DoF,) qpos addresses of the evolved joints.
+        joint_ids: (DoF,) joint ids of the evolved joints.
+        site_id: id of the marker site.
+        marker_site: its name.
+        kinematics: "chain" or "mjx" (see `KINEMATICS`).
+    """
+
+    def __init__(
+        self,
+        mj_model: mujoco.MjModel,
+        joints: Sequence[str],
+        marker_site: str,
+        fixed: Mapping[str, float] | None = None,
+        *,
+        kinematics: str = "chain",
+        source: str = "the model",
+    ):
+        joints = tuple(joints)
+        if not joints:
+            raise ValueError(f"no joints to evolve given for {source}")
+        if len(set(joints)) != len(joints):
+            raise ValueError(f"joints {list(joints)} name a joint twice ({source})")
+        if kinematics not in KINEMATICS:
+            raise ValueError(f"kinematics={kinematics!r}; expected one of {KINEMATICS}")
+        fixed = dict(fixed or {})
+        both = set(fixed) & set(joints)
+        if both:
+            raise ValueError(f"joints {sorted(both)} are both evolved and fixed")
+
+        jt = mujoco.mjtObj.mjOBJ_JOINT
+        self.mj_model = mj_model
+        self.joint_names = joints
+        self.n_dof = len(joints)
+        self.joint_ids = np.array([_id(mj_model, jt, j, "joint", source) for j in joints])
+        self.marker_site = marker_site
+        self.site_id = _id(mj_model, mujoco.mjtObj.mjOBJ_SITE, marker_site, "site", source)
+        self.kinematics = kinematics
+
+        lower, upper = [], []
+        for name, jid in zip(joints, self.joint_ids):
+            jtype = int(mj_model.jnt_type[jid])
+            if jtype not in (_HINGE, _SLIDE):
+                raise ValueError(
+                    f"joint {name!r} in {source} is a {mujoco.mjtJoint(jtype).name}; "
+                    "only hinge and slide joints can be evolved"
+                )
+            if mj_model.jnt_limited[jid]:
+                lo, hi = (float(v) for v in mj_model.jnt_range[jid])
+            elif jtype == _HINGE:
+                lo, hi = -math.pi, math.pi
+            else:
+                raise ValueError(f"slide joint {name!r} in {source} has no range")
+            lower.append(lo)
+            upper.append(hi)
+        self.lower = jnp.asarray(lower, dtype=jnp.float32)
+        self.upper = jnp.asarray(upper, dtype=jnp.float32)
+        self.qpos_adr = np.asarray(mj_model.jnt_qposadr[self.joint_ids], dtype=np.int32)
+
+        qpos0 = np.zeros(mj_model.nq)
+        for name, value in fixed.items():
+            jid = _id(mj_model, jt, name, "fixed joint", source)
+            if int(mj_model.jnt_type[jid]) not in (_HINGE, _SLIDE):
+                raise ValueError(f"fixed joint {name!r} in {source} is not a hinge/slide")
+            qpos0[mj_model.jnt_qposadr[jid]] = float(value)
+        self.fixed = fixed
+        self._qpos0_np = qpos0
+        self.qpos0 = jnp.asarray(qpos0, dtype=jnp.float32)
+
+        self.mjx_model = mjx.put_model(mj_model, impl="jax")
+        self._data0 = mjx.make_data(self.mjx_model, impl="jax")
+        self._fk: Callable[[Array], Array] = self._build_fk(kinematics)
+
+    @classmethod
+    def from_mjcf(
+        cls,
+        path: str | pathlib.Path,
+        joints: Sequence[str],
+        marker_site: str,
+        fixed: Mapping[str, float] | None = None,
+        *,
+        kinematics: str = "chain",
+    ) -> Robot:
+        """Load an MJCF file and choose the evolved joints and the marker site.
+
+        Args:
+            path: the MJCF file.
+            joints: (DoF,) names of the evolved joints, in gene order.
+            marker_site: name of the site whose position the scenes read.
+            fixed: joint name -> value (RADIANS / metres) held during execution;
+                joints neither evolved nor fixed stay at 0.
+            kinematics: forward-kinematics back-end, "chain" (default, faster) or
+                "mjx"; both match ``mujoco.mj_kinematics``.
+
+        Raises:
+            FileNotFoundError: the file does not exist.
+            KeyError: a joint or site name is not in the model (the message names it).
+            ValueError: bad joint types, repeats, or an unknown ``kinematics``.
+        """
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"MJCF file not found: {path}")
+        mj_model = mujoco.MjModel.from_xml_path(str(path))
+        return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
+                   source=str(path))
+
+    def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
+        if kinematics == "chain":
+            from cgda_jax.sim.chain import build_chain_fk
+
+            return build_chain_fk(
+                self.mj_model, self._qpos0_np, [int(j) for j in self.joint_ids],
+                self.site_id,
+            )
+        return lambda genes: self.kinematics_data(self.qpos(genes)).site_xpos[self.site_id]
+
+    def __repr__(self) -> str:
+        return (
+            f"Robot(joints={self.joint_names}, marker={self.marker_site!r}, "
+            f"kinematics={self.kinematics!r})"
+        )
+
+    def check_genes(self, genes: Array, what: str = "genes") -> None:
+        """Raise ValueError unless ``genes`` has shape (DoF,)."""
+        if tuple(jnp.shape(genes)) != (self.n_dof,):
+            raise ValueError(
+                f"{what} has shape {tuple(jnp.shape(genes))}, expected ({self.n_dof},) "
+                f"= one value per joint {self.joint_names}"
+            )
+
+    def clip(self, genes: Array) -> Array:
+        """Clip (..., DoF) genes into the joint limits."""
+        return jnp.clip(genes, self.lower, self.upper)
+
+    def qpos(self, genes: Array) -> Array:
+        """Full posture: (DoF,) genes written into ``qpos0`` -> (nq,)."""
+        self.check_genes(genes)
+        return self.qpos0.at[self.qpos_adr].set(jnp.asarray(genes, jnp.float32))
+
+    def genes_of(self, qpos: Array) -> Array:
+        """The evolved joints' values in a (nq,) posture -> (DoF,)."""
+        return qpos[self.qpos_adr]
+
+    def make_data(self, qpos: Array | None = None) -> mjx.Data:
+        """An ``mjx.Data`` (from the template made once) with ``qpos`` set."""
+        return self._data0 if qpos is None else self._data0.replace(qpos=qpos)
+
+    def kinematics_data(self, qpos: Array) -> mjx.Data:
+        """``mjx.kinematics`` at a (nq,) posture (every body and site placed)."""
+        return mjx.kinematics(self.mjx_model, self.make_data(qpos))
+
+    def marker_position(self, genes: Array) -> Array:
+        """Marker site position (3,) in the model's root frame for (DoF,) genes."""
+        self.check_genes(genes)
+        return self._fk(jnp.asarray(genes, jnp.float32))
+
+    def with_kinematics(self, kinematics: str) -> Robot:
+        """The same robot with another forward-kinematics back-end."""
+        return Robot(self.mj_model, self.joint_names, self.marker_site, self.fixed,
+                     kinematics=kinematics)
+
