@@ -49,6 +49,21 @@ __all__ += [
 ]
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
+from cgda_jax.sim.execute import SimState as SimState
+from cgda_jax.sim.execute import Simulator as Simulator
+from cgda_jax.sim.robot import Robot as Robot
+from cgda_jax.sim.robot import model_path as model_path
+from cgda_jax.sim.scenes import MarkerScene as MarkerScene
+from cgda_jax.sim.scenes import PaintWall as PaintWall
+
+__all__ += [
+    "Robot",
+    "model_path",
+    "MarkerScene",
+    "PaintWall",
+    "SimState",
+    "Simulator",
+]
 
 # --- strategies (FTE, IE, IET, OET) ------------------------------------------
 
