@@ -127,13 +127,13 @@ def test_arm_segments_have_constant_length():
 
 
 def test_clean_circle_demos_geometry():
-    centre = np.array([0.6, -0.35, 0.3])
+    centre = np.array([0.55, -0.45, 0.35])
     demos = clean_circle_demos(centre=centre, diameter=0.30, n=6, seed=0)
     assert len(demos) == 6
     for d in demos:
         assert tuple(d.feature_names) == ("X", "Y", "Z")
         x = d.features
-        assert abs(x[:, 0].mean() - centre[0]) < 0.015  # vertical plane x = 0.6
+        assert abs(x[:, 0].mean() - centre[0]) < 0.015  # vertical plane x = 0.55
         c, r = _circle_fit(x[:, 1:])
         assert abs(2 * r - 0.30) < 0.01
         assert np.linalg.norm(c - centre[1:]) < 0.015

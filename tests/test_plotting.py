@@ -1,0 +1,57 @@
+"""Plotting: each figure function returns a Figure with the data drawn and writes a PNG."""
+
+import numpy as np
+import pytest
+
+from cgda_jax import plotting
+from cgda_jax.datasets import clean_circle_demos, synthetic_actions
+
+
+def _png(path):
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 2000
+    return data
+
+
+def test_demonstrations_3d_and_panels(tmp_path):
+    demos = clean_circle_demos(n=3, seed=1)
+    goal = np.asarray(demos[0].features[::20])
+    fig = plotting.plot_demonstrations(demos, goal, goal + 0.01, path=tmp_path / "a.png")
+    ax = fig.axes[0]
+    assert ax.name == "3d" and len(ax.lines) == 3 + 2  # demos, goal, executed
+    np.testing.assert_allclose(ax.lines[3].get_data_3d()[2], goal[:, 2])
+    _png(tmp_path / "a.png")
+    paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
+    fig = plotting.plot_demonstrations(paint, features=["hue", "value"], path=tmp_path / "b.png")
+    assert [a.get_title() for a in fig.axes if a.get_visible()] == ["hue", "value"]
+    with pytest.raises(KeyError, match="nope"):
+        plotting.plot_demonstrations(paint, features=["nope"])
+
+
+def test_cost_matrix_marks_row_minimum(tmp_path):
+    m = np.array([[1.0, 50.0], [300.0, 2.0e6]])
+    fig = plotting.plot_cost_matrix(m, ["a", "b"], ["A", "B"], path=tmp_path / "c.png")
+    texts = {t.get_text(): t.get_fontweight() for t in fig.axes[0].texts}
+    assert texts["1"] == "bold" and texts["300"] == "bold"
+    assert texts["50"] == "normal" and texts["2.000e+06"] == "normal"
+    _png(tmp_path / "c.png")
+    with pytest.raises(ValueError, match="does not match"):
+        plotting.plot_cost_matrix(m, ["a"], ["A", "B"])
+
+
+def test_fitness_goal_time_frames(tmp_path):
+    h = np.r_[np.linspace(5, 1, 10), [np.nan] * 3]
+    fig = plotting.plot_fitness(h, path=tmp_path / "f.png")
+    x, y = fig.axes[0].lines[1].get_data()  # the red minimum marker
+    assert x[0] == 9 and y[0] == 1.0
+    plotting.plot_fitness(np.ones((3, 5)), labels=["p0", "p1", "p2"], path=tmp_path / "g.png")
+    goal = np.linspace(0, 100, 17)[:, None]
+    fig = plotting.plot_goal_vs_executed(goal, goal + 1, ["painted"], tolerance=3.0,
+                                         path=tmp_path / "e.png")
+    np.testing.assert_allclose(fig.axes[0].lines[1].get_ydata(), goal[:, 0] + 1)
+    with pytest.raises(ValueError, match="different F"):
+        plotting.plot_goal_vs_executed(goal, np.zeros((17, 2)))
+    plotting.plot_time_per_point(np.arange(17.0), path=tmp_path / "t.png")
+    plotting.plot_frames([np.zeros((8, 8, 3))] * 3, path=tmp_path / "r.png")
+    for name in "fgetr":
+        _png(tmp_path / f"{name}.png")
