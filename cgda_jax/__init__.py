@@ -66,5 +66,26 @@ __all__ += [
 ]
 
 # --- strategies (FTE, IE, IET, OET) ------------------------------------------
+from cgda_jax.strategies import (
+    ALGORITHMS as ALGORITHMS,
+    STRATEGIES as STRATEGIES,
+    ExecutionResult as ExecutionResult,
+    run_fte as run_fte,
+    run_ie as run_ie,
+    run_iet as run_iet,
+    run_oet as run_oet,
+    run_trials as run_trials,
+)
+
+__all__ += [
+    "ALGORITHMS",
+    "STRATEGIES",
+    "ExecutionResult",
+    "run_fte",
+    "run_ie",
+    "run_iet",
+    "run_oet",
+    "run_trials",
+]
 
 # --- user layer (datasets, experiments) --------------------------------------

@@ -1,0 +1,348 @@
+"""Shared machinery of the execution strategies: algorithms, gene bounds, one evolution.
+
+Every strategy (FTE, IE, IET, OET) runs one or more evolutions of the same kind: an
+`evosax` algorithm asks for a population of gene vectors, the whole population is
+executed in ONE batched simulator call, its fitness against the goal is computed and
+told back. This module holds that generation step (`evolution_step`), the start of an
+evolution (`evolution_init`), the name -> algorithm registry and the gene bounds.
+
+Gene bounds. Algorithms search an unbounded, normalized space ``u`` (D,); joint angles
+are ``q = mid + half * sin(pi / 2 * u)`` with ``mid, half`` the centre and half-width of
+the joint limits. ``u`` in [-1, 1] covers the whole range once; beyond it the sine folds
+back, a smooth reflection at the limits (no flat, gradient-free regions as with
+clipping, no infeasible postures). ``u = 0`` is the middle of every joint range, the
+start mean of distribution-based algorithms, and a step size of about 0.3 moves a joint
+by a few tenths of its range.
+
+References:
+    Lange, "evosax: JAX-based Evolution Strategies", GECCO 2023 companion.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
+from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
+from flax import struct
+
+#: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
+ALGORITHMS: dict[str, type] = dict(_EVOSAX_ALGORITHMS)
+
+FitnessFn = Callable[[jax.Array], jax.Array]
+"""Maps joint genes (P, D) -> fitness (P,), minimized; the one batched sim call."""
+
+
+# --------------------------------------------------------------------------- algorithms
+def make_algorithm(
+    name: str,
+    population_size: int,
+    n_genes: int,
+    *,
+    algorithm_kwargs: dict[str, Any] | None = None,
+    algorithm_params: dict[str, Any] | None = None,
+) -> tuple[Any, Any]:
+    """Builds an evosax algorithm by name and its parameters.
+
+    Args:
+        name: a key of `ALGORITHMS`, e.g. "CMA_ES", "SimpleGA", "DifferentialEvolution".
+        population_size: individuals per generation.
+        n_genes: genes per individual (D).
+        algorithm_kwargs: extra constructor arguments (e.g. ``std_schedule`` of SimpleGA).
+        algorithm_params: fields of the algorithm's ``default_params`` to override
+            (e.g. ``{"std_init": 0.3}`` for CMA_ES).
+
+    Returns:
+        ``(algorithm, params)``.
+
+    Raises:
+        ValueError: unknown name, unknown parameter, or a population too small for the
+            algorithm (its constructor refuses it or its default parameters are not
+            finite).
+    """
+    if name not in ALGORITHMS:
+        raise ValueError(
+            f"unknown algorithm {name!r}; choose one of {sorted(ALGORITHMS)}"
+        )
+    if int(population_size) < 2:
+        raise ValueError(
+            f"population_size={population_size} is too small for {name}: need >= 2"
+        )
+    try:
+        algo = ALGORITHMS[name](
+            population_size=int(population_size),
+            solution=jnp.zeros((n_genes,)),
+            **(algorithm_kwargs or {}),
+        )
+    except AssertionError as err:
+        raise ValueError(
+            f"population_size={population_size} is not allowed for {name}: {err}"
+        ) from None
+    except TypeError as err:
+        raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
+    params = algo.default_params
+    overrides = dict(algorithm_params or {})
+    unknown = sorted(set(overrides) - set(params.__dataclass_fields__))
+    if unknown:
+        raise ValueError(
+            f"unknown algorithm_params {unknown} for {name}; it has "
+            f"{sorted(params.__dataclass_fields__)}"
+        )
+    params = params.replace(**{k: jnp.asarray(v) for k, v in overrides.items()})
+    finite = jax.tree.leaves(
+        jax.tree.map(lambda x: jnp.all(jnp.isfinite(jnp.asarray(x, float))), params)
+    )
+    if not all(bool(f) for f in finite):
+        raise ValueError(
+            f"population_size={population_size} is too small for {name} with "
+            f"{n_genes} genes: its default parameters are not finite"
+        )
+    return algo, params
+
+
+# --------------------------------------------------------------------------- gene bounds
+def to_joints(u: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
+    """Maps normalized genes (..., DoF) to joint angles inside [lower, upper]."""
+    mid = 0.5 * (upper + lower)
+    half = 0.5 * (upper - lower)
+    return mid + half * jnp.sin(0.5 * jnp.pi * u)
+
+
+def from_joints(q: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
+    """Inverse of `to_joints` on [-1, 1] (angles are clipped into the limits first)."""
+    mid = 0.5 * (upper + lower)
+    half = jnp.maximum(0.5 * (upper - lower), 1e-12)
+    s = jnp.clip((q - mid) / half, -1.0, 1.0)
+    return jnp.arcsin(s) * (2.0 / jnp.pi)
+
+
+# --------------------------------------------------------------------------- validation
+def check_config(
+    sim: Any,
+    goal: Any,
+    *,
+    tolerance: float | None = None,
+    max_generations: int | None = None,
+    min_points: int = 1,
+) -> jax.Array:
+    """Checks a goal (N, F) against a simulator and common settings; returns it f32."""
+    g = jnp.asarray(goal, dtype=jnp.float32)
+    if g.ndim == 1 and sim.n_features == 1:
+        g = g[:, None]
+    if g.ndim != 2:
+        raise ValueError(f"goal must have shape (N, F); got shape {tuple(g.shape)}")
+    if g.shape[1] != sim.n_features:
+        names = getattr(sim, "feature_names", None)
+        raise ValueError(
+            f"goal has {g.shape[1]} features per point but the simulator's scene has "
+            f"{sim.n_features}" + (f" ({', '.join(names)})" if names else "")
+        )
+    if g.shape[0] < min_points:
+        raise ValueError(f"goal needs at least {min_points} point(s); got {g.shape[0]}")
+    if not bool(jnp.all(jnp.isfinite(g))):
+        bad = int(jnp.argmax(~jnp.all(jnp.isfinite(g), axis=1)))
+        raise ValueError(f"goal has a non-finite value at point {bad}")
+    if tolerance is not None and not tolerance > 0:
+        raise ValueError(f"tolerance must be > 0; got {tolerance}")
+    if max_generations is not None and int(max_generations) < 1:
+        raise ValueError(f"max_generations must be >= 1; got {max_generations}")
+    return g
+
+
+# --------------------------------------------------------------------------- one evolution
+@struct.dataclass
+class Evolution:
+    """State of one evolution (one point of IE/IET/OET, or the whole FTE trajectory).
+
+    Attributes:
+        algo: the evosax algorithm state.
+        key: this evolution's key; generation g uses ``fold_in(key, g)``.
+        best_u: best normalized genes so far (D,).
+        best_fitness: its fitness (scalar).
+        stall: generations since the best fitness last improved.
+        generation: generations run.
+        evaluations: fitness evaluations spent.
+        done: True once a stop condition held; the state is then frozen.
+    """
+
+    algo: Any
+    key: jax.Array
+    best_u: jax.Array
+    best_fitness: jax.Array
+    stall: jax.Array
+    generation: jax.Array
+    evaluations: jax.Array
+    done: jax.Array
+
+
+def _sanitize(fitness: jax.Array) -> jax.Array:
+    return jnp.where(jnp.isfinite(fitness), fitness, jnp.inf)
+
+
+def evolution_init(
+    algo: Any,
+    params: Any,
+    key: jax.Array,
+    fitness_u: FitnessFn,
+    n_genes: int,
+    mean: jax.Array | None = None,
+) -> Evolution:
+    """Starts an evolution (jittable, vmappable over `key` and `fitness_u`'s context).
+
+    Distribution-based algorithms start at `mean` (normalized genes (D,); default 0 =
+    mid joint ranges); population-based ones get a uniform initial population in
+    ``[-1, 1]^D`` that is evaluated here.
+    """
+    key, k_init, k_pop = jax.random.split(key, 3)
+    if isinstance(algo, PopulationBasedAlgorithm):
+        pop = jax.random.uniform(
+            k_pop, (algo.population_size, n_genes), minval=-1.0, maxval=1.0
+        )
+        fit = _sanitize(fitness_u(pop))
+        state = algo.init(k_init, pop, fit, params)
+        i = jnp.argmin(fit)
+        best_u, best_f, evals = pop[i], fit[i], algo.population_size
+    else:
+        mean = jnp.zeros((n_genes,)) if mean is None else mean
+        state = algo.init(k_init, mean, params)
+        best_u, best_f, evals = mean, jnp.asarray(jnp.inf), 0
+    return Evolution(
+        algo=state,
+        key=key,
+        best_u=best_u,
+        best_fitness=jnp.asarray(best_f, jnp.float32),
+        stall=jnp.asarray(0, jnp.int32),
+        generation=jnp.asarray(0, jnp.int32),
+        evaluations=jnp.asarray(evals, jnp.int32),
+        done=jnp.asarray(False),
+    )
+
+
+def freeze(done: jax.Array, old: Any, new: Any) -> Any:
+    """Keeps `old` where `done` (a scalar bool) holds, else `new` (pytree-wise)."""
+    return jax.tree.map(lambda o, n: jnp.where(done, o, n), old, new)
+
+
+def evolution_step(
+    algo: Any,
+    params: Any,
+    evo: Evolution,
+    fitness_u: FitnessFn,
+    stop: Callable[[Evolution], jax.Array],
+) -> tuple[Evolution, dict[str, jax.Array]]:
+    """One generation: ask -> one batched evaluation -> tell -> bookkeeping -> stop test.
+
+    A done evolution is returned unchanged (its computation still runs, masked, so that
+    batched evolutions stay in lock-step).
+
+    Args:
+        algo, params: from `make_algorithm`.
+        evo: the evolution state.
+        fitness_u: normalized genes (P, D) -> fitness (P,).
+        stop: Evolution -> bool, evaluated after the update.
+
+    Returns:
+        ``(evo, metrics)`` with metrics ``best_fitness`` (best so far) and
+        ``generation_best`` (this generation's best; inf when frozen).
+    """
+    k = jax.random.fold_in(evo.key, evo.generation)
+    k_ask, k_tell = jax.random.split(k)
+    pop, algo_state = algo.ask(k_ask, evo.algo, params)
+    fit = _sanitize(fitness_u(pop))
+    algo_state, _ = algo.tell(k_tell, pop, fit, algo_state, params)
+    i = jnp.argmin(fit)
+    better = fit[i] < evo.best_fitness
+    new = evo.replace(
+        algo=algo_state,
+        best_u=jnp.where(better, pop[i], evo.best_u),
+        best_fitness=jnp.where(better, fit[i], evo.best_fitness),
+        stall=jnp.where(better, 0, evo.stall + 1),
+        generation=evo.generation + 1,
+        evaluations=evo.evaluations + algo.population_size,
+    )
+    new = new.replace(done=stop(new))
+    out = freeze(evo.done, evo, new)
+    metrics = {
+        "best_fitness": out.best_fitness,
+        "generation_best": jnp.where(evo.done, jnp.inf, fit[i]),
+    }
+    return out, metrics
+
+
+# --------------------------------------------------------------------------- plans
+def _default_kwargs(name: str) -> dict[str, Any]:
+    """Defaults that fit the normalized gene space (see the module docstring)."""
+    if name == "SimpleGA":
+        import optax
+
+        # evosax's SimpleGA mutates with std 1.0 forever: in normalized genes that spans
+        # the whole joint range and never refines; decay it instead.
+        return {
+            "std_schedule": optax.exponential_decay(
+                0.3, transition_steps=1, decay_rate=0.95, end_value=0.003
+            )
+        }
+    return {}
+
+
+class PlanBase:
+    """Shared set-up of the strategy plans driven by `runner.drive`."""
+
+    name = "base"
+
+    def __init__(
+        self,
+        sim: Any,
+        goal: jax.Array,
+        n_genes: int,
+        *,
+        algorithm: str,
+        population_size: int,
+        tolerance: float,
+        max_generations: int,
+        algorithm_kwargs: dict[str, Any] | None = None,
+        algorithm_params: dict[str, Any] | None = None,
+        info: dict[str, Any] | None = None,
+    ):
+        self.sim, self.goal = sim, goal
+        self.lower = jnp.asarray(sim.lower, jnp.float32)
+        self.upper = jnp.asarray(sim.upper, jnp.float32)
+        self.n_dof = int(sim.n_dof)
+        self.n_genes = int(n_genes)
+        self.tolerance = float(tolerance)
+        self.max_generations = int(max_generations)
+        self.max_generations_total = self.max_generations
+        kwargs = {**_default_kwargs(algorithm), **(algorithm_kwargs or {})}
+        self.algo, self.params = make_algorithm(
+            algorithm,
+            population_size,
+            self.n_genes,
+            algorithm_kwargs=kwargs,
+            algorithm_params=algorithm_params,
+        )
+        self.info = {
+            "algorithm": algorithm,
+            "population_size": int(population_size),
+            **(info or {}),
+        }
+
+    def joints(self, u: jax.Array) -> jax.Array:
+        """Normalized genes (..., DoF) -> joint angles."""
+        return to_joints(u, self.lower, self.upper)
+
+    def point_features(self, state: Any, pop_u: jax.Array) -> jax.Array:
+        """Features (P, F) after one step from `state` to each posture of `pop_u` (P, DoF)."""
+        q = self.joints(pop_u)
+        return jax.vmap(lambda w: self.sim.step(state, w)[1])(q)
+
+    def stop(self, evo: Evolution) -> jax.Array:
+        """Per-point stop: error below tolerance or generation budget spent."""
+        return (evo.best_fitness < self.tolerance) | (
+            evo.generation >= self.max_generations
+        )
+
+    def result_info(self, timing: dict[str, Any], **extra: Any) -> dict[str, Any]:
+        return {**self.info, "trials_in_batch": timing["trials_in_batch"], **extra}

@@ -1,0 +1,220 @@
+"""Online Evolved Trajectories (OET; Fernandez-Fernandez et al., arXiv 1807.09177).
+
+From the *current* simulator state: localize the goal step k = argmin_k |f_now - g_k|,
+evolve ONE posture minimizing |f_after - g_{k+1}|, execute it, and repeat until the
+localized step is the goal's last point or `max_steps` postures were executed.
+
+Localization looks only at the window [k, k + lookahead] of the previous k (and starts
+with k = -1, so the first target is g_0): progress along the goal is monotone, and a
+closed goal (a circle whose end meets its start) is not mistaken as already finished.
+Each step's evolution starts from the current posture (distribution-based algorithms).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from cgda_jax.strategies.base import (
+    Evolution,
+    PlanBase,
+    check_config,
+    evolution_init,
+    evolution_step,
+    freeze,
+    from_joints,
+)
+from cgda_jax.strategies.result import ExecutionResult
+from cgda_jax.strategies.runner import drive, seed_keys
+
+
+@struct.dataclass
+class OETState:
+    """Carry of an OET run: the current evolution, sim state, localized step k and the
+    executed postures (S, DoF) / features (S, F) / targets (S,) so far (`steps` of S)."""
+
+    evo: Evolution
+    key: jax.Array
+    k: jax.Array
+    steps: jax.Array
+    sim_state: Any
+    joints: jax.Array
+    features: jax.Array
+    targets: jax.Array
+    step_generations: jax.Array
+    evaluations: jax.Array
+
+
+class OETPlan(PlanBase):
+    """OET as a plan for `runner.drive`."""
+
+    name = "oet"
+
+    def __init__(self, sim, goal, *, max_steps, lookahead, **kwargs):
+        super().__init__(sim, goal, int(sim.n_dof), **kwargs)
+        self.n_points = int(goal.shape[0])
+        self.max_steps = int(max_steps)
+        self.lookahead = int(lookahead)
+        self.max_generations_total = self.max_steps * self.max_generations
+
+    def _target(self, k):
+        return jnp.minimum(k + 1, self.n_points - 1)
+
+    def _fitness(self, sim_state, k):
+        goal_point = self.goal[self._target(k)]
+
+        def fitness_u(pop):
+            feats = self.point_features(sim_state, pop)
+            return jnp.linalg.norm(feats - goal_point, axis=-1)
+
+        return fitness_u
+
+    def _start(self, key, sim_state, k, steps, mean):
+        return evolution_init(
+            self.algo, self.params, jax.random.fold_in(key, steps),
+            self._fitness(sim_state, k), self.n_dof, mean=mean,
+        )
+
+    def init(self, key):
+        sim_state = self.sim.init_state()
+        k = jnp.asarray(-1, jnp.int32)
+        steps = jnp.zeros((), jnp.int32)
+        s, f = self.max_steps, self.goal.shape[1]
+        return OETState(
+            evo=self._start(key, sim_state, k, steps, None),
+            key=key, k=k, steps=steps, sim_state=sim_state,
+            joints=jnp.zeros((s, self.n_dof), jnp.float32),
+            features=jnp.zeros((s, f), jnp.float32),
+            targets=jnp.full((s,), -1, jnp.int32),
+            step_generations=jnp.zeros((s,), jnp.int32),
+            evaluations=jnp.zeros((), jnp.int32),
+        )
+
+    def _execute(self, s: OETState) -> OETState:
+        q = self.joints(s.evo.best_u)
+        sim_state, feats = self.sim.step(s.sim_state, q)
+        window = jnp.arange(self.n_points)
+        lo = jnp.maximum(s.k, 0)
+        inside = (window >= lo) & (window <= s.k + self.lookahead)
+        dist = jnp.linalg.norm(self.goal - feats, axis=-1)
+        k = jnp.argmin(jnp.where(inside, dist, jnp.inf)).astype(jnp.int32)
+        steps = s.steps + 1
+        return s.replace(
+            evo=self._start(s.key, sim_state, k, steps,
+                            from_joints(q, self.lower, self.upper)),
+            k=k, steps=steps, sim_state=sim_state,
+            joints=s.joints.at[s.steps].set(q),
+            features=s.features.at[s.steps].set(feats),
+            targets=s.targets.at[s.steps].set(self._target(s.k)),
+            step_generations=s.step_generations.at[s.steps].set(s.evo.generation),
+            evaluations=s.evaluations + s.evo.evaluations,
+        )
+
+    def step(self, s: OETState):
+        finished = self.done(s)
+        evo, metrics = evolution_step(
+            self.algo, self.params, s.evo, self._fitness(s.sim_state, s.k), self.stop
+        )
+        new = jax.lax.cond(evo.done, self._execute, lambda x: x, s.replace(evo=evo))
+        new = freeze(finished, s, new)
+        return new, {"best_fitness": metrics["best_fitness"],
+                     "step": jnp.where(finished, -1, s.steps)}
+
+    def done(self, s):
+        return (s.k >= self.n_points - 1) | (s.steps >= self.max_steps)
+
+    def progress(self, s):
+        return {"k": np.asarray(s.k).tolist(), "steps": np.asarray(s.steps).tolist()}
+
+    def finish(self, s):
+        return {"joints": s.joints, "features": s.features, "targets": s.targets,
+                "steps": s.steps, "k": s.k, "step_generations": s.step_generations,
+                "evaluations": s.evaluations}
+
+    def to_result(self, final, history, timing):
+        goal = np.asarray(self.goal)
+        n = int(final["steps"])
+        feats = final["features"][:n]
+        dist = np.linalg.norm(goal[:, None, :] - feats[None, :, :], axis=-1)
+        errors = dist.min(axis=1) if n else np.full(len(goal), np.inf)
+        gens = final["step_generations"][:n]
+        hist = np.full((n, max(int(gens.max(initial=0)), 1)), np.nan)
+        for i in range(n):
+            h = history["best_fitness"][history["step"] == i]
+            hist[i, : len(h)] = h
+        return ExecutionResult(
+            strategy=self.name,
+            joints=final["joints"][:n],
+            features=feats,
+            goal=goal,
+            point_errors=errors,
+            fitness_history=hist,
+            evaluations=int(final["evaluations"]),
+            generations=int(gens.sum()),
+            wall_time_s=timing["wall_time_s"],
+            compile_time_s=timing["compile_time_s"],
+            success=bool(np.all(errors < self.tolerance)),
+            tolerance=self.tolerance,
+            final_fitness=float(errors.max()),
+            info=self.result_info(
+                timing, steps=n, reached_end=int(final["k"]) >= len(goal) - 1,
+                targets=final["targets"][:n].tolist(),
+                step_generations=gens.tolist(), lookahead=self.lookahead,
+            ),
+        )
+
+
+def run_oet(
+    sim: Any,
+    goal: Any,
+    *,
+    algorithm: str = "CMA_ES",
+    population_size: int = 16,
+    tolerance: float = 0.02,
+    max_generations: int = 100,
+    max_steps: int | None = None,
+    lookahead: int = 1,
+    seed: int = 0,
+    chunk_size: int = 10,
+    algorithm_kwargs: dict | None = None,
+    algorithm_params: dict | None = None,
+    progress_fn: Callable[[dict], None] | None = None,
+) -> ExecutionResult:
+    """Online Evolved Trajectories: localize, evolve one posture, execute, repeat.
+
+    Args:
+        sim: a simulator (see `run_ie`).
+        goal: goal feature trajectory (N, F).
+        tolerance: one posture's evolution stops when its error to the target goal
+            point is below it; also the success threshold.
+        max_generations: generation budget per executed posture.
+        max_steps: budget of executed postures (default 2 N).
+        lookahead: localization window size beyond the current step (>= 1).
+        algorithm, population_size, seed, chunk_size, algorithm_kwargs,
+            algorithm_params, progress_fn: as in `run_ie`.
+
+    Returns:
+        `ExecutionResult` with joints (S, DoF) / features (S, F) the executed steps;
+        point_errors (N,) = distance from each goal point to its nearest executed
+        feature; success = all of them < tolerance.
+    """
+    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be >= 1; got {max_steps}")
+    if int(lookahead) < 1:
+        raise ValueError(f"lookahead must be >= 1; got {lookahead}")
+    plan = OETPlan(
+        sim, goal, max_steps=max_steps, lookahead=lookahead, algorithm=algorithm,
+        population_size=population_size, tolerance=tolerance,
+        max_generations=max_generations, algorithm_kwargs=algorithm_kwargs,
+        algorithm_params=algorithm_params, info={"seed": seed},
+    )
+    (result,) = drive(plan, seed_keys([seed]), chunk_size=chunk_size,
+                      progress_fn=progress_fn)
+    return result

@@ -1,0 +1,111 @@
+"""`ExecutionResult`: what a strategy run returns, with a JSON + NPZ round trip."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import pathlib
+from typing import Any
+
+import numpy as np
+
+_ARRAYS = ("joints", "features", "goal", "point_errors", "fitness_history")
+
+
+@dataclasses.dataclass
+class ExecutionResult:
+    """Outcome of one strategy run (host NumPy arrays).
+
+    Attributes:
+        strategy: "fte", "ie", "iet" or "oet".
+        joints: best joint trajectory (N, DoF) in radians (OET: the S executed postures).
+        features: features produced by executing `joints` from the start state (N, F)
+            (OET: (S, F)).
+        goal: the goal feature trajectory (N, F).
+        point_errors: Euclidean error per goal point (N,) (OET: distance from each goal
+            point to the nearest executed feature).
+        fitness_history: best fitness so far per generation: (G,) for FTE; (N, G) per
+            point for IE, IET and OET (NaN after a point stopped / before it started).
+        evaluations: fitness evaluations (individuals simulated) spent.
+        generations: generations run (IE: the longest point; IET/OET: summed over points).
+        wall_time_s: run time without compilation.
+        compile_time_s: time to lower and compile the jitted functions.
+        success: the run met its tolerance (see each strategy).
+        tolerance: that tolerance (feature units).
+        final_fitness: final fitness (FTE: DTW; IE/OET: worst point error; IET: the full
+            trajectory's Euclidean fitness).
+        info: extra settings (algorithm, population_size, seed, trial, ...).
+    """
+
+    strategy: str
+    joints: np.ndarray
+    features: np.ndarray
+    goal: np.ndarray
+    point_errors: np.ndarray
+    fitness_history: np.ndarray
+    evaluations: int
+    generations: int
+    wall_time_s: float
+    compile_time_s: float
+    success: bool
+    tolerance: float
+    final_fitness: float
+    info: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def points(self) -> int:
+        """Number of goal points N."""
+        return int(self.goal.shape[0])
+
+    @property
+    def max_point_error(self) -> float:
+        """Largest per-point error."""
+        return float(np.max(self.point_errors))
+
+    def summary(self) -> dict[str, Any]:
+        """The scalar figures (what `save` writes to result.json)."""
+        return {
+            "strategy": self.strategy,
+            "points": self.points,
+            "success": bool(self.success),
+            "tolerance": float(self.tolerance),
+            "max_point_error": self.max_point_error,
+            "point_errors": [float(e) for e in self.point_errors],
+            "final_fitness": float(self.final_fitness),
+            "evaluations": int(self.evaluations),
+            "generations": int(self.generations),
+            "wall_time_s": float(self.wall_time_s),
+            "compile_time_s": float(self.compile_time_s),
+            "info": self.info,
+        }
+
+    def save(self, directory: str | pathlib.Path) -> pathlib.Path:
+        """Writes ``result.json`` (summary) and ``arrays.npz`` into `directory`."""
+        d = pathlib.Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "result.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
+        np.savez(d / "arrays.npz", **{k: getattr(self, k) for k in _ARRAYS})
+        return d
+
+    @classmethod
+    def load(cls, directory: str | pathlib.Path) -> ExecutionResult:
+        """Reads a result written by `save`."""
+        d = pathlib.Path(directory)
+        for name in ("result.json", "arrays.npz"):
+            if not (d / name).is_file():
+                raise FileNotFoundError(f"{d / name} not found (not a saved result?)")
+        meta = json.loads((d / "result.json").read_text())
+        with np.load(d / "arrays.npz") as z:
+            arrays = {k: z[k] for k in _ARRAYS}
+        return cls(
+            strategy=meta["strategy"],
+            evaluations=meta["evaluations"],
+            generations=meta["generations"],
+            wall_time_s=meta["wall_time_s"],
+            compile_time_s=meta["compile_time_s"],
+            success=meta["success"],
+            tolerance=meta["tolerance"],
+            final_fitness=meta["final_fitness"],
+            info=meta.get("info", {}),
+            **arrays,
+        )
