@@ -1,0 +1,165 @@
+"""dtw / dtw_multi / euclidean against NumPy references and dtw-python."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cgda_jax.distance import dtw, dtw_multi, euclidean, resample
+
+SHAPES = [(7, 11, 3), (13, 4, 2), (1, 6, 1), (9, 1, 2), (10, 10, 4), (25, 17, 1)]
+
+
+def _accumulated_np(x, y, cost):
+    """Plain double-loop DTW accumulated cost D(N, M) (float64)."""
+    n, m = len(x), len(y)
+    acc = np.full((n + 1, m + 1), np.inf)
+    acc[0, 0] = 0.0
+    for i in range(n):
+        for j in range(m):
+            acc[i + 1, j + 1] = cost(x[i], y[j]) + min(
+                acc[i, j + 1], acc[i + 1, j], acc[i, j]
+            )
+    return acc[n, m]
+
+
+def dtw_np(x, y):
+    per_dim = [
+        _accumulated_np(x[:, f], y[:, f], lambda a, b: abs(a - b))
+        for f in range(x.shape[1])
+    ]
+    return sum(per_dim) / (len(x) + len(y))
+
+
+def dtw_multi_np(x, y):
+    return _accumulated_np(x, y, lambda a, b: np.linalg.norm(a - b))
+
+
+def _pair(n, m, f, seed):
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.normal(size=(n, f)), axis=0).astype(np.float32)
+    y = np.cumsum(rng.normal(size=(m, f)), axis=0).astype(np.float32)
+    return x, y
+
+
+@pytest.mark.parametrize("n,m,f", SHAPES)
+def test_dtw_matches_numpy_double_loop(n, m, f):
+    x, y = _pair(n, m, f, seed=n * 100 + m)
+    ref = dtw_np(x.astype(float), y.astype(float))
+    np.testing.assert_allclose(float(dtw(x, y)), ref, rtol=1e-5)
+
+
+@pytest.mark.parametrize("n,m,f", SHAPES)
+def test_dtw_multi_matches_numpy_double_loop(n, m, f):
+    x, y = _pair(n, m, f, seed=n * 10 + m)
+    ref = dtw_multi_np(x.astype(float), y.astype(float))
+    np.testing.assert_allclose(float(dtw_multi(x, y)), ref, rtol=1e-5)
+
+
+@pytest.mark.parametrize("n,m,f", [(8, 13, 3), (15, 6, 2), (30, 31, 1)])
+def test_dtw_matches_dtw_python_symmetric1(n, m, f):
+    """dtw-python's symmetric1 step pattern is this recursion; .distance is D(N, M)."""
+    dtwpy = pytest.importorskip("dtw")
+    x, y = _pair(n, m, f, seed=7 + n)
+    xd, yd = x.astype(float), y.astype(float)
+    per_dim = [
+        dtwpy.dtw(xd[:, k], yd[:, k], step_pattern="symmetric1",
+                  dist_method="cityblock").distance
+        for k in range(f)
+    ]
+    np.testing.assert_allclose(float(dtw(x, y)), sum(per_dim) / (n + m), rtol=1e-5)
+    multi = dtwpy.dtw(xd, yd, step_pattern="symmetric1", dist_method="euclidean")
+    np.testing.assert_allclose(float(dtw_multi(x, y)), multi.distance, rtol=1e-5)
+
+
+def test_dtw_1d_inputs_equal_single_feature():
+    x, y = _pair(9, 5, 1, seed=3)
+    assert float(dtw(x[:, 0], y[:, 0])) == pytest.approx(float(dtw(x, y)), rel=1e-6)
+    np.testing.assert_allclose(float(dtw(x[:, 0], y[:, 0])), dtw_np(x, y), rtol=1e-5)
+
+
+@pytest.mark.parametrize("fn", [dtw, dtw_multi, euclidean])
+def test_identity_zero_and_symmetry(fn):
+    x, y = _pair(12, 19, 3, seed=11)
+    assert float(fn(x, x)) == 0.0
+    np.testing.assert_allclose(float(fn(x, y)), float(fn(y, x)), rtol=1e-6)
+    assert float(fn(x, y)) > 0.0
+
+
+def test_dtw_time_warped_copy_is_zero():
+    # Repeating samples is a valid warping path with zero local cost.
+    x = np.sin(np.linspace(0, 3, 20)).astype(np.float32)
+    y = np.repeat(x, 2)
+    assert float(dtw(x, y)) == 0.0
+    assert float(dtw_multi(x, y)) == 0.0
+
+
+@pytest.mark.parametrize("fn,ref", [(dtw, dtw_np), (dtw_multi, dtw_multi_np)])
+def test_dtw_under_jit_and_vmap(fn, ref):
+    rng = np.random.default_rng(5)
+    cands = rng.normal(size=(6, 14, 3)).astype(np.float32)
+    target = rng.normal(size=(9, 3)).astype(np.float32)
+    got = jax.jit(jax.vmap(fn, in_axes=(0, None)))(cands, target)
+    want = [ref(c.astype(float), target.astype(float)) for c in cands]
+    np.testing.assert_allclose(np.asarray(got), want, rtol=1e-5)
+    # Batched in the second argument too, and both.
+    got_y = jax.vmap(fn, in_axes=(None, 0))(target, cands)
+    np.testing.assert_allclose(np.asarray(got_y), want, rtol=1e-5)
+    got_xy = jax.jit(jax.vmap(fn))(cands, cands[::-1])
+    want_xy = [ref(a.astype(float), b.astype(float)) for a, b in zip(cands, cands[::-1])]
+    np.testing.assert_allclose(np.asarray(got_xy), want_xy, rtol=1e-5)
+
+
+def test_dtw_gradient_is_finite():
+    x, y = _pair(10, 8, 2, seed=1)
+    for fn in (dtw, dtw_multi):
+        g = jax.grad(fn)(jnp.asarray(x), jnp.asarray(y))
+        assert g.shape == x.shape
+        assert bool(jnp.all(jnp.isfinite(g)))
+
+
+def euclidean_np(x, y, n):
+    t = np.linspace(0, 1, n)
+
+    def res(a):
+        ta = np.linspace(0, 1, len(a))
+        return np.stack([np.interp(t, ta, a[:, k]) for k in range(a.shape[1])], 1)
+
+    return np.linalg.norm(res(x) - res(y))
+
+
+@pytest.mark.parametrize("n,m,f,ns", [(7, 11, 3, None), (20, 20, 2, None),
+                                      (5, 9, 1, 33), (16, 3, 2, 4)])
+def test_euclidean_matches_numpy(n, m, f, ns):
+    x, y = _pair(n, m, f, seed=n + m)
+    want = euclidean_np(x.astype(float), y.astype(float), ns or max(n, m))
+    np.testing.assert_allclose(float(euclidean(x, y, ns)), want, rtol=1e-5)
+    got = jax.jit(jax.vmap(lambda a: euclidean(a, y, ns)))(np.stack([x, x + 1]))
+    want1 = euclidean_np(x.astype(float) + 1, y.astype(float), ns or max(n, m))
+    np.testing.assert_allclose(np.asarray(got), [want, want1], rtol=1e-5)
+
+
+def test_euclidean_equal_lengths_is_plain_norm():
+    x, y = _pair(15, 15, 3, seed=2)
+    np.testing.assert_allclose(
+        float(euclidean(x, y)), np.linalg.norm(x.astype(float) - y), rtol=1e-6
+    )
+
+
+def test_resample_keeps_ends_and_linear_signals():
+    x = np.linspace(0, 1, 7)[:, None] * np.array([[2.0, -3.0]])
+    out = np.asarray(resample(x.astype(np.float32), 13))
+    np.testing.assert_allclose(out, np.linspace(0, 1, 13)[:, None] * [[2.0, -3.0]],
+                               atol=1e-6)
+
+
+def test_distance_errors():
+    x = np.zeros((5, 3), np.float32)
+    with pytest.raises(ValueError, match="different feature counts"):
+        dtw(x, np.zeros((4, 2), np.float32))
+    with pytest.raises(ValueError, match=r"shape \(T,\) or \(T, F\)"):
+        dtw_multi(np.zeros((2, 2, 2)), x)
+    with pytest.raises(ValueError, match="y is empty"):
+        dtw(x, np.zeros((0, 3), np.float32))
+    with pytest.raises(ValueError, match="cannot resample"):
+        euclidean(x[:1], x)
