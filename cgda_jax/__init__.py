@@ -30,6 +30,10 @@ from cgda_jax.distance import resample as resample
 from cgda_jax.generalize import GeneralizedAction as GeneralizedAction
 from cgda_jax.generalize import generalize as generalize
 from cgda_jax.generalize import rbf_interpolate as rbf_interpolate
+from cgda_jax.recognize import ActionLibrary as ActionLibrary
+from cgda_jax.recognize import Recognition as Recognition
+from cgda_jax.recognize import cost_matrix as cost_matrix
+from cgda_jax.recognize import recognize as recognize
 
 __all__ += [
     "Demonstration",
@@ -46,6 +50,10 @@ __all__ += [
     "GeneralizedAction",
     "generalize",
     "rbf_interpolate",
+    "ActionLibrary",
+    "Recognition",
+    "cost_matrix",
+    "recognize",
 ]
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
