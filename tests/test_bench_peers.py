@@ -45,7 +45,13 @@ def _ours_to_ref(cands, ref):
 
 
 @pytest.mark.parametrize(
-    "pair_fn", [peers.dtai_pair, peers.dtwpython_pair, peers.tslearn_pair]
+    "pair_fn",
+    [
+        peers.dtai_pair,
+        peers.dtwpython_pair,
+        # tslearn's numba kernels compile for ~15 s in every new process.
+        pytest.param(peers.tslearn_pair, marks=pytest.mark.slow),
+    ],
 )
 def test_dtw_pair_peers_match_ours(series, pair_fn):
     if pair_fn is peers.tslearn_pair:
