@@ -183,7 +183,10 @@ class Robot:
         path = pathlib.Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"MJCF file not found: {path}")
-        mj_model = mujoco.MjModel.from_xml_path(str(path))
+        try:
+            mj_model = mujoco.MjModel.from_xml_path(str(path))
+        except ValueError as err:
+            raise ValueError(f"cannot load MJCF {path}: {err}") from err
         return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
                    source=str(path))
 
