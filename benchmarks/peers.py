@@ -64,13 +64,14 @@ def dtai_block(queries, refs, parallel: bool = True) -> np.ndarray:
         series = np.ascontiguousarray(
             np.concatenate([queries[:, :, d], refs[:, :, d]], axis=0)
         )
-        full = dtw.distance_matrix_fast(
+        block = dtw.distance_matrix_fast(  # compact: only the block, row-major
             series,
             block=((0, q), (q, q + r)),
             parallel=parallel,
             inner_dist="euclidean",
+            compact=True,
         )
-        total += full[:q, q:]
+        total += np.asarray(block).reshape(q, r)
     return total / (queries.shape[1] + refs.shape[1])
 
 
