@@ -146,6 +146,7 @@ def test_load_xgnitive_errors(tmp_path, xgnitive_dir):
     (folder / "reduced-data-1.csv").write_text("")
     with pytest.raises(ValueError, match=r"reduced-data-1\.csv: file is empty"):
         load_xgnitive(tmp_path, "iron", "jr3")
-    (folder / "reduced-data-1.csv").write_text("1 10.0 0 0 0 0 0 0\n2 9.0 0 0 0 0 0 0\n")
+    rows = "1 10.0 0 0 0 0 0 0\n2 9.0 0 0 0 0 0 0\n"
+    (folder / "reduced-data-1.csv").write_text(rows)
     with pytest.raises(ValueError, match=r"reduced-data-1\.csv, line 2: time does not"):
         load_xgnitive(tmp_path, "iron", "jr3")

@@ -106,7 +106,8 @@ def test_dtw_under_jit_and_vmap(fn, ref):
     got_y = jax.vmap(fn, in_axes=(None, 0))(target, cands)
     np.testing.assert_allclose(np.asarray(got_y), want, rtol=1e-5)
     got_xy = jax.jit(jax.vmap(fn))(cands, cands[::-1])
-    want_xy = [ref(a.astype(float), b.astype(float)) for a, b in zip(cands, cands[::-1])]
+    want_xy = [ref(a.astype(float), b.astype(float))
+               for a, b in zip(cands, cands[::-1])]
     np.testing.assert_allclose(np.asarray(got_xy), want_xy, rtol=1e-5)
 
 

@@ -145,7 +145,8 @@ def test_xgnitive_method_reproduces_authors_results(
     g = generalize(demos, interval_s=interval, method="xgnitive")
     want = np.loadtxt(xgnitive_dir / "xgnitive_derived/generalization_results" / saved)
     want = want.reshape(len(want), -1)
-    assert g.knots.shape == want.shape == ((13, 1) if action == "paint" else (9, len(columns)))
+    shape = (13, 1) if action == "paint" else (9, len(columns))
+    assert g.knots.shape == want.shape == shape
     np.testing.assert_allclose(np.asarray(g.knots), want, atol=1e-5, rtol=0)
     np.testing.assert_allclose(np.asarray(g.knot_times), np.linspace(0, 1, len(want)))
     # The paper method bins differently, so it must NOT reproduce them exactly.

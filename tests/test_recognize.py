@@ -58,7 +58,8 @@ def test_cost_matrix_entries_equal_single_pair_metrics(library):
     costs = np.asarray(cost_matrix([q_arr, q_demo], library, "dtw", n_samples=30))
     tq = np.linspace(0, 1, 30)
     demo_res = np.stack(
-        [np.interp(tq, q_demo.normalized_times, q_demo.features[:, f]) for f in range(3)],
+        [np.interp(tq, q_demo.normalized_times, q_demo.features[:, f])
+         for f in range(3)],
         1,
     )
     arr_res = np.stack(
