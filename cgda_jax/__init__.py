@@ -59,6 +59,7 @@ __all__ += [
 # --- simulation (robot, scenes, execution, rendering) ------------------------
 from cgda_jax.sim.execute import SimState as SimState
 from cgda_jax.sim.execute import Simulator as Simulator
+from cgda_jax.sim.render import render_trajectory as render_trajectory
 from cgda_jax.sim.robot import Robot as Robot
 from cgda_jax.sim.robot import model_path as model_path
 from cgda_jax.sim.scenes import MarkerScene as MarkerScene
@@ -71,6 +72,7 @@ __all__ += [
     "PaintWall",
     "SimState",
     "Simulator",
+    "render_trajectory",
 ]
 
 # --- strategies (FTE, IE, IET, OET) ------------------------------------------

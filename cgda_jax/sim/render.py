@@ -1,0 +1,196 @@
+"""Offscreen rendering of an executed trajectory to PNG frames or an animated GIF.
+
+Uses ``mujoco.Renderer`` (MuJoCo C, on the host), which needs an offscreen OpenGL:
+set ``MUJOCO_GL`` BEFORE the first ``import mujoco`` of the process, e.g.
+
+    MUJOCO_GL=egl python my_script.py      # Debian/Ubuntu: apt-get install libegl1
+                                           # (Mesa's EGL or the NVIDIA driver's)
+    MUJOCO_GL=osmesa python my_script.py   # software: apt-get install libosmesa6
+
+Without it MuJoCo tries GLFW, which needs a display.  The scene's decorations (the
+paint wall's squares, red once painted) are drawn into each frame.
+
+Frames follow the simulator: in kinematic mode the joint-space interpolation from
+each posture to the next waypoint (``frames_per_waypoint`` frames, the last at the
+waypoint); in dynamic mode MuJoCo C runs the same position-actuator physics
+(``physics_steps`` ``mj_step`` calls per waypoint) and frames are sampled from it.
+"""
+
+from __future__ import annotations
+
+import pathlib
+from collections.abc import Sequence
+
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+
+__all__ = ["render_trajectory"]
+
+_GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
+
+
+def _renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
+    try:
+        return mujoco.Renderer(model, height=height, width=width)
+    except Exception as err:  # GL back-ends raise various types
+        raise RuntimeError(
+            "cannot create an offscreen MuJoCo renderer "
+            f"({type(err).__name__}: {err}); set MUJOCO_GL=egl (package libegl1) or "
+            "MUJOCO_GL=osmesa (package libosmesa6) before importing mujoco"
+        ) from err
+
+
+def _camera(sim, lookat, distance, azimuth, elevation) -> mujoco.MjvCamera:
+    model = sim.robot.mj_model
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    if lookat is None:
+        points = [np.asarray(model.stat.center)]
+        centres = getattr(sim.scene, "centres", None)
+        if centres is not None:
+            points.append(np.asarray(centres).mean(axis=0))
+        lookat = np.mean(points, axis=0)
+    cam.lookat[:] = lookat
+    cam.distance = float(distance if distance is not None else 2.5 * model.stat.extent)
+    cam.azimuth = float(azimuth)
+    cam.elevation = float(elevation)
+    return cam
+
+
+def _add_decorations(scene: mujoco.MjvScene, decorations) -> None:
+    for kind, half, pos, rgba in decorations:
+        if scene.ngeom >= scene.maxgeom:
+            return
+        mujoco.mjv_initGeom(
+            scene.geoms[scene.ngeom], _GEOM[kind], np.asarray(half, np.float64),
+            np.asarray(pos, np.float64), np.eye(3).ravel(), np.asarray(rgba, np.float32),
+        )
+        scene.ngeom += 1
+
+
+def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
+    """Yield (qpos (nq,), marker positions since the last frame (K, 3)) per frame."""
+    robot = sim.robot
+    model = robot.mj_model
+    data = mujoco.MjData(model)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    qpos0 = np.asarray(robot.qpos0, np.float64)
+    genes = np.clip(np.zeros(robot.n_dof), lo, hi)
+    data.qpos[:] = qpos0
+    data.qpos[robot.qpos_adr] = genes
+    mujoco.mj_kinematics(model, data)
+    yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
+    if sim.mode == "dynamic":
+        act = sim._act_qadr
+        data.ctrl[:] = data.qpos[act]
+        mujoco.mj_forward(model, data)
+        every = max(1, sim.physics_steps // frames_per_waypoint)
+        for wp in waypoints:
+            target = qpos0.copy()
+            target[robot.qpos_adr] = np.clip(wp, lo, hi)
+            data.ctrl[:] = target[act]
+            trail = []
+            for k in range(1, sim.physics_steps + 1):
+                mujoco.mj_step(model, data)
+                mujoco.mj_kinematics(model, data)
+                trail.append(data.site_xpos[robot.site_id].copy())
+                if k % every == 0 or k == sim.physics_steps:
+                    yield data.qpos.copy(), np.array(trail)
+                    trail = []
+        return
+    for wp in waypoints:
+        wp = np.clip(wp, lo, hi)
+        for k in range(1, frames_per_waypoint + 1):
+            data.qpos[robot.qpos_adr] = genes + k / frames_per_waypoint * (wp - genes)
+            mujoco.mj_kinematics(model, data)
+            yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
+        genes = wp
+
+
+def render_trajectory(
+    sim,
+    waypoints,
+    out_path: str | pathlib.Path,
+    *,
+    frames_per_waypoint: int | None = None,
+    width: int = 480,
+    height: int = 360,
+    fps: int = 12,
+    lookat: Sequence[float] | None = None,
+    distance: float | None = None,
+    azimuth: float = 35.0,
+    elevation: float = -20.0,
+) -> list[pathlib.Path]:
+    """Render the robot executing ``waypoints`` offscreen.
+
+    Args:
+        sim: a `Simulator` (its robot, scene and mode are used).
+        waypoints: (N, DoF) joint values, clipped into the limits as in execution.
+        out_path: a ``.gif`` file (animated; falls back to PNG frames in a folder of
+            the same stem when Pillow is missing), or a folder for ``frame_0000.png``...
+        frames_per_waypoint: frames per waypoint (default ``sim.substeps``; the paint
+            state is updated at every frame, and in dynamic mode at every physics step).
+        width, height: image size in pixels.
+        fps: GIF frame rate.
+        lookat, distance, azimuth, elevation: free camera (defaults frame the robot
+            and the wall from behind its right shoulder).
+
+    Returns:
+        The files written.
+
+    Raises:
+        ValueError: waypoints of the wrong shape.
+        RuntimeError: no offscreen OpenGL (see the module doc for ``MUJOCO_GL``).
+    """
+    waypoints = np.asarray(waypoints, dtype=np.float64)
+    sim._check_waypoints(waypoints)
+    frames_per_waypoint = int(frames_per_waypoint or sim.substeps)
+    out_path = pathlib.Path(out_path)
+    model = sim.robot.mj_model
+    data = mujoco.MjData(model)
+    cam = _camera(sim, lookat, distance, azimuth, elevation)
+    scene, state = sim.scene, sim.scene.init_state()
+
+    images = []
+    renderer = _renderer(model, height, width)
+    try:
+        for qpos, trail in _postures(sim, waypoints, frames_per_waypoint):
+            for marker in trail:
+                state = scene.update(state, jnp.asarray(marker, jnp.float32))
+            data.qpos[:] = qpos
+            mujoco.mj_kinematics(model, data)
+            renderer.update_scene(data, camera=cam)
+            _add_decorations(renderer.scene, scene.decorations(state))
+            images.append(renderer.render().copy())
+    finally:
+        renderer.close()
+    return _write(images, out_path, fps)
+
+
+def _write(images: list[np.ndarray], out_path: pathlib.Path, fps: int) -> list[pathlib.Path]:
+    try:
+        from PIL import Image
+    except ImportError:  # pragma: no cover - matplotlib ships with Pillow
+        Image = None
+    if out_path.suffix.lower() == ".gif" and Image is not None:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        frames = [Image.fromarray(img) for img in images]
+        frames[0].save(out_path, save_all=True, append_images=frames[1:],
+                       duration=int(1000 / fps), loop=0)
+        return [out_path]
+    folder = out_path.with_suffix("") if out_path.suffix else out_path
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for i, img in enumerate(images):
+        path = folder / f"frame_{i:04d}.png"
+        if Image is not None:
+            Image.fromarray(img).save(path)
+        else:  # pragma: no cover
+            import matplotlib.image
+
+            matplotlib.image.imsave(path, img)
+        written.append(path)
+    return written
