@@ -99,3 +99,11 @@ __all__ += [
 ]
 
 # --- user layer (datasets, experiments) --------------------------------------
+from cgda_jax import datasets as datasets
+from cgda_jax.experiment import (
+    ExperimentConfig as ExperimentConfig,
+    load_config as load_config,
+    run_experiment as run_experiment,
+)
+
+__all__ += ["ExperimentConfig", "datasets", "load_config", "run_experiment"]

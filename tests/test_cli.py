@@ -1,0 +1,71 @@
+"""The `cgda` command: demo end to end, dry runs, and one-line user errors."""
+
+import json
+import pathlib
+
+import pytest
+
+from cgda_jax.cli import main
+
+EXPERIMENTS = pathlib.Path(__file__).resolve().parents[1] / "experiments"
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path_factory.getbasetemp() / "jaxcache"))
+
+
+def test_demo_small_succeeds_and_writes_results(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--small", "--quiet"]) == 0
+    assert capsys.readouterr().err == ""  # --quiet
+    result = json.loads((out / "result.json").read_text())
+    assert result["success"] is True
+    exps = result["experiments"]
+    assert set(exps) == {"recognition_all_features", "recognition_spatial",
+                         "recognition_arm_points", "clean_ie", "paint_iet"}
+    assert exps["clean_ie"]["max_point_error"] < 0.02
+    assert exps["paint_iet"]["success"] and exps["paint_iet"]["points"] == 17
+    for name, r in exps.items():
+        assert r["plots"], name
+        for p in r["plots"]:
+            assert (out / name / p).stat().st_size > 2000
+    assert "## clean_ie" in (out / "report.md").read_text()
+
+
+@pytest.mark.parametrize("path", sorted(EXPERIMENTS.glob("*.toml")), ids=lambda p: p.stem)
+def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(tmp_path))
+    assert main(["run", str(path), "--dry-run", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "valid" in out and "[strategy]" in out
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--set", "strategy.bogus=1"], ["unknown key", "strategy.bogus"]),
+        (["--set", "strategy.population_size=many"], ["strategy.population_size", "expected int"]),
+        (["--set", "robot.model=/nowhere/robot.xml"], ["/nowhere/robot.xml", "not found"]),
+        (["--set", "data.source=xgnitive", "--set", "data.data_dir=/nowhere/data"],
+         ["/nowhere/data", "not found"]),
+    ],
+)
+def test_user_mistakes_exit_nonzero_with_one_line(args, words, capsys):
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--dry-run", *args])
+    err = capsys.readouterr().err
+    assert code != 0
+    assert err.count("\n") == 1 and err.startswith("cgda: error:"), err
+    assert "Traceback" not in err
+    for w in words:
+        assert w in err
+
+
+def test_bad_file_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scene]\nkind = 3\n")
+    assert main(["run", str(bad), "--dry-run"]) != 0
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "scene.kind" in err and err.count("\n") == 1
+    assert main(["run", str(tmp_path / "none.toml")]) != 0
+    assert "none.toml" in capsys.readouterr().err

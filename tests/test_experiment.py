@@ -1,0 +1,98 @@
+"""Experiment configs (defaults, TOML, --set, errors) and recognition runs."""
+
+import json
+import pathlib
+
+import numpy as np
+import pytest
+
+from cgda_jax.experiment import (
+    ConfigError,
+    ExperimentConfig,
+    dump_config,
+    load_config,
+    run_experiment,
+    validate_config,
+)
+
+EXPERIMENTS = pathlib.Path(__file__).resolve().parents[1] / "experiments"
+
+
+def _write(tmp_path, text, name="exp.toml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_defaults_file_and_overrides_layer(tmp_path):
+    p = _write(tmp_path, 'kind = "execution"\n[strategy]\nname = "iet"\ntolerance = 3\n')
+    cfg = load_config(p, ["strategy.population_size=64", "robot.fixed.r_wrist=10"])
+    assert cfg.name == "exp"  # from the file name
+    assert cfg.kind == "execution" and cfg.strategy.name == "iet"
+    assert cfg.strategy.tolerance == 3.0 and isinstance(cfg.strategy.tolerance, float)
+    assert cfg.strategy.population_size == 64
+    assert cfg.robot.fixed == {"r_forearm_rotation": 45.0, "r_wrist": 10.0}
+    assert cfg.strategy.max_generations == ExperimentConfig().strategy.max_generations
+    # the dumped config loads back to the same values
+    again = load_config(_write(tmp_path, dump_config(cfg), "again.toml"))
+    assert again == cfg
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("[strategy]\npopulation = 3\n", r"exp.toml: unknown key 'strategy.population'"),
+        ("[strategy]\npopulation_size = 'big'\n", r"exp.toml: key 'strategy.population_size': expected int"),
+        ("[data]\ninterval_s = true\n", r"key 'data.interval_s': expected float"),
+        ("[robot]\njoints = 'r_elbow'\n", r"key 'robot.joints': expected list"),
+        ("strategy = 3\n", r"key 'strategy' must be a table"),
+        ("kind = \n", r"not valid TOML"),
+    ],
+)
+def test_file_errors_name_key_and_file(tmp_path, text, match):
+    with pytest.raises(ConfigError, match=match):
+        load_config(_write(tmp_path, text))
+
+
+def test_override_and_validation_errors(tmp_path):
+    with pytest.raises(ConfigError, match="unknown key 'output.folder'"):
+        load_config(None, ["output.folder=x"])
+    with pytest.raises(ConfigError, match="expected key=value"):
+        load_config(None, ["strategy.seed"])
+    with pytest.raises(FileNotFoundError, match="config file not found"):
+        load_config(tmp_path / "missing.toml")
+    cfg = load_config(None, ["kind=execution", "data.source=clean_circle",
+                             "robot.model=/no/such/robot.xml"])
+    with pytest.raises(FileNotFoundError, match="/no/such/robot.xml"):
+        validate_config(cfg)
+    cfg = load_config(None, ["kind=execution", "data.source=xgnitive",
+                             f"data.data_dir={tmp_path / 'absent'}"])
+    with pytest.raises(FileNotFoundError, match="absent"):
+        validate_config(cfg)
+    with pytest.raises(ConfigError, match="'strategy.name'"):
+        validate_config(load_config(None, ["kind=execution", "data.source=paint_ramp",
+                                           "strategy.name=ga"]))
+
+
+@pytest.mark.parametrize("path", sorted(EXPERIMENTS.glob("*.toml")), ids=lambda p: p.stem)
+def test_every_experiment_file_is_valid(path, monkeypatch, tmp_path):
+    if "xgnitive" in path.stem:
+        monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(tmp_path))  # any existing folder
+    validate_config(load_config(path))
+
+
+@pytest.mark.parametrize("name", ["recognition_all_features", "recognition_spatial"])
+def test_recognition_recognizes_every_test_action(name, tmp_path):
+    cfg = load_config(EXPERIMENTS / f"{name}.toml", ["output.plots=false"])
+    result = run_experiment(cfg, tmp_path)
+    assert result["recognized"] == result["truth"] == ["MOVE", "ROTATE", "CLEAN", "PAINT"]
+    assert result["accuracy"] == 1.0
+    costs = np.asarray(result["cost_matrix"])
+    assert costs.shape == (4, 4)
+    # every diagonal cost is clearly below the rest of its row
+    off = costs + np.diag([np.inf] * 4)
+    assert np.all(np.diag(costs) * 1.5 < off.min(axis=1))
+    saved = json.loads((tmp_path / "result.json").read_text())
+    assert saved["accuracy"] == 1.0 and saved["actions"] == result["actions"]
+    assert (tmp_path / "config.toml").is_file() and (tmp_path / "report.md").is_file()
+    assert np.load(tmp_path / "arrays.npz")["cost_matrix"].shape == (4, 4)
