@@ -1,0 +1,207 @@
+"""Execution strategies on the tiny arm: convergence, batching equivalences, errors, I/O."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
+from cgda_jax.strategies import (
+    ExecutionResult,
+    from_joints,
+    point_keys,
+    run_fte,
+    run_ie,
+    run_iet,
+    run_oet,
+    run_trials,
+    to_joints,
+)
+from cgda_jax.strategies import runner
+
+JOINTS = ["yaw", "shoulder", "elbow"]
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return Robot.from_mjcf(model_path("tiny_arm.xml"), JOINTS, "marker")
+
+
+@pytest.fixture(scope="module")
+def sim(robot):
+    return Simulator(robot, MarkerScene(), substeps=4)
+
+
+def _reachable_goal(robot, postures):
+    return np.stack([np.asarray(robot.marker_position(jnp.asarray(q))) for q in postures])
+
+
+@pytest.fixture(scope="module")
+def goal(robot):
+    # Marker positions of known postures (radians): reachable by construction.
+    postures = [[0.2, 0.5, 0.6], [0.4, 0.6, 0.8], [0.6, 0.7, 0.6], [0.8, 0.5, 0.4]]
+    return _reachable_goal(robot, postures)
+
+
+def test_gene_transform_stays_in_limits_and_inverts():
+    lower, upper = jnp.array([-1.0, 0.0]), jnp.array([2.0, 0.5])
+    u = jnp.linspace(-7.0, 7.0, 101)[:, None] * jnp.ones(2)
+    q = to_joints(u, lower, upper)
+    assert bool(jnp.all((q >= lower - 1e-6) & (q <= upper + 1e-6)))
+    u_in = jnp.array([[-0.9, 0.3], [0.0, 1.0]])
+    np.testing.assert_allclose(
+        from_joints(to_joints(u_in, lower, upper), lower, upper), u_in, atol=1e-3
+    )
+
+
+def test_ie_converges_every_point(sim, goal):
+    res = run_ie(sim, goal, population_size=12, tolerance=0.01, max_generations=80)
+    assert res.success, res.point_errors
+    assert res.point_errors.max() < 0.01
+    # the reported features are a fresh execution of the reported joints
+    feats, _ = sim.rollout(jnp.asarray(res.joints), sim.init_state())
+    np.testing.assert_allclose(res.features, feats, atol=1e-5)
+    assert np.all(res.joints >= np.asarray(sim.lower) - 1e-6)
+    assert np.all(res.joints <= np.asarray(sim.upper) + 1e-6)
+    assert res.fitness_history.shape[0] == len(goal)
+    assert res.evaluations == 12 * sum(res.info["point_generations"])
+
+
+@pytest.mark.parametrize("algorithm", ["SimpleGA", "DifferentialEvolution"])
+def test_ie_other_algorithms(sim, goal, algorithm):
+    res = run_ie(sim, goal[:2], algorithm=algorithm, population_size=16,
+                 tolerance=0.02, max_generations=60)
+    assert res.success, (algorithm, res.point_errors)
+
+
+def test_ie_batched_equals_each_point_alone(sim, goal):
+    goal = goal[:2]
+    keys = point_keys(jax.random.key(3), len(goal))
+    batched = run_ie(sim, goal, keys=keys, population_size=8, tolerance=0.01,
+                     max_generations=40)
+    for i in range(len(goal)):
+        alone = run_ie(sim, goal[i : i + 1], keys=keys[i : i + 1], population_size=8,
+                       tolerance=0.01, max_generations=40)
+        assert alone.info["point_generations"][0] == batched.info["point_generations"][i]
+        np.testing.assert_allclose(alone.joints[0], batched.joints[i], atol=1e-4)
+        g = alone.info["point_generations"][0]
+        np.testing.assert_allclose(alone.fitness_history[0, :g],
+                                   batched.fitness_history[i, :g], rtol=1e-4, atol=1e-6)
+
+
+def test_fte_dtw_converges(sim, goal):
+    from cgda_jax import dtw
+
+    res = run_fte(sim, goal[:3], population_size=24, stagnation=20,
+                  max_generations=200, seed=1)
+    # the reported fitness is the DTW of the reported execution against the goal
+    assert res.final_fitness == pytest.approx(
+        float(dtw(jnp.asarray(res.features), jnp.asarray(goal[:3]))), rel=1e-4, abs=1e-6
+    )
+    assert res.final_fitness < 0.02 < res.fitness_history[0]
+    assert res.fitness_history.ndim == 1 and len(res.fitness_history) == res.generations
+    assert np.all(np.diff(res.fitness_history) <= 0)
+
+
+@pytest.fixture(scope="module")
+def paint_sim(robot):
+    centres = _reachable_goal(robot, [[-0.6, 0.8, 0.6], [-0.2, 0.8, 0.6],
+                                      [0.2, 0.8, 0.6], [0.6, 0.8, 0.6]])
+    return Simulator(robot, PaintWall(centres, radius=0.05), substeps=8)
+
+
+def test_iet_paints_ramp_with_one_compiled_step(paint_sim):
+    goal = np.linspace(0.0, 100.0, 5)[:, None]
+    before = runner.TRACE_COUNTS.get("iet", 0)
+    res = run_iet(paint_sim, goal, population_size=12, tolerance=1.0,
+                  max_generations=60, chunk_size=2)
+    assert runner.TRACE_COUNTS["iet"] - before == 1  # all points, all chunks: one trace
+    assert res.success, res.features.ravel()
+    np.testing.assert_allclose(res.features, goal, atol=1e-4)
+    assert res.info["carried_matches_rollout"]
+    assert res.fitness_history.shape[0] == len(goal)
+
+
+def test_iet_spatial_prefix_fitness(sim, goal):
+    res = run_iet(sim, goal, population_size=12, tolerance=0.01, max_generations=80)
+    assert res.success
+    # Algorithm 1's fitness of the last point is the whole trajectory's distance
+    assert res.final_fitness == pytest.approx(
+        float(np.linalg.norm(res.features - goal)), rel=1e-3, abs=1e-5
+    )
+
+
+def test_oet_reaches_every_goal_point(sim, goal):
+    res = run_oet(sim, goal, population_size=12, tolerance=0.01, max_generations=60)
+    assert res.success, res.point_errors
+    assert res.info["reached_end"]
+    assert res.info["targets"][: len(goal)] == list(range(len(goal)))
+
+
+def test_trials_equal_single_runs(sim, goal):
+    trials = run_trials("ie", sim, goal[:2], 2, seed=5, population_size=8,
+                        tolerance=0.01, max_generations=30)
+    assert [t.info["seed"] for t in trials] == [5, 6]
+    for t in trials[1:]:  # the second trial: its seed is not the batch's first
+        single = run_ie(sim, goal[:2], seed=t.info["seed"], population_size=8,
+                        tolerance=0.01, max_generations=30)
+        np.testing.assert_allclose(t.joints, single.joints, atol=1e-4)
+        assert t.evaluations == single.evaluations
+
+
+def test_trials_iet_batched(paint_sim):
+    goal = np.linspace(0.0, 100.0, 5)[:, None]
+    trials = run_trials("iet", paint_sim, goal, 3, population_size=12, tolerance=1.0,
+                        max_generations=60)
+    assert len(trials) == 3
+    # greedy painting order can strand a square (the paper's noted IET weakness), so
+    # not every seed succeeds on this 4-square row; most do, and they differ
+    assert sum(t.success for t in trials) >= 2
+    assert len({t.evaluations for t in trials}) >= 2
+    for t in trials:
+        assert t.info["carried_matches_rollout"]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"algorithm": "NoSuchES"}, "unknown algorithm"),
+        ({"population_size": 1}, "population_size"),
+        ({"algorithm": "DifferentialEvolution", "population_size": 3}, "population_size"),
+        ({"tolerance": 0.0}, "tolerance"),
+        ({"tolerance": -1.0}, "tolerance"),
+        ({"max_generations": 0}, "max_generations"),
+        ({"algorithm_params": {"no_such": 1.0}}, "no_such"),
+    ],
+)
+def test_bad_configuration_raises(sim, goal, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        run_ie(sim, goal, **kwargs)
+
+
+def test_goal_feature_count_mismatch_raises(sim, paint_sim, goal):
+    with pytest.raises(ValueError, match="features"):
+        run_fte(sim, goal[:, :2])
+    with pytest.raises(ValueError, match="features"):
+        run_iet(paint_sim, goal)
+    with pytest.raises(ValueError, match="unknown strategy"):
+        run_trials("xyz", sim, goal, 2)
+    with pytest.raises(ValueError, match="non-finite"):
+        run_oet(sim, np.where(np.arange(3) == 1, np.nan, goal[:3]))
+
+
+def test_result_save_load_round_trip(sim, goal, tmp_path):
+    res = run_ie(sim, goal[:2], population_size=8, tolerance=0.02, max_generations=20)
+    res.save(tmp_path / "r")
+    back = ExecutionResult.load(tmp_path / "r")
+    for name in ("joints", "features", "goal", "point_errors", "fitness_history"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(res, name))
+    assert back.summary() == res.summary()
+    import json
+
+    meta = json.loads((tmp_path / "r" / "result.json").read_text())
+    for key in ("strategy", "points", "success", "max_point_error", "final_fitness",
+                "evaluations", "generations", "wall_time_s", "compile_time_s"):
+        assert key in meta
+    with pytest.raises(FileNotFoundError):
+        ExecutionResult.load(tmp_path / "missing")
