@@ -187,22 +187,185 @@ class MujocoMarker:
         mujoco.mj_kinematics(self.model, self.data)
         return self.data.site_xpos[self.site].copy()
 
-    def _paint(self, painted, pos):
-        if painted is not None:
-            painted |= np.sum((self.centres - pos) ** 2, axis=1) <= self.radius**2
-
-    def execute(self, waypoints: np.ndarray, start: np.ndarray | None = None):
-        """Features (N, F) of executing (N, DoF) waypoints from posture ``start``
-        (default: zeros clipped into the limits)."""
+    def init_state(self, start: np.ndarray | None = None) -> tuple:
+        """(posture (DoF,), painted (S,) or None): ``start`` (default zeros),
+        clipped, with the scene updated there."""
         q = np.zeros(len(self.qadr)) if start is None else np.asarray(start, float)
         q = np.clip(q, self.lower, self.upper)
         painted = None if self.centres is None else np.zeros(len(self.centres), bool)
         self._paint(painted, self.marker(q))
+        return q, painted
+
+    def _paint(self, painted, pos) -> None:
+        if painted is not None:
+            painted |= np.sum((self.centres - pos) ** 2, axis=1) <= self.radius**2
+
+    def step(self, state: tuple, waypoint: np.ndarray) -> tuple[tuple, np.ndarray]:
+        """Move to one (DoF,) waypoint: (new state, features (F,))."""
+        q, painted = state
+        painted = None if painted is None else painted.copy()
+        w = np.clip(np.asarray(waypoint, np.float64), self.lower, self.upper)
+        for a in self.alphas:
+            pos = self.marker(q + a * (w - q))
+            self._paint(painted, pos)
+        feats = pos if painted is None else np.array([100.0 * painted.mean()])
+        return (w, painted), feats
+
+    def execute(self, waypoints: np.ndarray, start: np.ndarray | None = None):
+        """Features (N, F) of executing (N, DoF) waypoints from ``start``."""
+        state = self.init_state(start)
         feats = []
-        for w in np.clip(np.asarray(waypoints, np.float64), self.lower, self.upper):
-            for a in self.alphas:
-                pos = self.marker(q + a * (w - q))
-                self._paint(painted, pos)
-            q = w
-            feats.append(pos if painted is None else [100.0 * painted.mean()])
+        for w in np.asarray(waypoints, np.float64):
+            state, f = self.step(state, w)
+            feats.append(f)
         return np.asarray(feats)
+
+
+# --- pycma + MuJoCo C strategies ---------------------------------------------------
+# The same searches as cgda_jax.strategies (CMA-ES in the same normalized gene space,
+# same start mean 0 and step size, same population size, fitness and stopping rules),
+# written the way a user of pycma would: ask/tell, each candidate executed on its own.
+
+
+def to_joints(u, lower, upper) -> np.ndarray:
+    """Normalized genes -> joint angles (cgda_jax.strategies.base.to_joints)."""
+    mid, half = 0.5 * (upper + lower), 0.5 * (upper - lower)
+    return mid + half * np.sin(0.5 * np.pi * np.asarray(u))
+
+
+def _cma(n_genes: int, popsize: int, sigma0: float, seed: int, max_gens: int):
+    import cma
+
+    opts = {
+        "popsize": popsize,
+        "seed": seed + 1,  # pycma: seed 0 means "random"
+        "verbose": -9,
+        "maxiter": max_gens,
+        "CMA_diagonal": False,
+    }
+    return cma.CMAEvolutionStrategy(np.zeros(n_genes), sigma0, opts)
+
+
+def _evolve(fitness, n_genes, popsize, sigma0, seed, max_gens, stop):
+    """ask/tell until ``stop(best, stall, generation)`` or pycma stops.
+
+    Returns (best_u, best_f, generations, evaluations)."""
+    es = _cma(n_genes, popsize, sigma0, seed, max_gens)
+    best_u, best_f, stall, gen = np.zeros(n_genes), np.inf, 0, 0
+    while not es.stop():
+        pop = es.ask()
+        fit = [fitness(u) for u in pop]  # one candidate at a time
+        es.tell(pop, fit)
+        gen += 1
+        i = int(np.argmin(fit))
+        if fit[i] < best_f:
+            best_u, best_f, stall = np.asarray(pop[i]), fit[i], 0
+        else:
+            stall += 1
+        if stop(best_f, stall, gen):
+            break
+    return best_u, best_f, gen, gen * popsize
+
+
+def pycma_ie(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0) -> dict:
+    """IE: each point evolved on its own (one after the other), fitness = distance of
+    the features after one step from the start to the candidate posture."""
+    lo, hi = c_sim.lower, c_sim.upper
+    start = c_sim.init_state()
+    postures, evals, gens = [], 0, []
+    for i, g in enumerate(np.asarray(goal, np.float64)):
+
+        def fitness(u, g=g):
+            return float(np.linalg.norm(c_sim.step(start, to_joints(u, lo, hi))[1] - g))
+
+        u, _, n_gen, n_eval = _evolve(
+            fitness,
+            len(lo),
+            popsize,
+            sigma0,
+            seed + 1000 * i,
+            max_gens,
+            lambda f, stall, gen: f < tolerance or gen >= max_gens,
+        )
+        postures.append(to_joints(u, lo, hi))
+        evals += n_eval
+        gens.append(n_gen)
+    errors = np.linalg.norm(c_sim.execute(np.array(postures)) - goal, axis=-1)
+    return {
+        "success": bool(np.all(errors < tolerance)),
+        "evaluations": evals,
+        "generations": int(max(gens)),
+        "point_errors": errors,
+    }
+
+
+def pycma_fte(
+    c_sim, goal, popsize, tolerance, max_gens, stagnation=10, seed=0, sigma0=1.0
+) -> dict:
+    """FTE: one evolution over all N x DoF genes, fitness = the paper's DTW score
+    (dtaidistance C) of the whole executed trajectory."""
+    lo, hi = c_sim.lower, c_sim.upper
+    n, dof = goal.shape[0], len(lo)
+    goal = np.asarray(goal, np.float64)
+
+    def fitness(u):
+        feats = c_sim.execute(to_joints(np.reshape(u, (n, dof)), lo, hi))
+        return dtai_pair(feats, goal)
+
+    u, best, gens, evals = _evolve(
+        fitness,
+        n * dof,
+        popsize,
+        sigma0,
+        seed,
+        max_gens,
+        lambda f, stall, gen: stall >= stagnation or gen >= max_gens,
+    )
+    feats = c_sim.execute(to_joints(np.reshape(u, (n, dof)), lo, hi))
+    errors = np.linalg.norm(feats - goal, axis=-1)
+    return {
+        "success": bool(np.all(errors < tolerance)),
+        "evaluations": evals,
+        "generations": gens,
+        "point_errors": errors,
+        "final_fitness": best,
+    }
+
+
+def pycma_iet(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0) -> dict:
+    """IET: point i evolved with points 0..i-1 frozen, fitness = the distance of
+    executed features 0..i to goal 0..i; the state reached by the frozen prefix is
+    carried (one step per candidate), as cgda_jax does."""
+    import time
+
+    lo, hi = c_sim.lower, c_sim.upper
+    state, prefix_sq = c_sim.init_state(), 0.0
+    point_times, point_fitness, evals = [], [], 0
+    for i, g in enumerate(np.asarray(goal, np.float64)):
+        t0 = time.perf_counter()
+
+        def fitness(u, g=g, state=state, prefix_sq=prefix_sq):
+            feats = c_sim.step(state, to_joints(u, lo, hi))[1]
+            return float(np.sqrt(prefix_sq + np.sum((feats - g) ** 2)))
+
+        u, best, _, n_eval = _evolve(
+            fitness,
+            len(lo),
+            popsize,
+            sigma0,
+            seed + 1000 * i,
+            max_gens,
+            lambda f, stall, gen: f < tolerance or gen >= max_gens,
+        )
+        state, feats = c_sim.step(state, to_joints(u, lo, hi))
+        prefix_sq += float(np.sum((feats - g) ** 2))
+        evals += n_eval
+        point_fitness.append(best)
+        point_times.append(time.perf_counter() - t0)
+    point_fitness = np.array(point_fitness)
+    return {
+        "success": bool(np.all(point_fitness < tolerance)),
+        "evaluations": evals,
+        "point_times_s": point_times,
+        "point_fitness": point_fitness,
+    }

@@ -1,0 +1,243 @@
+"""Execution strategies: cgda_jax vs pycma + MuJoCo C, on the paper's experiments.
+
+For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right arm):
+
+- ours: the strategy as ``cgda run`` calls it; cold = the first call in this process
+  (trace + compile + run), steady = ``wall_time_s`` (run only, compile apart) as the
+  median of ``--repeats`` calls;
+- peer: the same search written with pycma's ask/tell and MuJoCo's C
+  ``mj_kinematics``, one candidate at a time (benchmarks/peers.py: same gene space,
+  start, step size, population size, fitness, stopping rule and success test);
+- IET time per point: ours measured with one generation per chunk (a host sync per
+  generation, so a little slower than the real run), the peer's per point;
+  "flat" = mean of the last 3 points within 1.5x of the first 3;
+- trials: ``run_trials("ie", ..., 30)`` in one batched call vs 30 sequential
+  ``run_ie`` calls (seeds 0..29), with JAX's persistent compilation cache on (as the
+  CLI does), so sequential calls after the first reuse the compiled program.
+
+    python benchmarks/bench_strategies.py [--repeats 3] [--trials 30] [--quick]
+
+``--quick`` lowers the generation budgets and trial count (a smoke test only).
+Targets (2-core CPU): clean IE >= 30x faster than the peer (steady state); cold
+start incl. compile < 3 s; paint IET >= 10x faster than the peer; 30 batched trials
+>= 10x the throughput of 30 sequential runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import statistics
+import tempfile
+import time
+
+import numpy as np
+import peers
+from _common import print_table, write_json
+
+from cgda_jax import experiment as ex
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+TARGETS = {"ie": 30.0, "iet": 10.0, "fte": None}
+
+
+def setup(name: str, overrides: list[str]):
+    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml", overrides)
+    goal, _, _ = ex.build_goal(cfg)
+    sim = ex.build_simulator(cfg)
+    return cfg, np.asarray(goal, np.float32), sim
+
+
+def strategy_kwargs(cfg) -> dict:
+    s = cfg.strategy
+    return dict(
+        algorithm=s.algorithm,
+        population_size=s.population_size,
+        tolerance=s.tolerance,
+        max_generations=s.max_generations,
+        seed=s.seed,
+        chunk_size=s.chunk_size,
+        **s.options,
+    )
+
+
+def run_ours(cfg, goal, sim, repeats: int) -> dict:
+    fn = ex.strategy_function(cfg.strategy.name)
+    kw = strategy_kwargs(cfg)
+    t0 = time.perf_counter()
+    res = fn(sim, goal, **kw)
+    cold = time.perf_counter() - t0
+    walls = [res.wall_time_s]
+    compiles = [res.compile_time_s]
+    for _ in range(repeats - 1):
+        r = fn(sim, goal, **kw)
+        walls.append(r.wall_time_s)
+        compiles.append(r.compile_time_s)
+    return {
+        "cold_s": cold,
+        "compile_s": statistics.median(compiles),
+        "steady_s": statistics.median(walls),
+        "evaluations": res.evaluations,
+        "success": res.success,
+        "max_point_error": float(np.max(res.point_errors)),
+    }
+
+
+def run_peer(cfg, goal, sim) -> dict:
+    c_sim = peers.MujocoMarker.from_simulator(sim)
+    s = cfg.strategy
+    args = (c_sim, goal, s.population_size, s.tolerance, s.max_generations)
+    t0 = time.perf_counter()
+    if s.name == "ie":
+        out = peers.pycma_ie(*args, seed=s.seed)
+    elif s.name == "iet":
+        out = peers.pycma_iet(*args, seed=s.seed)
+    else:
+        out = peers.pycma_fte(
+            *args, stagnation=s.options.get("stagnation", 10), seed=s.seed
+        )
+    out["time_s"] = time.perf_counter() - t0
+    return out
+
+
+def iet_point_times(cfg, goal, sim) -> list[float]:
+    """Our IET's wall time per point, from one-generation chunks."""
+    kw = {**strategy_kwargs(cfg), "chunk_size": 1}
+    stamps: list[tuple[float, int]] = []
+
+    def progress(info):
+        stamps.append((info["elapsed_s"], int(np.ravel(info["point"])[0])))
+
+    ex.strategy_function("iet")(sim, goal, progress_fn=progress, **kw)
+    times, last_t, last_p = [], 0.0, 0
+    for t, p in stamps:
+        if p != last_p:  # point last_p was committed during this chunk
+            times.append(t - last_t)
+            last_t, last_p = t, p
+    return times
+
+
+def flatness(times) -> dict:
+    first, last = float(np.mean(times[:3])), float(np.mean(times[-3:]))
+    return {"first3_s": first, "last3_s": last, "flat": last <= 1.5 * first}
+
+
+def trials_benchmark(cfg, goal, sim, n_trials: int) -> dict:
+    from cgda_jax.cli import enable_compilation_cache
+    from cgda_jax.strategies.ie import run_ie
+    from cgda_jax.strategies.trials import run_trials
+
+    enable_compilation_cache(pathlib.Path(tempfile.mkdtemp(prefix="cgda_bench_")))
+    kw = strategy_kwargs(cfg)
+    kw.pop("seed")
+    t0 = time.perf_counter()
+    batch = run_trials("ie", sim, goal, n_trials, seed=0, **kw)
+    batch_total = time.perf_counter() - t0
+    seq_walls, seq_compiles, seq_ok = [], [], 0
+    t0 = time.perf_counter()
+    for seed in range(n_trials):
+        r = run_ie(sim, goal, seed=seed, **kw)
+        seq_walls.append(r.wall_time_s)
+        seq_compiles.append(r.compile_time_s)
+        seq_ok += r.success
+    seq_total = time.perf_counter() - t0
+    return {
+        "n_trials": n_trials,
+        "batched_run_s": batch[0].wall_time_s,
+        "batched_compile_s": batch[0].compile_time_s,
+        "batched_total_s": batch_total,
+        "batched_successes": sum(r.success for r in batch),
+        "sequential_run_s": float(np.sum(seq_walls)),
+        "sequential_compile_s": float(np.sum(seq_compiles)),
+        "sequential_total_s": seq_total,
+        "sequential_successes": seq_ok,
+        "throughput_ratio_run": float(np.sum(seq_walls)) / batch[0].wall_time_s,
+        "throughput_ratio_total": seq_total / batch_total,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--trials", type=int, default=30)
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument(
+        "--only", nargs="*", default=["clean_ie", "clean_fte", "paint_iet", "trials"]
+    )
+    args = parser.parse_args()
+    overrides = ["strategy.max_generations=20"] if args.quick else []
+    n_trials = 4 if args.quick else args.trials
+
+    rows, payload = [], {"quick": args.quick}
+    for name in [n for n in args.only if n != "trials"]:
+        print(f"{name} ...", flush=True)
+        cfg, goal, sim = setup(name, overrides)
+        ours = run_ours(cfg, goal, sim, args.repeats)
+        peer = run_peer(cfg, goal, sim)
+        ratio = peer["time_s"] / ours["steady_s"]
+        target = TARGETS[cfg.strategy.name]
+        rows.append(
+            {
+                "experiment": name,
+                "points": goal.shape[0],
+                "ours_steady_s": ours["steady_s"],
+                "ours_compile_s": ours["compile_s"],
+                "ours_cold_s": ours["cold_s"],
+                "ours_evals": ours["evaluations"],
+                "ours_ok": ours["success"],
+                "peer_s": peer["time_s"],
+                "peer_evals": peer["evaluations"],
+                "peer_ok": peer["success"],
+                "ratio": ratio,
+                "target": "" if target is None else f">= {target:g}x",
+                "met": "" if target is None else ratio >= target,
+            }
+        )
+        payload[name] = {"ours": ours, "peer": _plain(peer)}
+        if cfg.strategy.name == "iet":
+            ours_pt = iet_point_times(cfg, goal, sim)
+            payload[name]["ours_point_times_s"] = ours_pt
+            payload[name]["ours_flatness"] = flatness(ours_pt)
+            payload[name]["peer_flatness"] = flatness(peer["point_times_s"])
+        if cfg.strategy.name == "ie":
+            payload["cold_start_s"] = ours["cold_s"]
+    cols = list(rows[0]) if rows else []
+    if rows:
+        print_table(rows, cols)
+    for name in ("paint_iet",):
+        if name in payload:
+            print(
+                f"{name} time per point: ours {payload[name]['ours_flatness']}, "
+                f"peer {payload[name]['peer_flatness']}"
+            )
+    if "cold_start_s" in payload:
+        c = payload["cold_start_s"]
+        print(
+            f"clean IE cold start (compile + run, in process): {c:.2f} s "
+            f"(target < 3 s: {'met' if c < 3 else 'NOT met'})"
+        )
+    if "trials" in args.only:
+        print(f"trials ({n_trials}) ...", flush=True)
+        cfg, goal, sim = setup("clean_ie", overrides)
+        tr = trials_benchmark(cfg, goal, sim, n_trials)
+        payload["trials"] = tr
+        print_table([tr], list(tr))
+        ok = tr["throughput_ratio_run"] >= 10
+        print(
+            f"batched vs sequential throughput (run only): "
+            f"{tr['throughput_ratio_run']:.1f}x (target >= 10x: "
+            f"{'met' if ok else 'NOT met'})"
+        )
+    payload["rows"] = rows
+    write_json("bench_strategies", payload)
+
+
+def _plain(d: dict) -> dict:
+    return {
+        k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)
+        for k, v in d.items()
+    }
+
+
+if __name__ == "__main__":
+    main()
