@@ -15,13 +15,19 @@ TEO_PAPER = ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
 
 @pytest.fixture(scope="module")
 def tiny():
-    return Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"], "marker")
+    return Robot.from_mjcf(
+        model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"], "marker"
+    )
 
 
 @pytest.fixture(scope="module")
 def teo():
-    return Robot.from_mjcf(model_path("teo.xml"), TEO_PAPER, "marker",
-                           fixed={"r_forearm_rotation": math.radians(45)})
+    return Robot.from_mjcf(
+        model_path("teo.xml"),
+        TEO_PAPER,
+        "marker",
+        fixed={"r_forearm_rotation": math.radians(45)},
+    )
 
 
 def _c_marker(robot, genes):
@@ -54,7 +60,9 @@ def test_waypoints_are_clipped_into_the_limits(tiny):
     wp = np.array([[3.0, -3.0, 0.0]], np.float32)
     feats = sim.execute(wp)
     clipped = np.clip(wp[0], tiny.lower, tiny.upper)
-    np.testing.assert_allclose(np.asarray(feats[0]), _c_marker(tiny, clipped), atol=1e-5)
+    np.testing.assert_allclose(
+        np.asarray(feats[0]), _c_marker(tiny, clipped), atol=1e-5
+    )
 
 
 def _teo_marker(teo, deg):
@@ -98,8 +106,9 @@ def test_teo_paint_features_match_a_host_reference(teo):
 
 
 def test_rollout_continues_from_a_carried_state(tiny):
-    wall = PaintWall(np.array([[0.3, 0.0, 0.3], [0.0, 0.3, 0.3], [-0.3, 0.0, 0.3]]),
-                     radius=0.1)
+    wall = PaintWall(
+        np.array([[0.3, 0.0, 0.3], [0.0, 0.3, 0.3], [-0.3, 0.0, 0.3]]), radius=0.1
+    )
     sim = Simulator(tiny, wall, substeps=4)
     wps = _random_waypoints(tiny, (10,), seed=4)
     whole, _ = sim.rollout(wps)

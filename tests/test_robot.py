@@ -11,8 +11,12 @@ import pytest
 from cgda_jax import Robot, model_path
 
 TEO_RIGHT = [
-    "r_shoulder_flexion", "r_shoulder_abduction", "r_upper_arm_rotation",
-    "r_elbow", "r_forearm_rotation", "r_wrist",
+    "r_shoulder_flexion",
+    "r_shoulder_abduction",
+    "r_upper_arm_rotation",
+    "r_elbow",
+    "r_forearm_rotation",
+    "r_wrist",
 ]
 TEO_ALL = ["trunk_axial", "trunk_frontal", *TEO_RIGHT] + [
     j.replace("r_", "l_", 1) for j in TEO_RIGHT
@@ -32,8 +36,12 @@ def _c_marker(robot: Robot, genes: np.ndarray) -> np.ndarray:
 CASES = [
     ("teo.xml", TEO_ALL, "marker", None),
     ("teo.xml", TEO_ALL, "marker_left", None),
-    ("teo.xml", ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"], "marker",
-     {"r_forearm_rotation": math.pi / 4, "r_wrist": 0.3, "trunk_axial": -0.2}),
+    (
+        "teo.xml",
+        ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"],
+        "marker",
+        {"r_forearm_rotation": math.pi / 4, "r_wrist": 0.3, "trunk_axial": -0.2},
+    ),
     ("tiny_arm.xml", ["yaw", "shoulder", "elbow"], "marker", None),
     ("tiny_arm.xml", ["elbow", "shoulder"], "marker", {"yaw": 0.7}),
 ]
@@ -43,7 +51,9 @@ CASES = [
 @pytest.mark.parametrize("case", CASES, ids=lambda c: f"{c[0]}-{c[2]}-{len(c[1])}")
 def test_marker_matches_mujoco_c(case, kinematics):
     name, joints, site, fixed = case
-    robot = Robot.from_mjcf(model_path(name), joints, site, fixed, kinematics=kinematics)
+    robot = Robot.from_mjcf(
+        model_path(name), joints, site, fixed, kinematics=kinematics
+    )
     rng = np.random.default_rng(0)
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     genes = rng.uniform(lo, hi, size=(20, robot.n_dof)).astype(np.float32)
@@ -55,23 +65,36 @@ def test_marker_matches_mujoco_c(case, kinematics):
 
 def test_limits_from_model():
     robot = Robot.from_mjcf(model_path("teo.xml"), TEO_RIGHT, "marker")
-    want = np.deg2rad([[-45, 70], [-70, 15], [-10, 75], [-10, 100], [-90, 90], [-10, 100]])
+    want = np.deg2rad(
+        [[-45, 70], [-70, 15], [-10, 75], [-10, 100], [-90, 90], [-10, 100]]
+    )
     np.testing.assert_allclose(robot.lower, want[:, 0], rtol=1e-6)
     np.testing.assert_allclose(robot.upper, want[:, 1], rtol=1e-6)
-    left = Robot.from_mjcf(model_path("teo.xml"), [j.replace("r_", "l_", 1) for j in TEO_RIGHT],
-                           "marker_left")
-    want = np.deg2rad([[-75, 45], [-15, 70], [-10, 75], [-100, 10], [-90, 90], [-100, 10]])
+    left = Robot.from_mjcf(
+        model_path("teo.xml"),
+        [j.replace("r_", "l_", 1) for j in TEO_RIGHT],
+        "marker_left",
+    )
+    want = np.deg2rad(
+        [[-75, 45], [-15, 70], [-10, 75], [-100, 10], [-90, 90], [-100, 10]]
+    )
     np.testing.assert_allclose(left.lower, want[:, 0], rtol=1e-6)
     np.testing.assert_allclose(left.upper, want[:, 1], rtol=1e-6)
 
 
 def test_qpos_writes_genes_and_fixed_values():
-    robot = Robot.from_mjcf(model_path("teo.xml"), ["r_elbow", "r_shoulder_flexion"],
-                            "marker", fixed={"r_forearm_rotation": 0.5})
+    robot = Robot.from_mjcf(
+        model_path("teo.xml"),
+        ["r_elbow", "r_shoulder_flexion"],
+        "marker",
+        fixed={"r_forearm_rotation": 0.5},
+    )
     qpos = np.asarray(robot.qpos(jnp.array([0.1, 0.2])))
     m = robot.mj_model
-    adr = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j): m.jnt_qposadr[j]
-           for j in range(m.njnt)}
+    adr = {
+        mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j): m.jnt_qposadr[j]
+        for j in range(m.njnt)
+    }
     assert qpos[adr["r_elbow"]] == pytest.approx(0.1)
     assert qpos[adr["r_shoulder_flexion"]] == pytest.approx(0.2)
     assert qpos[adr["r_forearm_rotation"]] == pytest.approx(0.5)
@@ -96,21 +119,26 @@ def test_teo_hand_checked_postures(teo_right):
     np.testing.assert_allclose(_teo(r), SHOULDER_R - [0, 0, ARM], atol=1e-5)
     # elbow 90: forearm + marker point forward (x), elbow under the shoulder
     np.testing.assert_allclose(
-        _teo(r, r_elbow=90), SHOULDER_R + [0.202 + 0.267, 0, -0.329], atol=1e-5)
+        _teo(r, r_elbow=90), SHOULDER_R + [0.202 + 0.267, 0, -0.329], atol=1e-5
+    )
     # shoulder flexion 90: the whole arm forward
-    np.testing.assert_allclose(_teo(r, r_shoulder_flexion=90), SHOULDER_R + [ARM, 0, 0],
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        _teo(r, r_shoulder_flexion=90), SHOULDER_R + [ARM, 0, 0], atol=1e-5
+    )
     # shoulder abduction -90 (right arm out to the side, -y)
-    np.testing.assert_allclose(_teo(r, r_shoulder_abduction=-90),
-                               SHOULDER_R + [0, -ARM, 0], atol=1e-5)
+    np.testing.assert_allclose(
+        _teo(r, r_shoulder_abduction=-90), SHOULDER_R + [0, -ARM, 0], atol=1e-5
+    )
     # wrist 90 with the forearm down: the marker (0.267) points forward from the wrist
-    np.testing.assert_allclose(_teo(r, r_wrist=90),
-                               SHOULDER_R + [0.267, 0, -0.329 - 0.202], atol=1e-5)
+    np.testing.assert_allclose(
+        _teo(r, r_wrist=90), SHOULDER_R + [0.267, 0, -0.329 - 0.202], atol=1e-5
+    )
     # forearm rotation alone does not move a marker on the forearm axis
     np.testing.assert_allclose(_teo(r, r_forearm_rotation=45), _teo(r), atol=1e-6)
     # trunk axial 90: the right shoulder swings to +x around the trunk axis
-    np.testing.assert_allclose(_teo(r, trunk_axial=90),
-                               [0.34692, 0.0, 0.4982 - ARM], atol=1e-5)
+    np.testing.assert_allclose(
+        _teo(r, trunk_axial=90), [0.34692, 0.0, 0.4982 - ARM], atol=1e-5
+    )
 
 
 def test_teo_left_arm_mirrors_right():
@@ -119,13 +147,22 @@ def test_teo_left_arm_mirrors_right():
     mirror = np.array([1.0, -1.0, 1.0])
     # the left joints' ranges mean mirrored motions: flexion/elbow/wrist negated
     for r_deg, l_deg in [
-        (dict(r_shoulder_flexion=60, r_elbow=80), dict(l_shoulder_flexion=-60, l_elbow=-80)),
-        (dict(r_shoulder_abduction=-40, r_wrist=30), dict(l_shoulder_abduction=40, l_wrist=-30)),
-        (dict(r_shoulder_flexion=30, r_upper_arm_rotation=50, r_elbow=60),
-         dict(l_shoulder_flexion=-30, l_upper_arm_rotation=50, l_elbow=-60)),
+        (
+            {"r_shoulder_flexion": 60, "r_elbow": 80},
+            {"l_shoulder_flexion": -60, "l_elbow": -80},
+        ),
+        (
+            {"r_shoulder_abduction": -40, "r_wrist": 30},
+            {"l_shoulder_abduction": 40, "l_wrist": -30},
+        ),
+        (
+            {"r_shoulder_flexion": 30, "r_upper_arm_rotation": 50, "r_elbow": 60},
+            {"l_shoulder_flexion": -30, "l_upper_arm_rotation": 50, "l_elbow": -60},
+        ),
     ]:
-        np.testing.assert_allclose(_teo(left, **l_deg), _teo(right, **r_deg) * mirror,
-                                   atol=1e-5)
+        np.testing.assert_allclose(
+            _teo(left, **l_deg), _teo(right, **r_deg) * mirror, atol=1e-5
+        )
 
 
 def test_other_arm_by_configuration_alone(tmp_path):

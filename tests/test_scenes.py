@@ -24,9 +24,13 @@ def test_teo_wall_geometry():
     wall = PaintWall.grid()
     assert wall.n_squares == 16 and wall.n_features == 1
     assert wall.centres.shape == (16, 3)
-    np.testing.assert_allclose(sorted(set(wall.centres[:, 1].round(4))), [-0.8, -0.6, -0.4, -0.2])
+    np.testing.assert_allclose(
+        sorted(set(wall.centres[:, 1].round(4))), [-0.8, -0.6, -0.4, -0.2]
+    )
     # world z 0.32..0.92 with the waist at 0.3 -> 0.02..0.62 in the waist frame
-    np.testing.assert_allclose(sorted(set(wall.centres[:, 2].round(4))), [0.02, 0.22, 0.42, 0.62])
+    np.testing.assert_allclose(
+        sorted(set(wall.centres[:, 2].round(4))), [0.02, 0.22, 0.42, 0.62]
+    )
     np.testing.assert_allclose(wall.centres[:, 0], 0.6)
 
 
@@ -48,7 +52,9 @@ def test_revisiting_does_not_double_count_and_painting_sticks():
     path = [far, a, far, a, a, far, b, far, a]
     painted, feats = _paint(wall, path)
     assert painted.sum() == 2 and painted[0] and painted[15]
-    np.testing.assert_allclose(feats, [0, 6.25, 6.25, 6.25, 6.25, 6.25, 12.5, 12.5, 12.5])
+    np.testing.assert_allclose(
+        feats, [0, 6.25, 6.25, 6.25, 6.25, 6.25, 12.5, 12.5, 12.5]
+    )
 
 
 def test_percentages_are_multiples_of_6_25_and_reach_100():

@@ -125,7 +125,8 @@ class Simulator:
                 raise ValueError(f"actuator {name!r} does not drive a joint")
             adr.append(int(m.jnt_qposadr[m.actuator_trnid[a, 0]]))
         missing = [
-            name for name, q in zip(self.robot.joint_names, self.robot.qpos_adr)
+            name
+            for name, q in zip(self.robot.joint_names, self.robot.qpos_adr)
             if int(q) not in adr
         ]
         if missing:

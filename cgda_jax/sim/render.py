@@ -65,8 +65,12 @@ def _add_decorations(scene: mujoco.MjvScene, decorations) -> None:
         if scene.ngeom >= scene.maxgeom:
             return
         mujoco.mjv_initGeom(
-            scene.geoms[scene.ngeom], _GEOM[kind], np.asarray(half, np.float64),
-            np.asarray(pos, np.float64), np.eye(3).ravel(), np.asarray(rgba, np.float32),
+            scene.geoms[scene.ngeom],
+            _GEOM[kind],
+            np.asarray(half, np.float64),
+            np.asarray(pos, np.float64),
+            np.eye(3).ravel(),
+            np.asarray(rgba, np.float32),
         )
         scene.ngeom += 1
 
@@ -170,7 +174,9 @@ def render_trajectory(
     return _write(images, out_path, fps)
 
 
-def _write(images: list[np.ndarray], out_path: pathlib.Path, fps: int) -> list[pathlib.Path]:
+def _write(
+    images: list[np.ndarray], out_path: pathlib.Path, fps: int
+) -> list[pathlib.Path]:
     try:
         from PIL import Image
     except ImportError:  # pragma: no cover - matplotlib ships with Pillow
@@ -178,8 +184,13 @@ def _write(images: list[np.ndarray], out_path: pathlib.Path, fps: int) -> list[p
     if out_path.suffix.lower() == ".gif" and Image is not None:
         out_path.parent.mkdir(parents=True, exist_ok=True)
         frames = [Image.fromarray(img) for img in images]
-        frames[0].save(out_path, save_all=True, append_images=frames[1:],
-                       duration=int(1000 / fps), loop=0)
+        frames[0].save(
+            out_path,
+            save_all=True,
+            append_images=frames[1:],
+            duration=int(1000 / fps),
+            loop=0,
+        )
         return [out_path]
     folder = out_path.with_suffix("") if out_path.suffix else out_path
     folder.mkdir(parents=True, exist_ok=True)

@@ -57,7 +57,9 @@ def model_path(name: str) -> pathlib.Path:
     return path
 
 
-def _id(mj_model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, what: str, src) -> int:
+def _id(
+    mj_model: mujoco.MjModel, kind: mujoco.mjtObj, name: str, what: str, src
+) -> int:
     idx = mujoco.mj_name2id(mj_model, kind, name)
     if idx < 0:
         names = [
@@ -115,9 +117,13 @@ class Robot:
         self.mj_model = mj_model
         self.joint_names = joints
         self.n_dof = len(joints)
-        self.joint_ids = np.array([_id(mj_model, jt, j, "joint", source) for j in joints])
+        self.joint_ids = np.array(
+            [_id(mj_model, jt, j, "joint", source) for j in joints]
+        )
         self.marker_site = marker_site
-        self.site_id = _id(mj_model, mujoco.mjtObj.mjOBJ_SITE, marker_site, "site", source)
+        self.site_id = _id(
+            mj_model, mujoco.mjtObj.mjOBJ_SITE, marker_site, "site", source
+        )
         self.kinematics = kinematics
 
         lower, upper = [], []
@@ -144,7 +150,9 @@ class Robot:
         for name, value in fixed.items():
             jid = _id(mj_model, jt, name, "fixed joint", source)
             if int(mj_model.jnt_type[jid]) not in (_HINGE, _SLIDE):
-                raise ValueError(f"fixed joint {name!r} in {source} is not a hinge/slide")
+                raise ValueError(
+                    f"fixed joint {name!r} in {source} is not a hinge/slide"
+                )
             qpos0[mj_model.jnt_qposadr[jid]] = float(value)
         self.fixed = fixed
         self._qpos0_np = qpos0
@@ -187,18 +195,28 @@ class Robot:
             mj_model = mujoco.MjModel.from_xml_path(str(path))
         except ValueError as err:
             raise ValueError(f"cannot load MJCF {path}: {err}") from err
-        return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
-                   source=str(path))
+        return cls(
+            mj_model,
+            joints,
+            marker_site,
+            fixed,
+            kinematics=kinematics,
+            source=str(path),
+        )
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
         if kinematics == "chain":
             from cgda_jax.sim.chain import build_chain_fk
 
             return build_chain_fk(
-                self.mj_model, self._qpos0_np, [int(j) for j in self.joint_ids],
+                self.mj_model,
+                self._qpos0_np,
+                [int(j) for j in self.joint_ids],
                 self.site_id,
             )
-        return lambda genes: self.kinematics_data(self.qpos(genes)).site_xpos[self.site_id]
+        return lambda genes: self.kinematics_data(self.qpos(genes)).site_xpos[
+            self.site_id
+        ]
 
     def __repr__(self) -> str:
         return (
@@ -242,6 +260,10 @@ class Robot:
 
     def with_kinematics(self, kinematics: str) -> Robot:
         """The same robot with another forward-kinematics back-end."""
-        return Robot(self.mj_model, self.joint_names, self.marker_site, self.fixed,
-                     kinematics=kinematics)
-
+        return Robot(
+            self.mj_model,
+            self.joint_names,
+            self.marker_site,
+            self.fixed,
+            kinematics=kinematics,
+        )

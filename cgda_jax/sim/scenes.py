@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["MarkerScene", "PaintWall", "TEO_WALL_Y", "TEO_WALL_Z"]
+__all__ = ["TEO_WALL_Y", "TEO_WALL_Z", "MarkerScene", "PaintWall"]
 
 #: The authors' paint wall (world frame, robot waist at z = 0.3).
 TEO_WALL_Y = (-0.8, -0.6, -0.4, -0.2)
@@ -82,7 +82,9 @@ class PaintWall:
     def __post_init__(self):
         centres = np.asarray(self.centres, dtype=np.float32)
         if centres.ndim != 2 or centres.shape[1] != 3 or len(centres) == 0:
-            raise ValueError(f"PaintWall centres has shape {centres.shape}, expected (S, 3)")
+            raise ValueError(
+                f"PaintWall centres has shape {centres.shape}, expected (S, 3)"
+            )
         if not np.all(np.isfinite(centres)):
             raise ValueError("PaintWall centres contain NaN or inf")
         if not self.radius > 0:
