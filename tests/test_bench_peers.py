@@ -96,3 +96,27 @@ def test_mujoco_c_execution_matches_simulator(scene_kind):
     np.testing.assert_allclose(ours, theirs, atol=1e-4)
     if scene_kind == "paint":
         assert theirs.max() > 0  # the check is not vacuous
+
+
+def test_pycma_peers_use_our_gene_map_and_solve_a_tiny_goal():
+    from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
+    from cgda_jax.strategies.base import to_joints
+
+    robot = Robot.from_mjcf(
+        model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"], "marker"
+    )
+    sim = Simulator(robot, MarkerScene(), substeps=2)
+    c_sim = peers.MujocoMarker.from_simulator(sim)
+    u = np.random.default_rng(3).normal(size=(5, 3))
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    np.testing.assert_allclose(
+        peers.to_joints(u, lo, hi),
+        np.asarray(to_joints(jnp.asarray(u, jnp.float32), robot.lower, robot.upper)),
+        atol=1e-6,
+    )
+    # Reachable goals: the marker at two known postures.
+    goal = c_sim.execute(np.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
+    ie = peers.pycma_ie(c_sim, goal, popsize=8, tolerance=0.02, max_gens=150)
+    assert ie["success"] and ie["point_errors"].max() < 0.02
+    iet = peers.pycma_iet(c_sim, goal, popsize=8, tolerance=0.02, max_gens=150)
+    assert iet["success"] and len(iet["point_times_s"]) == 2
