@@ -56,6 +56,7 @@ from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 __all__ = [
     "AXIS",
+    "axis_shardings",
     "pad_leading",
     "population_mesh",
     "population_sharding",
@@ -138,6 +139,35 @@ def pad_leading(tree: Any, multiple: int) -> Any:
         return jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)], axis=0)
 
     return jax.tree.map(pad, tree)
+
+
+def axis_shardings(tree: Any, sharding: NamedSharding, axis: int = 0) -> Any:
+    """Per-leaf shardings that split axis ``axis`` of every leaf over the mesh.
+
+    For ``jax.jit(..., in_shardings=..., out_shardings=...)`` of functions whose
+    inputs/outputs are batched over trials or candidates: leaves with fewer than
+    ``axis + 1`` dimensions are replicated.  E.g. a strategy runner that vmaps a
+    plan over R trials can keep its carry split over devices with
+    ``axis_shardings(carry_shapes, s)`` and its per-chunk metrics (G, R, ...) with
+    ``axis_shardings(metric_shapes, s, axis=1)``; the whole loop then runs R/K
+    trials per device with no change to the plan (tests/test_sharding.py).
+
+    Args:
+        tree: pytree of arrays or ``jax.ShapeDtypeStruct`` (e.g. ``jax.eval_shape``).
+        sharding: from `population_sharding` (its mesh and axis name are used).
+        axis: the batch axis.
+
+    Returns:
+        A pytree of ``NamedSharding`` with the structure of ``tree``.
+    """
+    mesh = sharding.mesh
+
+    def one(leaf):
+        if len(leaf.shape) <= axis:
+            return NamedSharding(mesh, PartitionSpec())
+        return NamedSharding(mesh, PartitionSpec(*([None] * axis), AXIS))
+
+    return jax.tree.map(one, tree)
 
 
 def shard_leading(tree: Any, sharding: NamedSharding, *, pad: bool = False) -> Any:

@@ -53,6 +53,48 @@ SCRIPT = textwrap.dedent(
     """
 )
 
+# A strategy (IE) whose R = 4 trials are split over 4 devices with `axis_shardings`,
+# the way a runner given a sharding would jit its init and chunk functions; it must
+# give the same result per seed as the unsharded `drive`.
+TRIALS_SCRIPT = """
+import jax, jax.numpy as jnp, numpy as np
+from cgda_jax import sharding as sh
+from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
+from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.runner import drive, seed_keys
+
+robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                        "marker")
+sim = Simulator(robot, MarkerScene(), substeps=2)
+goal = sim.execute(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
+plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
+              max_generations=20)
+keys = seed_keys(np.arange(4))
+ref = drive(plan, keys, chunk_size=5)
+
+# The same plan, its 4 trials split over 4 devices (a runner with a sharding).
+s4 = sh.population_sharding()
+chunk = lambda c: jax.lax.scan(lambda c, _: jax.vmap(plan.step)(c), c, None, length=5)
+carry_shape = jax.eval_shape(jax.vmap(plan.init), keys)
+metric_shape = jax.eval_shape(chunk, carry_shape)[1]
+cs = sh.axis_shardings(carry_shape, s4)
+init_c = jax.jit(jax.vmap(plan.init), in_shardings=s4, out_shardings=cs)
+chunk_c = jax.jit(chunk, in_shardings=(cs,),
+                  out_shardings=(cs, sh.axis_shardings(metric_shape, s4, axis=1)))
+carry = init_c(sh.shard_leading(keys, s4))
+for _ in range(4):
+    carry, _ = chunk_c(carry)
+    if bool(jnp.all(jax.vmap(plan.done)(carry))):
+        break
+assert len(carry.best_u.sharding.device_set) == 4, carry.best_u.sharding
+hlo = chunk_c.lower(carry).compile().as_text()
+assert "f32[1,2,8,3]" in hlo, "each device should evolve 1 trial x 2 points x 8"
+final = jax.tree.map(np.asarray, jax.vmap(plan.finish)(carry))
+for r, res in enumerate(ref):
+    np.testing.assert_allclose(final["joints"][r], res.joints, rtol=1e-5, atol=1e-6)
+print("TRIALS-OK")
+"""
+
 
 def _run(script: str, n_devices: int = 4) -> str:
     env = dict(os.environ)
@@ -74,6 +116,11 @@ def _run(script: str, n_devices: int = 4) -> str:
 
 def test_sharded_execute_matches_unsharded_on_4_devices():
     assert "SHARDING-OK" in _run(SCRIPT)
+
+
+def test_sharded_strategy_trials_match_unsharded_on_4_devices():
+    pytest.importorskip("cgda_jax.strategies.runner")
+    assert "TRIALS-OK" in _run(TRIALS_SCRIPT)
 
 
 def test_pad_leading_repeats_last_row():
