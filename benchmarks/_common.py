@@ -79,6 +79,17 @@ def print_table(rows: list[dict[str, Any]], columns: list[str]) -> None:
         print("  ".join(v.ljust(w) for v, w in zip(row, widths)))
 
 
+def find_row(rows: list[dict[str, Any]], **match: Any) -> dict[str, Any] | None:
+    """The first row whose items include ``match``, or None."""
+    return next((r for r in rows if all(r.get(k) == v for k, v in match.items())), None)
+
+
+def report_target(text: str, value: float | None, ok: bool | None) -> None:
+    """Print one ``target: ...`` line (skipped when the case was not run)."""
+    if value is not None:
+        print(f"target: {text}: {value:.3g} ({'met' if ok else 'NOT met'})")
+
+
 def write_json(name: str, payload: dict[str, Any]) -> pathlib.Path:
     """Write ``payload`` and the machine description to benchmarks/out/NAME.json."""
     OUT.mkdir(exist_ok=True)

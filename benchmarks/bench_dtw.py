@@ -25,7 +25,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import peers
-from _common import compile_jax, median_time, print_table, write_json
+from _common import (
+    compile_jax,
+    find_row,
+    median_time,
+    print_table,
+    report_target,
+    write_json,
+)
 
 from cgda_jax.distance import dtw
 
@@ -135,21 +142,13 @@ def main() -> None:
     cols = ["case", "method", "time_s", "compile_s", "pairs_per_s"]
     print_table(rows, cols + ["ratio_peer_over_ours", "max_rel_err"])
 
-    target = next(
-        (
-            r["ratio_peer_over_ours"]
-            for r in rows
-            if r["case"] == "1024 x 100 x 3 vs 1"
-            and r["method"] == "dtaidistance C parallel"
-        ),
-        None,
+    row = find_row(rows, case="1024 x 100 x 3 vs 1", method="dtaidistance C parallel")
+    target = None if row is None else row["ratio_peer_over_ours"]
+    report_target(
+        f">= {TARGET_RATIO}x dtaidistance parallel C at 1024x100x3 (ratio)",
+        target,
+        target is not None and target >= TARGET_RATIO,
     )
-    if target is not None:
-        met = "met" if target >= TARGET_RATIO else "NOT met"
-        print(
-            f"target: >= {TARGET_RATIO}x dtaidistance parallel C at 1024x100x3: "
-            f"{target:.2f}x ({met})"
-        )
     write_json(
         "bench_dtw",
         {

@@ -267,6 +267,19 @@ def _evolve(fitness, n_genes, popsize, sigma0, seed, max_gens, stop):
     return best_u, best_f, gen, gen * popsize
 
 
+def _evolve_point(fitness, n_genes, popsize, sigma0, seed, max_gens, tolerance):
+    """One point's evolution: stop below ``tolerance`` or after ``max_gens``."""
+    return _evolve(
+        fitness,
+        n_genes,
+        popsize,
+        sigma0,
+        seed,
+        max_gens,
+        lambda f, stall, gen: f < tolerance or gen >= max_gens,
+    )
+
+
 def pycma_ie(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0) -> dict:
     """IE: each point evolved on its own (one after the other), fitness = distance of
     the features after one step from the start to the candidate posture."""
@@ -278,14 +291,8 @@ def pycma_ie(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0) -> d
         def fitness(u, g=g):
             return float(np.linalg.norm(c_sim.step(start, to_joints(u, lo, hi))[1] - g))
 
-        u, _, n_gen, n_eval = _evolve(
-            fitness,
-            len(lo),
-            popsize,
-            sigma0,
-            seed + 1000 * i,
-            max_gens,
-            lambda f, stall, gen: f < tolerance or gen >= max_gens,
+        u, _, n_gen, n_eval = _evolve_point(
+            fitness, len(lo), popsize, sigma0, seed + 1000 * i, max_gens, tolerance
         )
         postures.append(to_joints(u, lo, hi))
         evals += n_eval
@@ -348,14 +355,8 @@ def pycma_iet(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0) -> 
             feats = c_sim.step(state, to_joints(u, lo, hi))[1]
             return float(np.sqrt(prefix_sq + np.sum((feats - g) ** 2)))
 
-        u, best, _, n_eval = _evolve(
-            fitness,
-            len(lo),
-            popsize,
-            sigma0,
-            seed + 1000 * i,
-            max_gens,
-            lambda f, stall, gen: f < tolerance or gen >= max_gens,
+        u, best, _, n_eval = _evolve_point(
+            fitness, len(lo), popsize, sigma0, seed + 1000 * i, max_gens, tolerance
         )
         state, feats = c_sim.step(state, to_joints(u, lo, hi))
         prefix_sq += float(np.sum((feats - g) ** 2))
