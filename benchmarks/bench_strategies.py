@@ -133,13 +133,14 @@ def trials_benchmark(cfg, goal, sim, n_trials: int) -> dict:
     t0 = time.perf_counter()
     batch = run_trials("ie", sim, goal, n_trials, seed=0, **kw)
     batch_total = time.perf_counter() - t0
-    seq_walls, seq_compiles, seq_ok = [], [], 0
+    seq_walls, seq_compiles, seq_ok, seq_gens = [], [], 0, []
     t0 = time.perf_counter()
     for seed in range(n_trials):
         r = run_ie(sim, goal, seed=seed, **kw)
         seq_walls.append(r.wall_time_s)
         seq_compiles.append(r.compile_time_s)
         seq_ok += r.success
+        seq_gens.append(r.generations)
     seq_total = time.perf_counter() - t0
     return {
         "n_trials": n_trials,
@@ -147,6 +148,9 @@ def trials_benchmark(cfg, goal, sim, n_trials: int) -> dict:
         "batched_compile_s": batch[0].compile_time_s,
         "batched_total_s": batch_total,
         "batched_successes": sum(r.success for r in batch),
+        # The batch runs in lock-step until its slowest trial stops.
+        "batched_generations": max(r.generations for r in batch),
+        "sequential_generations_sum": int(np.sum(seq_gens)),
         "sequential_run_s": float(np.sum(seq_walls)),
         "sequential_compile_s": float(np.sum(seq_compiles)),
         "sequential_total_s": seq_total,
