@@ -78,6 +78,7 @@ def kinematic(args, robot) -> list[dict]:
         pop = population(robot, p)
         wp = p * N_WAYPOINTS
         for name, sim in sims.items():
+            print(f"kinematic P={p} {name} ...", flush=True)
             r, out = bench_ours(sim, pop, args.repeats)
             rows.append(
                 {
@@ -89,6 +90,7 @@ def kinematic(args, robot) -> list[dict]:
                     "marker_evals_per_s": wp * args.substeps / r["time_s"],
                 }
             )
+        print(f"kinematic P={p} MuJoCo C loop ...", flush=True)
         n_c = min(p, args.c_max)
         t0 = time.perf_counter()
         c_out = np.stack([c_sim.execute(w) for w in pop[:n_c]])
@@ -142,6 +144,7 @@ def dynamic(args, robot) -> list[dict]:
     for p in args.dyn_pops:
         pop = population(robot, p)
         wp = p * N_WAYPOINTS
+        print(f"dynamic P={p} mjx ...", flush=True)
         r, _ = bench_ours(sim, pop, args.repeats)
         steps = wp * args.physics_steps
         rows.append(
@@ -163,6 +166,7 @@ def dynamic(args, robot) -> list[dict]:
         def run_rollout(ctrl=ctrl, init=init):
             return rollout.rollout(model, datas, init, ctrl)
 
+        print(f"dynamic P={p} mujoco.rollout ...", flush=True)
         t = median_time(run_rollout, repeats=max(1, args.repeats // 2))
         rows.append(
             {
