@@ -28,7 +28,9 @@ if os.environ.get("MPLBACKEND") is None:
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 __all__ = [
     "plot_cost_matrix",
@@ -71,6 +73,28 @@ def _select(names: Sequence[str], features) -> list[int]:
         else:
             out.append(int(f))
     return out
+
+
+def _equal_3d(ax, curves: Sequence[np.ndarray], min_share: float = 0.4) -> None:
+    """True geometry (a circle looks like a circle) with room for every axis' ticks.
+
+    Each axis spans at least ``min_share`` of the largest data range (centred on
+    its data), so a flat trajectory does not squeeze one axis' tick labels
+    together; at most 3 ticks per axis.
+    """
+    pts = np.concatenate([np.asarray(c, float).reshape(-1, 3) for c in curves])
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if not len(pts):
+        return
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    span = np.maximum(hi - lo, min_share * max(float((hi - lo).max()), 1e-9))
+    mid = (lo + hi) / 2
+    for k, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+        setter(mid[k] - span[k] / 2, mid[k] + span[k] / 2)
+    ax.set_box_aspect(span / span.max(), zoom=0.85)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(MaxNLocator(nbins=3))
+    ax.tick_params(labelsize=8)
 
 
 def plot_demonstrations(
@@ -118,12 +142,11 @@ def plot_demonstrations(
             ax.scatter(*knots.T, color=_GOAL, s=14)
         if ex is not None:
             ax.plot(*ex.T, "-o", color=_EXEC, lw=1.8, ms=3, label="executed")
-        ax.set_xlabel(names[cols[0]])
-        ax.set_ylabel(names[cols[1]])
-        ax.set_zlabel(names[cols[2]])
-        ax.set_aspect("equal")  # true geometry: a circle looks like a circle
-        for axis in "xyz":
-            ax.locator_params(axis=axis, nbins=4)
+        _equal_3d(ax, [np.asarray(d.features)[:, cols] for d in demos]
+                  + [c for c in (gen_curve, ex) if c is not None])
+        ax.set_xlabel(names[cols[0]], labelpad=6)
+        ax.set_ylabel(names[cols[1]], labelpad=6)
+        ax.set_zlabel(names[cols[2]], labelpad=6)
         ax.legend(loc="upper left", fontsize=8)
     else:
         n = len(cols)
@@ -154,14 +177,21 @@ def plot_cost_matrix(
     queries: Sequence[str],
     references: Sequence[str],
     *,
+    label: str = "cost",
     title: str | None = None,
     path: str | os.PathLike | None = None,
 ) -> Figure:
     """Cost matrix (Q, A) as an annotated heatmap, row minima in bold (Tables 2-4).
 
     Rows are test actions (lower case in the paper), columns generalized ones.
-    Colours follow log10 of the cost, so costs spanning orders of magnitude stay
-    readable.
+    Colours follow the cost on a log scale (bright = low cost = similar, with a
+    colorbar), so costs spanning orders of magnitude stay readable; the lowest
+    cost of each row (the recognized action) is printed in bold.
+
+    Args:
+        matrix: costs (Q, A).
+        queries, references: Q row and A column names.
+        label: what the numbers are (colorbar label).
     """
     m = np.asarray(matrix, dtype=float)
     if m.shape != (len(queries), len(references)):
@@ -169,11 +199,16 @@ def plot_cost_matrix(
             f"matrix shape {m.shape} does not match {len(queries)} queries x "
             f"{len(references)} references"
         )
-    fig, ax = plt.subplots(figsize=(1.3 * len(references) + 2.0, 0.7 * len(queries) + 1.6))
-    shown = np.log10(np.maximum(m, 1e-12))
-    ax.imshow(shown, cmap="viridis_r")
+    fig, ax = plt.subplots(figsize=(1.3 * len(references) + 2.4, 0.7 * len(queries) + 1.6))
+    positive = np.maximum(m, 1e-12)
+    lo, hi = positive.min(), positive.max()
+    norm = LogNorm(lo, hi if hi > lo else lo * 10)
+    image = ax.imshow(positive, cmap="viridis_r", norm=norm)
+    bar = fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04)
+    bar.set_label(f"{label} (log scale)\nbright = low = similar", fontsize=8)
+    bar.ax.tick_params(labelsize=7)
     best = m.argmin(axis=1)
-    mid = (shown.min() + shown.max()) / 2
+    shown = norm(positive)
     for i in range(m.shape[0]):
         for j in range(m.shape[1]):
             v = m[i, j]
@@ -181,7 +216,7 @@ def plot_cost_matrix(
             ax.text(
                 j, i, text, ha="center", va="center", fontsize=9,
                 fontweight="bold" if j == best[i] else "normal",
-                color="black" if shown[i, j] < mid else "white",
+                color="black" if shown[i, j] < 0.5 else "white",
             )
     ax.set_xticks(range(len(references)), [r.upper() for r in references])
     ax.set_yticks(range(len(queries)), [q.lower() for q in queries])

@@ -55,3 +55,21 @@ def test_fitness_goal_time_frames(tmp_path):
     plotting.plot_frames([np.zeros((8, 8, 3))] * 3, path=tmp_path / "r.png")
     for name in "fgetr":
         _png(tmp_path / f"{name}.png")
+
+
+def test_cost_matrix_has_a_labelled_log_colorbar():
+    m = np.array([[1.0, 50.0], [300.0, 2.0e6]])
+    fig = plotting.plot_cost_matrix(m, ["a", "b"], ["A", "B"], label="DTW cost")
+    image = fig.axes[0].images[0]
+    assert image.colorbar is not None and len(fig.axes) == 2
+    assert "DTW cost" in image.colorbar.ax.get_ylabel()
+    assert "low" in image.colorbar.ax.get_ylabel()
+    assert image.norm.vmin == 1.0 and image.norm.vmax == 2.0e6  # log norm over the data
+
+
+def test_flat_3d_trajectory_keeps_room_for_its_ticks():
+    demos = clean_circle_demos(n=2, seed=1)  # a circle in the Y-Z plane: X nearly flat
+    ax = plotting.plot_demonstrations(demos).axes[0]
+    spans = [np.ptp(lim) for lim in (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())]
+    assert min(spans) >= 0.39 * max(spans)
+    assert len([t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]) <= 4
