@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import json
+import logging
 import math
 import os
 import pathlib
@@ -51,6 +52,8 @@ SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive")
 STRATEGIES = ("fte", "ie", "iet", "oet")
 SCENES = ("marker", "paint")
 XGNITIVE_ENV = "CGDA_XGNITIVE_DIR"
+
+log = logging.getLogger("cgda_jax")
 
 
 class ConfigError(ValueError):
@@ -166,10 +169,17 @@ class StrategyConfig:
 
 @dataclasses.dataclass
 class OutputConfig:
-    """Results: ``dir`` (parent folder), ``plots`` on/off."""
+    """Results: ``dir`` (parent folder), ``plots`` on/off, ``render`` on/off.
+
+    ``render`` (execution runs): an animated GIF of the robot executing the best
+    trajectory and a strip of frames (paper Fig. 8/11), rendered offscreen by
+    MuJoCo (``MUJOCO_GL=egl`` or ``osmesa``). Without a working offscreen OpenGL
+    the run goes on and one warning says why nothing was rendered.
+    """
 
     dir: str = "results"
     plots: bool = True
+    render: bool = True
 
 
 @dataclasses.dataclass
@@ -494,7 +504,7 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
 
         plots = out / "plots"
         plotting.plot_cost_matrix(
-            costs, [q.lower() for q in truth], names,
+            costs, [q.lower() for q in truth], names, label=f"{r.metric.upper()} cost",
             title=f"{r.metric.upper()} cost: test (rows) vs generalized",
             path=plots / "cost_matrix.png",
         )
@@ -595,7 +605,55 @@ def run_execution(
                     "feature_names": list(sim.feature_names)})
     if cfg.output.plots:
         _execution_plots(cfg, out / "plots", res, sim, demos, gen)
+    if cfg.output.render:
+        summary["render"] = render_execution(cfg, out / "plots", res.joints, sim)
     return summary
+
+
+def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
+                     *, width: int = 320, height: int = 240, n_strip: int = 8) -> dict:
+    """The robot executing ``joints`` (N, DoF): ``execution.gif`` + ``frames.png``.
+
+    Never raises: when offscreen OpenGL (or anything else in rendering) fails,
+    logs one warning on the ``cgda_jax`` logger and returns ``{"ok": False,
+    "reason": ...}``; otherwise ``{"ok": True, "gif": ..., "frames": ..., "backend": ...}``
+    (paths relative to the results folder).
+    """
+    joints = np.asarray(joints, np.float32)
+    paint = getattr(sim.scene, "centres", None) is not None
+    # the paint wall is updated per frame: keep every kinematic sub-step there
+    fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
+    distance = None if paint else 1.6 * float(sim.robot.mj_model.stat.extent)
+    try:
+        from PIL import Image
+
+        from cgda_jax import plotting
+        from cgda_jax.sim.render import render_trajectory
+
+        gif = folder / "execution.gif"
+        render_trajectory(sim, joints, gif, frames_per_waypoint=fpw, width=width,
+                          height=height, fps=max(4, 2 * fpw), distance=distance)
+        with Image.open(gif) as im:
+            n_frames = getattr(im, "n_frames", 1)
+            points = np.unique(np.linspace(0, len(joints), min(n_strip, len(joints) + 1))
+                               .round().astype(int))
+            frames = []
+            for k in points:
+                im.seek(min(int(k) * fpw, n_frames - 1))
+                frames.append(np.asarray(im.convert("RGB")))
+        plotting.plot_frames(
+            frames, labels=["start" if k == 0 else f"point {k}" for k in points],
+            title=f"{cfg.name}: robot executing the best trajectory",
+            path=folder / "frames.png",
+        )
+        _close_all()
+    except Exception as err:  # no GL, missing library, driver trouble: never fatal
+        reason = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+        log.warning("%s: frames not rendered (%s); set MUJOCO_GL=egl or osmesa, or "
+                    "output.render=false", cfg.name, reason)
+        return {"ok": False, "reason": reason}
+    return {"ok": True, "gif": "plots/execution.gif", "frames": "plots/frames.png",
+            "backend": os.environ.get("MUJOCO_GL", "")}
 
 
 def _execution_plots(cfg, plots: pathlib.Path, res, sim, demos, gen) -> None:
@@ -658,9 +716,16 @@ def _report(cfg: ExperimentConfig, result: dict) -> str:
             f"| final fitness | {result['final_fitness']:.4g} |",
             f"| generations | {result['generations']} |",
             f"| evaluations | {result['evaluations']} |",
-            f"| wall time | {result['wall_time_s']:.2f} s |",
+            f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",
             f"| compile time | {result['compile_time_s']:.2f} s |",
         ]
+        render = result.get("render")
+        if render and render.get("ok"):
+            lines += ["", "The robot executing the best trajectory (paper Fig. 8/11):", "",
+                      f"![robot executing]({render['gif']})"]
+        elif render:
+            lines += ["", f"Frames not rendered: {render['reason']} (set MUJOCO_GL=egl "
+                      "or osmesa; `output.render = false` turns rendering off)."]
     plots = sorted(p for p in result.get("plots", []))
     if plots:
         lines += ["", "Plots:", ""] + [f"![{p}]({p})" for p in plots]
@@ -680,6 +745,7 @@ def run_experiment(
         progress_fn: called with the strategies' progress dicts (execution).
     """
     validate_config(cfg)
+    t0 = time.perf_counter()
     folder = pathlib.Path(out) if out is not None else pathlib.Path(cfg.output.dir) / cfg.name
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "config.toml").write_text(dump_config(cfg))
@@ -690,6 +756,7 @@ def run_experiment(
     result["plots"] = sorted(
         str(p.relative_to(folder)) for p in (folder / "plots").glob("*.png")
     ) if (folder / "plots").is_dir() else []
+    result["total_time_s"] = time.perf_counter() - t0
     _write_json(folder / "result.json", result)
     (folder / "report.md").write_text(_report(cfg, result))
     return result

@@ -1,7 +1,10 @@
 """Experiment configs (defaults, TOML, --set, errors) and recognition runs."""
 
 import json
+import os
 import pathlib
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -96,3 +99,40 @@ def test_recognition_recognizes_every_test_action(name, tmp_path):
     assert saved["accuracy"] == 1.0 and saved["actions"] == result["actions"]
     assert (tmp_path / "config.toml").is_file() and (tmp_path / "report.md").is_file()
     assert np.load(tmp_path / "arrays.npz")["cost_matrix"].shape == (4, 4)
+
+
+TINY_RUN = ["kind=execution", "data.source=paint_ramp", "data.goal_points=3",
+            "scene.kind=paint", "strategy.name=iet", "strategy.population_size=8",
+            "strategy.max_generations=10", "strategy.tolerance=40", "robot.substeps=2"]
+
+
+def test_render_switch_writes_gif_and_frame_strip_or_nothing(tmp_path):
+    cfg = load_config(None, TINY_RUN + ["output.plots=false"])
+    result = run_experiment(cfg, tmp_path / "on")
+    if not result["render"]["ok"]:
+        pytest.skip(f"no offscreen OpenGL here: {result['render']['reason']}")
+    assert (tmp_path / "on/plots/execution.gif").stat().st_size > 1000
+    assert (tmp_path / "on/plots/frames.png").stat().st_size > 2000
+    assert "![robot executing](plots/execution.gif)" in (tmp_path / "on/report.md").read_text()
+    off = run_experiment(load_config(None, TINY_RUN + ["output.plots=false",
+                                                       "output.render=false"]), tmp_path / "off")
+    assert "render" not in off and not (tmp_path / "off/plots").exists()
+
+
+def test_missing_gl_gives_one_warning_not_a_crash(tmp_path):
+    # EGL requested while PyOpenGL is pinned to another platform: no GL context
+    env = dict(os.environ, MUJOCO_GL="egl", PYOPENGL_PLATFORM="osmesa", JAX_PLATFORMS="cpu",
+               CGDA_JAX_CACHE=str(tmp_path / "cache"))
+    sets = [a for s in TINY_RUN + ["output.plots=false"] for a in ("--set", s)]
+    proc = subprocess.run(
+        [sys.executable, "-m", "cgda_jax.cli", "run", *sets, "--out", str(tmp_path / "r"),
+         "--quiet", "--no-cache", str(EXPERIMENTS / "paint_iet.toml")],
+        env=env, capture_output=True, text=True, timeout=300, check=False,
+    )
+    assert proc.returncode in (0, 1), proc.stderr  # 1: goal not met; never a crash
+    assert "Traceback" not in proc.stderr
+    warn = [x for x in proc.stderr.splitlines() if "frames not rendered" in x]
+    assert len(warn) == 1 and "output.render=false" in warn[0], proc.stderr
+    saved = json.loads((tmp_path / "r/result.json").read_text())
+    assert saved["render"]["ok"] is False
+    assert "Frames not rendered" in (tmp_path / "r/report.md").read_text()
