@@ -69,3 +69,26 @@ def test_bad_file_names_the_file(tmp_path, capsys):
     assert "bad.toml" in err and "scene.kind" in err and err.count("\n") == 1
     assert main(["run", str(tmp_path / "none.toml")]) != 0
     assert "none.toml" in capsys.readouterr().err
+
+
+def test_demo_report_starts_with_a_summary_table():
+    from cgda_jax.cli import summary_table
+
+    rows = summary_table({
+        "rec": {"kind": "recognition", "success": True, "accuracy": 1.0,
+                "features": ["X", "Y", "Z"], "metric": "dtw", "total_time_s": 1.25},
+        "clean": {"kind": "execution", "success": False, "strategy": "ie",
+                  "max_point_error": 0.031, "tolerance": 0.02, "points": 11,
+                  "generations": 40, "total_time_s": 3.0},
+    })
+    assert rows[0] == "| experiment | result | key figure | time |"
+    assert rows[2] == "| [rec](#rec) | ok | accuracy 100% (3 features, dtw) | 1.2 s |"
+    assert "**NOT met**" in rows[3] and "max point error 0.031 (tolerance 0.02)" in rows[3]
+
+
+def test_help_texts_show_examples(capsys):
+    for cmd in ("run", "demo"):
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        out = capsys.readouterr().out
+        assert "examples:" in out and f"cgda {cmd}" in out and "report.md" in out

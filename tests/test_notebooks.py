@@ -12,7 +12,9 @@ NOTEBOOKS = pathlib.Path(__file__).resolve().parents[1] / "notebooks"
 
 
 @pytest.mark.parametrize("path", sorted(NOTEBOOKS.glob("*.ipynb")), ids=lambda p: p.stem)
-def test_notebook_runs(path, monkeypatch, request):
+def test_notebook_runs(path, monkeypatch, request, tmp_path_factory):
+    # never the user's compilation cache (~/.cache/cgda_jax), should a notebook enable it
+    monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path_factory.getbasetemp() / "jaxcache"))
     if "real_teo" in path.stem:
         data = request.getfixturevalue("xgnitive_dir")  # skips when absent
         monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(data))
