@@ -35,25 +35,43 @@ from cgda_jax.strategies.base import (
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import drive, seed_keys
 
+#: Default restarts of a point that missed its tolerance, and backtracks per run.
+RESTARTS = 4
+BACKTRACKS = 8
+
 
 @struct.dataclass
 class IETState:
     """Carry of an IET run.
 
     Attributes:
-        evo: evolution of the current point.
-        key: the run's key (point i's evolution uses ``fold_in(key, i)``).
+        evo: evolution of the current point (one restart of it).
+        key: the run's key; evolution ``t`` of point i uses
+            ``fold_in(fold_in(key, i), t)``.
         point: index of the point being evolved (N once finished).
-        sim_state: simulator state after executing the frozen prefix.
-        prefix_sq: summed squared feature error of the frozen prefix.
+        tries: evolutions started so far per point (N,) (restarts and revisits after a
+            backtrack); the next one of point i is number ``tries[i]``.
+        restart: restarts of the current point since it was (re)entered.
+        backtracks: backtracks spent.
+        best_u, best_fitness: best genes / fitness over the current point's restarts.
+        sim_states: simulator state before each point (stacked, N + 1).
+        prefix_sq: summed squared feature error of the frozen prefix before each point
+            (N + 1,).
         joints: frozen postures (N, DoF); features: their features (N, F).
-        point_fitness, point_generations, point_evaluations: per point (N,).
+        point_fitness: fitness (Euclidean over points 0..i) at commit (N,).
+        point_generations, point_evaluations: spent per point (N,), restarts and
+            revisits included.
     """
 
     evo: Evolution
     key: jax.Array
     point: jax.Array
-    sim_state: Any
+    tries: jax.Array
+    restart: jax.Array
+    backtracks: jax.Array
+    best_u: jax.Array
+    best_fitness: jax.Array
+    sim_states: Any
     prefix_sq: jax.Array
     joints: jax.Array
     features: jax.Array
@@ -62,18 +80,42 @@ class IETState:
     point_evaluations: jax.Array
 
 
+def _at(tree: Any, i: jax.Array) -> Any:
+    return jax.tree.map(lambda x: x[i], tree)
+
+
+def _set(tree: Any, i: jax.Array, value: Any) -> Any:
+    return jax.tree.map(lambda x, v: x.at[i].set(v), tree, value)
+
+
 class IETPlan(PlanBase):
-    """IET as a plan for `runner.drive`."""
+    """IET as a plan for `runner.drive`.
+
+    Args (beyond `PlanBase`'s):
+        restarts: evolutions of a point that missed its tolerance after
+            `max_generations` are restarted (fresh key, random start mean) up to this
+            many times; the best over all restarts is kept.
+        backtracks: when a point still misses after its restarts, the previous point
+            is re-evolved (fresh key) and the point tried again, up to this many times
+            per run (escapes prefixes that leave no way to the goal, e.g. every
+            remaining square only reachable by sweeping across another one).
+    """
 
     name = "iet"
 
-    def __init__(self, sim, goal, **kwargs):
+    def __init__(self, sim, goal, *, restarts=0, backtracks=0, **kwargs):
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
         self.n_points = int(goal.shape[0])
-        self.max_generations_total = self.n_points * self.max_generations
+        self.restarts = int(restarts)
+        self.backtracks = int(backtracks)
+        evolutions = self.n_points * (1 + self.restarts) * (1 + self.backtracks)
+        self.max_generations_total = evolutions * self.max_generations
+
+    def _goal(self, point):
+        return self.goal[jnp.clip(point, 0, self.n_points - 1)]
 
     def _fitness(self, sim_state, prefix_sq, point):
-        goal_point = self.goal[jnp.minimum(point, self.n_points - 1)]
+        goal_point = self._goal(point)
 
         def fitness_u(pop):
             feats = self.point_features(sim_state, pop)
@@ -82,54 +124,110 @@ class IETPlan(PlanBase):
 
         return fitness_u
 
-    def _start(self, key, sim_state, prefix_sq, point):
-        return evolution_init(
-            self.algo, self.params, jax.random.fold_in(key, point),
-            self._fitness(sim_state, prefix_sq, point), self.n_dof,
+    def _stop(self, prefix_sq):
+        # the frozen prefix adds a constant the point cannot change: stop on the
+        # point's own error (fitness^2 - prefix), same ranking as the paper's fitness
+        tol_sq = self.tolerance**2
+
+        def stop(evo):
+            own_sq = evo.best_fitness**2 - prefix_sq
+            return (own_sq < tol_sq) | (evo.generation >= self.max_generations)
+
+        return stop
+
+    def _start(self, s: IETState, point, restart) -> IETState:
+        """Starts evolution number ``tries[point]`` of `point` (a restart when > 0)."""
+        p = jnp.clip(point, 0, self.n_points - 1)
+        t = s.tries[p]
+        key = jax.random.fold_in(jax.random.fold_in(s.key, point), t)
+        k_mean, k_evo = jax.random.split(key)
+        mean = jnp.where(
+            t > 0,
+            jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0),
+            0.0,
+        )
+        prefix_sq = s.prefix_sq[p]
+        evo = evolution_init(
+            self.algo, self.params, k_evo,
+            self._fitness(_at(s.sim_states, p), prefix_sq, point), self.n_dof,
+            mean=mean,
+        )
+        return s.replace(
+            evo=evo, point=point, restart=restart, tries=s.tries.at[p].add(1),
+            best_u=evo.best_u, best_fitness=evo.best_fitness,
         )
 
     def init(self, key):
         n, f = self.n_points, self.goal.shape[1]
-        sim_state = self.sim.init_state()
-        zero = jnp.zeros((), jnp.float32)
-        point = jnp.zeros((), jnp.int32)
-        return IETState(
-            evo=self._start(key, sim_state, zero, point),
-            key=key,
-            point=point,
-            sim_state=sim_state,
-            prefix_sq=zero,
+        state0 = self.sim.init_state()
+        zero_i = jnp.zeros((), jnp.int32)
+        s = IETState(
+            evo=None, key=key, point=zero_i, tries=jnp.zeros((n,), jnp.int32),
+            restart=zero_i, backtracks=zero_i,
+            best_u=jnp.zeros((self.n_dof,), jnp.float32),
+            best_fitness=jnp.asarray(jnp.inf, jnp.float32),
+            sim_states=jax.tree.map(
+                lambda x: jnp.broadcast_to(x, (n + 1, *jnp.shape(x))), state0),
+            prefix_sq=jnp.zeros((n + 1,), jnp.float32),
             joints=jnp.zeros((n, self.n_dof), jnp.float32),
             features=jnp.zeros((n, f), jnp.float32),
             point_fitness=jnp.full((n,), jnp.inf, jnp.float32),
             point_generations=jnp.zeros((n,), jnp.int32),
             point_evaluations=jnp.zeros((n,), jnp.int32),
         )
+        return self._start(s, zero_i, zero_i)
 
-    def _commit(self, s: IETState) -> IETState:
+    def _end_evolution(self, s: IETState) -> IETState:
+        """The current evolution stopped: commit the point, restart it, or backtrack."""
         i = s.point
-        q = self.joints(s.evo.best_u)
-        sim_state, feats = self.sim.step(s.sim_state, q)
-        prefix_sq = s.prefix_sq + jnp.sum((feats - self.goal[i]) ** 2)
-        nxt = i + 1
-        return s.replace(
-            evo=self._start(s.key, sim_state, prefix_sq, nxt),
-            point=nxt,
-            sim_state=sim_state,
-            prefix_sq=prefix_sq,
-            joints=s.joints.at[i].set(q),
-            features=s.features.at[i].set(feats),
-            point_fitness=s.point_fitness.at[i].set(s.evo.best_fitness),
-            point_generations=s.point_generations.at[i].set(s.evo.generation),
-            point_evaluations=s.point_evaluations.at[i].set(s.evo.evaluations),
+        better = s.evo.best_fitness < s.best_fitness
+        best_u = jnp.where(better, s.evo.best_u, s.best_u)
+        best_f = jnp.where(better, s.evo.best_fitness, s.best_fitness)
+        s = s.replace(
+            best_u=best_u, best_fitness=best_f,
+            point_generations=s.point_generations.at[i].add(s.evo.generation),
+            point_evaluations=s.point_evaluations.at[i].add(s.evo.evaluations),
         )
+        q = self.joints(best_u)
+        sim_state, feats = self.sim.step(_at(s.sim_states, i), q)
+        own_sq = jnp.sum((feats - self.goal[i]) ** 2)
+        met = own_sq < self.tolerance**2
+        can_restart = s.restart < self.restarts
+        can_backtrack = (i > 0) & (s.backtracks < self.backtracks)
+
+        def commit(s):
+            nxt = i + 1
+            s = s.replace(
+                sim_states=_set(s.sim_states, nxt, sim_state),
+                prefix_sq=s.prefix_sq.at[nxt].set(s.prefix_sq[i] + own_sq),
+                joints=s.joints.at[i].set(q),
+                features=s.features.at[i].set(feats),
+                point_fitness=s.point_fitness.at[i].set(best_f),
+            )
+            return jax.lax.cond(nxt < self.n_points,
+                                lambda s: self._start(s, nxt, jnp.zeros_like(i)),
+                                lambda s: s.replace(point=nxt), s)
+
+        def restart(s):
+            return self._start(s, i, s.restart + 1)
+
+        def backtrack(s):
+            return self._start(s.replace(backtracks=s.backtracks + 1), i - 1,
+                               jnp.zeros_like(i))
+
+        branch = jnp.where(met, 0, jnp.where(can_restart, 1,
+                                             jnp.where(can_backtrack, 2, 0)))
+        return jax.lax.switch(branch, [commit, restart, backtrack], s)
 
     def step(self, s: IETState):
         finished = self.done(s)
-        fit = self._fitness(s.sim_state, s.prefix_sq, s.point)
-        evo, metrics = evolution_step(self.algo, self.params, s.evo, fit, self.stop)
+        p = jnp.minimum(s.point, self.n_points - 1)
+        prefix_sq = s.prefix_sq[p]
+        fit = self._fitness(_at(s.sim_states, p), prefix_sq, s.point)
+        evo, metrics = evolution_step(self.algo, self.params, s.evo, fit,
+                                      self._stop(prefix_sq))
         new = s.replace(evo=evo)
-        new = jax.lax.cond(evo.done, self._commit, lambda x: x, new)
+        new = jax.lax.cond(evo.done, self._end_evolution, lambda x: x, new)
         new = freeze(finished, s, new)
         metrics = {"best_fitness": metrics["best_fitness"],
                    "point": jnp.where(finished, -1, s.point)}
@@ -139,7 +237,8 @@ class IETPlan(PlanBase):
         return s.point >= self.n_points
 
     def progress(self, s):
-        return {"point": np.asarray(s.point).tolist()}
+        return {"point": np.asarray(s.point).tolist(),
+                "backtracks": np.asarray(s.backtracks).tolist()}
 
     def finish(self, s):
         features, _ = self.sim.rollout(s.joints, self.sim.init_state())
@@ -148,6 +247,8 @@ class IETPlan(PlanBase):
             "features": features,
             "carried_features": s.features,
             "point": s.point,
+            "tries": s.tries,
+            "backtracks": s.backtracks,
             "point_fitness": s.point_fitness,
             "point_generations": s.point_generations,
             "point_evaluations": s.point_evaluations,
@@ -173,11 +274,15 @@ class IETPlan(PlanBase):
             generations=int(gens.sum()),
             wall_time_s=timing["wall_time_s"],
             compile_time_s=timing["compile_time_s"],
-            success=bool(complete and np.all(final["point_fitness"] < self.tolerance)),
+            success=bool(complete and np.all(errors < self.tolerance)),
             tolerance=self.tolerance,
-            final_fitness=float(final["point_fitness"][-1]),
+            final_fitness=float(np.linalg.norm(final["features"] - goal)),
             info=self.result_info(
                 timing,
+                restarts=self.restarts,
+                backtracks=self.backtracks,
+                backtracks_used=int(final["backtracks"]),
+                point_tries=final["tries"].tolist(),
                 point_generations=gens.tolist(),
                 point_evaluations=final["point_evaluations"].tolist(),
                 point_fitness=final["point_fitness"].tolist(),
@@ -199,6 +304,8 @@ def run_iet(
     max_generations: int = 100,
     seed: int = 0,
     chunk_size: int = 10,
+    restarts: int = RESTARTS,
+    backtracks: int = BACKTRACKS,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -208,21 +315,31 @@ def run_iet(
     Args:
         sim: a simulator (see `run_ie`).
         goal: goal feature trajectory (N, F).
-        tolerance: epsilon of Algorithm 1: point i stops when the Euclidean distance of
-            executed features 0..i to goal 0..i is below it (feature units, e.g. percent
-            painted).
-        max_generations: generation budget per point.
+        tolerance: epsilon of Algorithm 1 (feature units, e.g. percent painted). The
+            evolution of point i minimizes the paper's fitness, the Euclidean distance
+            of executed features 0..i to goal 0..i; it stops when point i's OWN error
+            is below epsilon (the frozen prefix adds a constant the point cannot
+            change; with the whole-prefix rule one miss would make every later point
+            spend its whole budget).
+        max_generations: generation budget of one evolution of a point.
+        restarts: a point that missed epsilon after `max_generations` is evolved
+            again with a fresh key from a random start mean, up to this many times.
+        backtracks: a point that still missed after its restarts makes the run
+            re-evolve the previous point (fresh key) and try again, up to this many
+            times per run. 0 and 0 give the paper's plain Algorithm 1.
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn: as in `run_ie`.
 
     Returns:
-        `ExecutionResult`; success = every point met epsilon; final_fitness = the whole
-        trajectory's Euclidean fitness.
+        `ExecutionResult`; success = every executed point's error < epsilon;
+        final_fitness = the whole trajectory's Euclidean fitness. ``info`` holds
+        per-point generations / evaluations / tries and the backtracks used.
     """
     goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
     plan = IETPlan(
         sim, goal, algorithm=algorithm, population_size=population_size,
         tolerance=tolerance, max_generations=max_generations,
+        restarts=restarts, backtracks=backtracks,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         info={"seed": seed},
     )

@@ -8,7 +8,7 @@ from typing import Any
 from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
-from cgda_jax.strategies.iet import IETPlan
+from cgda_jax.strategies.iet import BACKTRACKS, RESTARTS, IETPlan
 from cgda_jax.strategies.oet import OETPlan
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import drive, seed_keys
@@ -17,7 +17,7 @@ from cgda_jax.strategies.runner import drive, seed_keys
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
     "ie": (IEPlan, {}),
-    "iet": (IETPlan, {}),
+    "iet": (IETPlan, {"restarts": RESTARTS, "backtracks": BACKTRACKS}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
 }
 
@@ -51,7 +51,7 @@ def run_trials(
             functions.
         n_trials: R.
         seed: first seed.
-        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance;
+        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IET: restarts, backtracks;
             OET: max_steps, lookahead).
 
     Returns:
