@@ -139,6 +139,16 @@ def test_clean_circle_demos_geometry():
         assert np.linalg.norm(c - centre[1:]) < 0.015
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_clean_circle_default_goal_has_the_papers_nine_points(seed):
+    from cgda_jax import generalize
+
+    demos = clean_circle_demos(seed=seed)
+    mean_s = np.mean([d.times[-1] - d.times[0] for d in demos])
+    assert round(mean_s) == 9
+    assert generalize(demos, interval_s=1.0).knots.shape == (9, 3)
+
+
 def test_select_features_and_errors(marker):
     sel = select_features(marker["MOVE"], ["Z", "X"])
     np.testing.assert_array_equal(sel[0].features[:, 1], marker["MOVE"][0].features[:, 0])

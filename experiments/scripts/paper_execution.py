@@ -41,8 +41,8 @@ def teo_sim(scene, joints=PAPER_JOINTS, fixed=PAPER_FIXED, substeps=8):
 
 
 def clean_goal(seed=0):
-    # 7 s of circling (+ pauses) -> 9 one-second intervals: the paper's 9-point goal
-    demos = clean_circle_demos(seed=seed, duration_s=7.0)
+    # default demos: ~9 s each (circling + pauses) -> the paper's 9-point goal
+    demos = clean_circle_demos(seed=seed)
     return np.asarray(cg.generalize(demos, interval_s=1.0).knots)
 
 
