@@ -103,6 +103,19 @@ def test_fte_dtw_converges(sim, goal):
     assert np.all(np.diff(res.fitness_history) <= 0)
 
 
+def test_fte_distance_by_name(sim, goal):
+    from cgda_jax import dtw_multi
+
+    res = run_fte(sim, goal[:3], population_size=16, stagnation=5, max_generations=20,
+                  distance="dtw_multi", seed=1)
+    assert res.final_fitness == pytest.approx(
+        float(dtw_multi(jnp.asarray(res.features), jnp.asarray(goal[:3]))),
+        rel=1e-4, abs=1e-6,
+    )
+    with pytest.raises(ValueError, match="unknown distance"):
+        run_fte(sim, goal[:3], distance="dtw_nope")
+
+
 @pytest.fixture(scope="module")
 def paint_sim(robot):
     centres = _reachable_goal(robot, [[-0.6, 0.8, 0.6], [-0.2, 0.8, 0.6],

@@ -20,10 +20,27 @@ from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import drive, seed_keys
 
 
-def _default_distance():
-    from cgda_jax.distance import dtw
+#: Fitness names accepted by ``distance=``.
+DISTANCES = ("dtw", "dtw_multi", "euclidean")
 
-    return dtw
+
+def resolve_distance(distance):
+    """A fitness ``(executed (N, F), goal (N, F)) -> scalar`` from a name or callable.
+
+    None = "dtw" (the paper's per-dimension DTW). "dtw_multi" is the multi-dimensional
+    DTW the authors' C++ execution code used (one warping path for all dimensions, so
+    X, Y and Z cannot be warped independently).
+    """
+    from cgda_jax import distance as d
+
+    if distance is None:
+        return d.dtw
+    if callable(distance):
+        return distance
+    if distance not in DISTANCES:
+        raise ValueError(f"unknown distance {distance!r}; choose one of {list(DISTANCES)}"
+                         " or pass a callable")
+    return getattr(d, distance)
 
 
 class FTEPlan(PlanBase):
@@ -35,7 +52,7 @@ class FTEPlan(PlanBase):
         n_points = goal.shape[0]
         super().__init__(sim, goal, n_points * int(sim.n_dof), **kwargs)
         self.stagnation = int(stagnation)
-        self.distance = distance or _default_distance()
+        self.distance = resolve_distance(distance)
 
     def _execute(self, u_flat):
         q = self.joints(u_flat.reshape(self.goal.shape[0], self.n_dof))
@@ -103,7 +120,7 @@ def run_fte(
     max_generations: int = 500,
     seed: int = 0,
     chunk_size: int = 10,
-    distance: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
+    distance: str | Callable[[jax.Array, jax.Array], jax.Array] | None = None,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -119,8 +136,9 @@ def run_fte(
             not stop on it; it stops on stagnation).
         stagnation: stop after this many generations without improvement (paper: 10).
         max_generations: generation budget.
-        distance: fitness ``(executed (N, F), goal (N, F)) -> scalar``; default
-            `cgda_jax.dtw`.
+        distance: fitness: "dtw" (default, the paper's per-dimension DTW),
+            "dtw_multi" (the authors' C++ fitness), "euclidean", or a callable
+            ``(executed (N, F), goal (N, F)) -> scalar``.
 
     Returns:
         `ExecutionResult`; final_fitness is the best DTW, success = every point's error
