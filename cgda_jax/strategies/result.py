@@ -30,8 +30,11 @@ class ExecutionResult:
         generations: generations run (IE: the longest point; IET/OET: summed over points).
         wall_time_s: run time without compilation.
         compile_time_s: time to lower and compile the jitted functions.
-        success: the run met its tolerance (see each strategy).
-        tolerance: that tolerance (feature units).
+        success: the run met its tolerance (see each strategy): IE, IET, OET and FTE:
+            every point's error < tolerance.
+        tolerance: that tolerance (feature units). For a quantized feature (paint:
+            multiples of 6.25 %) with goals between the steps, half a step (3.125 %)
+            means "each executed point is the nearest achievable value".
         final_fitness: final fitness (FTE: DTW; IE/OET: worst point error; IET: the full
             trajectory's Euclidean fitness).
         info: extra settings (algorithm, population_size, seed, trial, ...).
