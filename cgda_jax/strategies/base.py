@@ -25,9 +25,12 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
 from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
 from flax import struct
+
+from cgda_jax.strategies.result import ExecutionResult
 
 #: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
 ALGORITHMS: dict[str, type] = dict(_EVOSAX_ALGORITHMS)
@@ -288,8 +291,21 @@ def _default_kwargs(name: str) -> dict[str, Any]:
     return {}
 
 
+def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
+    """Stacks 1-D rows of different lengths into (len(rows), longest or 1), NaN-padded."""
+    out = np.full((len(rows), max([len(r) for r in rows] + [1])), np.nan)
+    for i, r in enumerate(rows):
+        out[i, : len(r)] = r
+    return out
+
+
 class PlanBase:
-    """Shared set-up of the strategy plans driven by `runner.drive`."""
+    """Shared set-up and pieces of the strategy plans driven by `runner.drive`.
+
+    A plan is built from an already checked goal (`check_config`); subclasses add their
+    own settings (checked in their ``__init__``) and the plan functions ``init``,
+    ``step``, ``finish``, ``progress`` and ``to_result`` (see `runner`).
+    """
 
     name = "base"
 
@@ -308,6 +324,7 @@ class PlanBase:
         info: dict[str, Any] | None = None,
     ):
         self.sim, self.goal = sim, goal
+        self.n_points = int(goal.shape[0])
         self.lower = jnp.asarray(sim.lower, jnp.float32)
         self.upper = jnp.asarray(sim.upper, jnp.float32)
         self.n_dof = int(sim.n_dof)
@@ -329,6 +346,24 @@ class PlanBase:
             **(info or {}),
         }
 
+    # ---- evolutions and fitness
+    def start(
+        self, key: jax.Array, fitness_u: FitnessFn, mean: jax.Array | None = None
+    ) -> Evolution:
+        """`evolution_init` with this plan's algorithm and gene count."""
+        return evolution_init(self.algo, self.params, key, fitness_u, self.n_genes,
+                              mean=mean)
+
+    def evolve(
+        self,
+        evo: Evolution,
+        fitness_u: FitnessFn,
+        stop: Callable[[Evolution], jax.Array] | None = None,
+    ) -> tuple[Evolution, dict[str, jax.Array]]:
+        """`evolution_step` with this plan's algorithm (default stop: `self.stop`)."""
+        return evolution_step(self.algo, self.params, evo, fitness_u,
+                              self.stop if stop is None else stop)
+
     def joints(self, u: jax.Array) -> jax.Array:
         """Normalized genes (..., DoF) -> joint angles."""
         return to_joints(u, self.lower, self.upper)
@@ -338,11 +373,77 @@ class PlanBase:
         q = self.joints(pop_u)
         return jax.vmap(lambda w: self.sim.step(state, w)[1])(q)
 
+    def point_fitness(
+        self, state: Any, goal_point: jax.Array, prefix_sq: jax.Array | None = None
+    ) -> FitnessFn:
+        """Fitness of one posture (P, DoF) -> (P,) stepped to from `state`.
+
+        The Euclidean distance of its features to `goal_point` (F,); with `prefix_sq`
+        (the summed squared error of earlier points) ``sqrt(prefix_sq + error^2)``.
+        """
+
+        def fitness_u(pop):
+            feats = self.point_features(state, pop)
+            if prefix_sq is None:
+                return jnp.linalg.norm(feats - goal_point, axis=-1)
+            return jnp.sqrt(prefix_sq + jnp.sum((feats - goal_point) ** 2, axis=-1))
+
+        return fitness_u
+
     def stop(self, evo: Evolution) -> jax.Array:
         """Per-point stop: error below tolerance or generation budget spent."""
         return (evo.best_fitness < self.tolerance) | (
             evo.generation >= self.max_generations
         )
 
-    def result_info(self, timing: dict[str, Any], **extra: Any) -> dict[str, Any]:
-        return {**self.info, "trials_in_batch": timing["trials_in_batch"], **extra}
+    # ---- plan functions shared by several strategies
+    def done(self, carry: Any) -> jax.Array:
+        """Every evolution of the carry stopped."""
+        return jnp.all(carry.done)
+
+    def execution(self, joints: jax.Array) -> dict[str, jax.Array]:
+        """``joints`` (N, DoF) and their ``features`` (N, F) executed from the start."""
+        features, _ = self.sim.rollout(joints, self.sim.init_state())
+        return {"joints": joints, "features": features}
+
+    def result(
+        self,
+        final: dict[str, np.ndarray],
+        timing: dict[str, Any],
+        *,
+        fitness_history: np.ndarray,
+        evaluations: int,
+        generations: int,
+        final_fitness: float | None = None,
+        point_errors: np.ndarray | None = None,
+        complete: bool = True,
+        **info: Any,
+    ) -> ExecutionResult:
+        """The `ExecutionResult` of a finished run (host arrays).
+
+        ``final`` holds ``joints`` and ``features``; `point_errors` defaults to each
+        executed point's Euclidean error to its goal point, `final_fitness` to the
+        largest of them; success = `complete` and every error < tolerance. `info`
+        extends the plan's settings.
+        """
+        goal = np.asarray(self.goal)
+        if point_errors is None:
+            point_errors = np.linalg.norm(final["features"] - goal, axis=-1)
+        if final_fitness is None:
+            final_fitness = point_errors.max()
+        return ExecutionResult(
+            strategy=self.name,
+            joints=final["joints"],
+            features=final["features"],
+            goal=goal,
+            point_errors=point_errors,
+            fitness_history=fitness_history,
+            evaluations=int(evaluations),
+            generations=int(generations),
+            wall_time_s=timing["wall_time_s"],
+            compile_time_s=timing["compile_time_s"],
+            success=bool(complete and np.all(point_errors < self.tolerance)),
+            tolerance=self.tolerance,
+            final_fitness=float(final_fitness),
+            info={**self.info, "trials_in_batch": timing["trials_in_batch"], **info},
+        )

@@ -12,12 +12,11 @@ from collections.abc import Callable
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-from cgda_jax.strategies.base import PlanBase, check_config, evolution_init, evolution_step
+from cgda_jax.strategies.base import PlanBase
 from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import run
 
 
 #: Fitness names accepted by ``distance=``.
@@ -44,68 +43,58 @@ def resolve_distance(distance):
 
 
 class FTEPlan(PlanBase):
-    """FTE as a plan for `runner.drive`."""
+    """FTE as a plan for `runner.drive`.
+
+    Args (beyond `PlanBase`'s):
+        stagnation: stop after this many generations without improvement.
+        distance: fitness name or callable (see `resolve_distance`).
+    """
 
     name = "fte"
 
-    def __init__(self, sim, goal, *, stagnation, distance=None, **kwargs):
-        n_points = goal.shape[0]
-        super().__init__(sim, goal, n_points * int(sim.n_dof), **kwargs)
+    def __init__(self, sim, goal, *, stagnation=10, distance=None, **kwargs):
+        if int(stagnation) < 1:
+            raise ValueError(f"stagnation must be >= 1; got {stagnation}")
+        super().__init__(sim, goal, goal.shape[0] * int(sim.n_dof), **kwargs)
         self.stagnation = int(stagnation)
         self.distance = resolve_distance(distance)
 
-    def _execute(self, u_flat):
-        q = self.joints(u_flat.reshape(self.goal.shape[0], self.n_dof))
-        return self.sim.rollout(q, self.sim.init_state())[0]
+    def _trajectory(self, u_flat):
+        return self.joints(u_flat.reshape(self.n_points, self.n_dof))
 
     def _fitness(self, pop):
-        feats = jax.vmap(self._execute)(pop)
+        feats = jax.vmap(lambda u: self.execution(self._trajectory(u))["features"])(pop)
         return jax.vmap(lambda f: self.distance(f, self.goal))(feats)
 
     def stop(self, evo):
         return (evo.stall >= self.stagnation) | (evo.generation >= self.max_generations)
 
     def init(self, key):
-        return evolution_init(self.algo, self.params, key, self._fitness, self.n_genes)
+        return self.start(key, self._fitness)
 
     def step(self, evo):
-        return evolution_step(self.algo, self.params, evo, self._fitness, self.stop)
-
-    def done(self, evo):
-        return evo.done
+        return self.evolve(evo, self._fitness)
 
     def progress(self, evo):
         return {"best_fitness": np.asarray(evo.best_fitness).tolist()}
 
     def finish(self, evo):
-        q = self.joints(evo.best_u.reshape(self.goal.shape[0], self.n_dof))
         return {
-            "joints": q,
-            "features": self.sim.rollout(q, self.sim.init_state())[0],
+            **self.execution(self._trajectory(evo.best_u)),
             "best_fitness": evo.best_fitness,
             "generation": evo.generation,
             "evaluations": evo.evaluations,
         }
 
     def to_result(self, final, history, timing):
-        goal = np.asarray(self.goal)
-        errors = np.linalg.norm(final["features"] - goal, axis=-1)
         gens = int(final["generation"])
-        return ExecutionResult(
-            strategy=self.name,
-            joints=final["joints"],
-            features=final["features"],
-            goal=goal,
-            point_errors=errors,
+        return self.result(
+            final, timing,
             fitness_history=history["best_fitness"][:gens].astype(np.float64),
-            evaluations=int(final["evaluations"]),
+            evaluations=final["evaluations"],
             generations=gens,
-            wall_time_s=timing["wall_time_s"],
-            compile_time_s=timing["compile_time_s"],
-            success=bool(np.all(errors < self.tolerance)),
-            tolerance=self.tolerance,
-            final_fitness=float(final["best_fitness"]),
-            info=self.result_info(timing, stagnation=self.stagnation),
+            final_fitness=final["best_fitness"],
+            stagnation=self.stagnation,
         )
 
 
@@ -144,15 +133,11 @@ def run_fte(
         `ExecutionResult`; final_fitness is the best DTW, success = every point's error
         < tolerance.
     """
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
-    if int(stagnation) < 1:
-        raise ValueError(f"stagnation must be >= 1; got {stagnation}")
-    plan = FTEPlan(
-        sim, goal, stagnation=stagnation, distance=distance, algorithm=algorithm,
+    (result,) = run(
+        FTEPlan, sim, goal, [seed], algorithm=algorithm,
         population_size=population_size, tolerance=tolerance,
-        max_generations=max_generations, algorithm_kwargs=algorithm_kwargs,
-        algorithm_params=algorithm_params, info={"seed": seed},
+        max_generations=max_generations, chunk_size=chunk_size,
+        algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
+        stagnation=stagnation, distance=distance, progress_fn=progress_fn,
     )
-    (result,) = drive(plan, seed_keys([seed]), chunk_size=chunk_size,
-                      progress_fn=progress_fn)
     return result

@@ -16,14 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cgda_jax.strategies.base import (
-    PlanBase,
-    check_config,
-    evolution_init,
-    evolution_step,
-)
+from cgda_jax.strategies.base import PlanBase, ragged_rows
 from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import run
 
 
 def point_keys(key: jax.Array, n_points: int) -> jax.Array:
@@ -32,39 +27,31 @@ def point_keys(key: jax.Array, n_points: int) -> jax.Array:
 
 
 class IEPlan(PlanBase):
-    """IE as a plan for `runner.drive` (see there)."""
+    """IE as a plan for `runner.drive` (see there).
+
+    Args (beyond `PlanBase`'s):
+        keys: optional explicit per-point keys (N,) replacing those of the run's key.
+    """
 
     name = "ie"
 
-    def __init__(self, sim, goal, *, keys_fn=None, **kwargs):
+    def __init__(self, sim, goal, *, keys=None, **kwargs):
+        if keys is not None and keys.shape[0] != goal.shape[0]:
+            raise ValueError(
+                f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
+            )
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
-        self.keys_fn = keys_fn or (lambda key: point_keys(key, goal.shape[0]))
+        self.keys = keys
 
     def _fitness(self, goal_point: jax.Array) -> Callable[[jax.Array], jax.Array]:
-        start = self.sim.init_state()
-
-        def fitness_u(pop):
-            feats = self.point_features(start, pop)
-            return jnp.linalg.norm(feats - goal_point, axis=-1)
-
-        return fitness_u
+        return self.point_fitness(self.sim.init_state(), goal_point)
 
     def init(self, key):
-        return jax.vmap(
-            lambda k, g: evolution_init(
-                self.algo, self.params, k, self._fitness(g), self.n_dof
-            )
-        )(self.keys_fn(key), self.goal)
+        keys = point_keys(key, self.n_points) if self.keys is None else self.keys
+        return jax.vmap(lambda k, g: self.start(k, self._fitness(g)))(keys, self.goal)
 
     def step(self, evo):
-        return jax.vmap(
-            lambda e, g: evolution_step(
-                self.algo, self.params, e, self._fitness(g), self.stop
-            )
-        )(evo, self.goal)
-
-    def done(self, evo):
-        return jnp.all(evo.done)
+        return jax.vmap(lambda e, g: self.evolve(e, self._fitness(g)))(evo, self.goal)
 
     def progress(self, evo):
         return {
@@ -73,38 +60,21 @@ class IEPlan(PlanBase):
         }
 
     def finish(self, evo):
-        joints = self.joints(evo.best_u)
-        features, _ = self.sim.rollout(joints, self.sim.init_state())
         return {
-            "joints": joints,
-            "features": features,
-            "best_fitness": evo.best_fitness,
+            **self.execution(self.joints(evo.best_u)),
             "generation": evo.generation,
             "evaluations": evo.evaluations,
         }
 
     def to_result(self, final, history, timing):
-        goal = np.asarray(self.goal)
-        errors = np.linalg.norm(final["features"] - goal, axis=-1)
         gens = final["generation"]
-        hist = history["best_fitness"].T.astype(np.float64)  # (N, G)
-        hist = hist[:, : int(gens.max())]
-        hist[np.arange(hist.shape[1])[None, :] >= gens[:, None]] = np.nan
-        return ExecutionResult(
-            strategy=self.name,
-            joints=final["joints"],
-            features=final["features"],
-            goal=goal,
-            point_errors=errors,
-            fitness_history=hist,
-            evaluations=int(final["evaluations"].sum()),
-            generations=int(gens.max()),
-            wall_time_s=timing["wall_time_s"],
-            compile_time_s=timing["compile_time_s"],
-            success=bool(np.all(errors < self.tolerance)),
-            tolerance=self.tolerance,
-            final_fitness=float(errors.max()),
-            info=self.result_info(timing, point_generations=gens.tolist()),
+        hist = history["best_fitness"].astype(np.float64)  # (G, N)
+        return self.result(
+            final, timing,
+            fitness_history=ragged_rows([hist[:g, i] for i, g in enumerate(gens)]),
+            evaluations=final["evaluations"].sum(),
+            generations=gens.max(),
+            point_generations=gens.tolist(),
         )
 
 
@@ -148,16 +118,11 @@ def run_ie(
         >>> res = run_ie(sim, goal, tolerance=0.02)  # doctest: +SKIP
         >>> res.point_errors.max() < 0.02  # doctest: +SKIP
     """
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
-    if keys is not None and keys.shape[0] != goal.shape[0]:
-        raise ValueError(f"keys has {keys.shape[0]} entries for {goal.shape[0]} points")
-    plan = IEPlan(
-        sim, goal, algorithm=algorithm, population_size=population_size,
-        tolerance=tolerance, max_generations=max_generations,
+    (result,) = run(
+        IEPlan, sim, goal, [seed], algorithm=algorithm,
+        population_size=population_size, tolerance=tolerance,
+        max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        keys_fn=None if keys is None else (lambda _key: keys),
-        info={"seed": seed},
+        keys=keys, progress_fn=progress_fn,
     )
-    (result,) = drive(plan, seed_keys([seed]), chunk_size=chunk_size,
-                      progress_fn=progress_fn)
     return result

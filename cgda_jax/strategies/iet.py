@@ -24,16 +24,9 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from cgda_jax.strategies.base import (
-    Evolution,
-    PlanBase,
-    check_config,
-    evolution_init,
-    evolution_step,
-    freeze,
-)
+from cgda_jax.strategies.base import Evolution, PlanBase, freeze, ragged_rows
 from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import run
 
 #: Default restarts of a point that missed its tolerance, and backtracks per run.
 RESTARTS = 4
@@ -105,7 +98,6 @@ class IETPlan(PlanBase):
 
     def __init__(self, sim, goal, *, restarts=0, backtracks=0, **kwargs):
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
-        self.n_points = int(goal.shape[0])
         self.restarts = int(restarts)
         self.backtracks = int(backtracks)
         evolutions = self.n_points * (1 + self.restarts) * (1 + self.backtracks)
@@ -115,14 +107,7 @@ class IETPlan(PlanBase):
         return self.goal[jnp.clip(point, 0, self.n_points - 1)]
 
     def _fitness(self, sim_state, prefix_sq, point):
-        goal_point = self._goal(point)
-
-        def fitness_u(pop):
-            feats = self.point_features(sim_state, pop)
-            sq = jnp.sum((feats - goal_point) ** 2, axis=-1)
-            return jnp.sqrt(prefix_sq + sq)
-
-        return fitness_u
+        return self.point_fitness(sim_state, self._goal(point), prefix_sq)
 
     def _stop(self, prefix_sq):
         # the frozen prefix adds a constant the point cannot change: stop on the
@@ -147,10 +132,8 @@ class IETPlan(PlanBase):
             0.0,
         )
         prefix_sq = s.prefix_sq[p]
-        evo = evolution_init(
-            self.algo, self.params, k_evo,
-            self._fitness(_at(s.sim_states, p), prefix_sq, point), self.n_dof,
-            mean=mean,
+        evo = self.start(
+            k_evo, self._fitness(_at(s.sim_states, p), prefix_sq, point), mean=mean
         )
         return s.replace(
             evo=evo, point=point, restart=restart, tries=s.tries.at[p].add(1),
@@ -224,8 +207,7 @@ class IETPlan(PlanBase):
         p = jnp.minimum(s.point, self.n_points - 1)
         prefix_sq = s.prefix_sq[p]
         fit = self._fitness(_at(s.sim_states, p), prefix_sq, s.point)
-        evo, metrics = evolution_step(self.algo, self.params, s.evo, fit,
-                                      self._stop(prefix_sq))
+        evo, metrics = self.evolve(s.evo, fit, self._stop(prefix_sq))
         new = s.replace(evo=evo)
         new = jax.lax.cond(evo.done, self._end_evolution, lambda x: x, new)
         new = freeze(finished, s, new)
@@ -241,10 +223,8 @@ class IETPlan(PlanBase):
                 "backtracks": np.asarray(s.backtracks).tolist()}
 
     def finish(self, s):
-        features, _ = self.sim.rollout(s.joints, self.sim.init_state())
         return {
-            "joints": s.joints,
-            "features": features,
+            **self.execution(s.joints),
             "carried_features": s.features,
             "point": s.point,
             "tries": s.tries,
@@ -255,41 +235,26 @@ class IETPlan(PlanBase):
         }
 
     def to_result(self, final, history, timing):
-        goal = np.asarray(self.goal)
-        errors = np.linalg.norm(final["features"] - goal, axis=-1)
+        hist = ragged_rows(
+            [history["best_fitness"][history["point"] == i] for i in range(self.n_points)]
+        )
         gens = final["point_generations"]
-        hist = np.full((self.n_points, max(int(gens.max()), 1)), np.nan)
-        for i in range(self.n_points):
-            h = history["best_fitness"][history["point"] == i]
-            hist[i, : len(h)] = h
-        complete = int(final["point"]) >= self.n_points
-        return ExecutionResult(
-            strategy=self.name,
-            joints=final["joints"],
-            features=final["features"],
-            goal=goal,
-            point_errors=errors,
+        return self.result(
+            final, timing,
             fitness_history=hist,
-            evaluations=int(final["point_evaluations"].sum()),
-            generations=int(gens.sum()),
-            wall_time_s=timing["wall_time_s"],
-            compile_time_s=timing["compile_time_s"],
-            success=bool(complete and np.all(errors < self.tolerance)),
-            tolerance=self.tolerance,
-            final_fitness=float(np.linalg.norm(final["features"] - goal)),
-            info=self.result_info(
-                timing,
-                restarts=self.restarts,
-                backtracks=self.backtracks,
-                backtracks_used=int(final["backtracks"]),
-                point_tries=final["tries"].tolist(),
-                point_generations=gens.tolist(),
-                point_evaluations=final["point_evaluations"].tolist(),
-                point_fitness=final["point_fitness"].tolist(),
-                carried_matches_rollout=bool(
-                    np.allclose(final["carried_features"], final["features"],
-                                atol=1e-4)
-                ),
+            evaluations=final["point_evaluations"].sum(),
+            generations=gens.sum(),
+            final_fitness=np.linalg.norm(final["features"] - np.asarray(self.goal)),
+            complete=int(final["point"]) >= self.n_points,
+            restarts=self.restarts,
+            backtracks=self.backtracks,
+            backtracks_used=int(final["backtracks"]),
+            point_tries=final["tries"].tolist(),
+            point_generations=gens.tolist(),
+            point_evaluations=final["point_evaluations"].tolist(),
+            point_fitness=final["point_fitness"].tolist(),
+            carried_matches_rollout=bool(
+                np.allclose(final["carried_features"], final["features"], atol=1e-4)
             ),
         )
 
@@ -335,14 +300,11 @@ def run_iet(
         final_fitness = the whole trajectory's Euclidean fitness. ``info`` holds
         per-point generations / evaluations / tries and the backtracks used.
     """
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
-    plan = IETPlan(
-        sim, goal, algorithm=algorithm, population_size=population_size,
-        tolerance=tolerance, max_generations=max_generations,
-        restarts=restarts, backtracks=backtracks,
+    (result,) = run(
+        IETPlan, sim, goal, [seed], algorithm=algorithm,
+        population_size=population_size, tolerance=tolerance,
+        max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        info={"seed": seed},
+        restarts=restarts, backtracks=backtracks, progress_fn=progress_fn,
     )
-    (result,) = drive(plan, seed_keys([seed]), chunk_size=chunk_size,
-                      progress_fn=progress_fn)
     return result

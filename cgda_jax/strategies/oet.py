@@ -20,17 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from cgda_jax.strategies.base import (
-    Evolution,
-    PlanBase,
-    check_config,
-    evolution_init,
-    evolution_step,
-    freeze,
-    from_joints,
-)
+from cgda_jax.strategies.base import Evolution, PlanBase, freeze, from_joints, ragged_rows
 from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import run
 
 
 @struct.dataclass
@@ -51,14 +43,23 @@ class OETState:
 
 
 class OETPlan(PlanBase):
-    """OET as a plan for `runner.drive`."""
+    """OET as a plan for `runner.drive`.
+
+    Args (beyond `PlanBase`'s):
+        max_steps: budget of executed postures (None: 2 N).
+        lookahead: localization window size beyond the current step (>= 1).
+    """
 
     name = "oet"
 
-    def __init__(self, sim, goal, *, max_steps, lookahead, **kwargs):
+    def __init__(self, sim, goal, *, max_steps=None, lookahead=1, **kwargs):
+        max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
+        if max_steps < 1:
+            raise ValueError(f"max_steps must be >= 1; got {max_steps}")
+        if int(lookahead) < 1:
+            raise ValueError(f"lookahead must be >= 1; got {lookahead}")
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
-        self.n_points = int(goal.shape[0])
-        self.max_steps = int(max_steps)
+        self.max_steps = max_steps
         self.lookahead = int(lookahead)
         self.max_generations_total = self.max_steps * self.max_generations
 
@@ -66,19 +67,11 @@ class OETPlan(PlanBase):
         return jnp.minimum(k + 1, self.n_points - 1)
 
     def _fitness(self, sim_state, k):
-        goal_point = self.goal[self._target(k)]
-
-        def fitness_u(pop):
-            feats = self.point_features(sim_state, pop)
-            return jnp.linalg.norm(feats - goal_point, axis=-1)
-
-        return fitness_u
+        return self.point_fitness(sim_state, self.goal[self._target(k)])
 
     def _start(self, key, sim_state, k, steps, mean):
-        return evolution_init(
-            self.algo, self.params, jax.random.fold_in(key, steps),
-            self._fitness(sim_state, k), self.n_dof, mean=mean,
-        )
+        return self.start(jax.random.fold_in(key, steps), self._fitness(sim_state, k),
+                          mean=mean)
 
     def init(self, key):
         sim_state = self.sim.init_state()
@@ -117,9 +110,7 @@ class OETPlan(PlanBase):
 
     def step(self, s: OETState):
         finished = self.done(s)
-        evo, metrics = evolution_step(
-            self.algo, self.params, s.evo, self._fitness(s.sim_state, s.k), self.stop
-        )
+        evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k))
         new = jax.lax.cond(evo.done, self._execute, lambda x: x, s.replace(evo=evo))
         new = freeze(finished, s, new)
         return new, {"best_fitness": metrics["best_fitness"],
@@ -141,31 +132,18 @@ class OETPlan(PlanBase):
         n = int(final["steps"])
         feats = final["features"][:n]
         dist = np.linalg.norm(goal[:, None, :] - feats[None, :, :], axis=-1)
-        errors = dist.min(axis=1) if n else np.full(len(goal), np.inf)
         gens = final["step_generations"][:n]
-        hist = np.full((n, max(int(gens.max(initial=0)), 1)), np.nan)
-        for i in range(n):
-            h = history["best_fitness"][history["step"] == i]
-            hist[i, : len(h)] = h
-        return ExecutionResult(
-            strategy=self.name,
-            joints=final["joints"][:n],
-            features=feats,
-            goal=goal,
-            point_errors=errors,
-            fitness_history=hist,
-            evaluations=int(final["evaluations"]),
-            generations=int(gens.sum()),
-            wall_time_s=timing["wall_time_s"],
-            compile_time_s=timing["compile_time_s"],
-            success=bool(np.all(errors < self.tolerance)),
-            tolerance=self.tolerance,
-            final_fitness=float(errors.max()),
-            info=self.result_info(
-                timing, steps=n, reached_end=int(final["k"]) >= len(goal) - 1,
-                targets=final["targets"][:n].tolist(),
-                step_generations=gens.tolist(), lookahead=self.lookahead,
+        return self.result(
+            {"joints": final["joints"][:n], "features": feats}, timing,
+            point_errors=dist.min(axis=1) if n else np.full(len(goal), np.inf),
+            fitness_history=ragged_rows(
+                [history["best_fitness"][history["step"] == i] for i in range(n)]
             ),
+            evaluations=final["evaluations"],
+            generations=gens.sum(),
+            steps=n, reached_end=int(final["k"]) >= len(goal) - 1,
+            targets=final["targets"][:n].tolist(),
+            step_generations=gens.tolist(), lookahead=self.lookahead,
         )
 
 
@@ -203,18 +181,11 @@ def run_oet(
         point_errors (N,) = distance from each goal point to its nearest executed
         feature; success = all of them < tolerance.
     """
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
-    max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
-    if max_steps < 1:
-        raise ValueError(f"max_steps must be >= 1; got {max_steps}")
-    if int(lookahead) < 1:
-        raise ValueError(f"lookahead must be >= 1; got {lookahead}")
-    plan = OETPlan(
-        sim, goal, max_steps=max_steps, lookahead=lookahead, algorithm=algorithm,
+    (result,) = run(
+        OETPlan, sim, goal, [seed], algorithm=algorithm,
         population_size=population_size, tolerance=tolerance,
-        max_generations=max_generations, algorithm_kwargs=algorithm_kwargs,
-        algorithm_params=algorithm_params, info={"seed": seed},
+        max_generations=max_generations, chunk_size=chunk_size,
+        algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
+        max_steps=max_steps, lookahead=lookahead, progress_fn=progress_fn,
     )
-    (result,) = drive(plan, seed_keys([seed]), chunk_size=chunk_size,
-                      progress_fn=progress_fn)
     return result

@@ -5,9 +5,14 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 - ``init(key) -> carry``
 - ``step(carry) -> (carry, metrics)``: one generation; done parts are frozen inside.
 - ``done(carry) -> bool``: nothing left to evolve.
+- ``progress(carry) -> dict``: host figures for ``progress_fn`` (one entry per trial).
 - ``finish(carry) -> dict``: final arrays (best trajectory, its execution, ...).
 - ``to_result(final, history, timing) -> ExecutionResult`` on host NumPy arrays.
-- ``max_chunks_generations``: an upper bound on generations (loop guard).
+- ``max_generations_total``: an upper bound on generations (loop guard).
+- ``n_points``: goal points (reported to ``progress_fn`` as ``points``).
+
+`run` is the entry every ``run_*`` function and `run_trials` share: it checks the goal and
+common settings, builds the plan and drives it for a list of seeds.
 
 `drive` compiles ``init``, a chunk of ``chunk_size`` generations and ``finish`` once each
 (timed apart with ``jit(...).lower(...).compile()``), then calls the compiled chunk until
@@ -24,6 +29,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from cgda_jax.strategies.base import check_config
+from cgda_jax.strategies.result import ExecutionResult
 
 #: Number of times a chunk function was traced, per strategy name (tests use it to
 #: prove that IET compiles one step for all of its points).
@@ -107,3 +115,36 @@ def drive(
 def seed_keys(seeds: Any) -> jax.Array:
     """Typed keys (R,) from integer seeds (R,)."""
     return jax.vmap(jax.random.key)(jnp.asarray(seeds, dtype=jnp.uint32))
+
+
+def run(
+    plan_cls: type,
+    sim: Any,
+    goal: Any,
+    seeds: list[int],
+    *,
+    tolerance: float,
+    max_generations: int,
+    chunk_size: int = 10,
+    progress_fn: Callable[[dict[str, Any]], None] | None = None,
+    **plan_kwargs: Any,
+) -> list[ExecutionResult]:
+    """Checks `goal` and the common settings, builds the plan, runs it for `seeds`.
+
+    Args:
+        plan_cls: a plan class (e.g. `IEPlan`).
+        sim, goal, tolerance, max_generations, chunk_size, progress_fn: as in `run_ie`.
+        seeds: R seeds, run as R independent trials in one batched call.
+        **plan_kwargs: the rest of the plan's constructor arguments.
+
+    Returns:
+        R results, ``info["seed"]`` set to each one's seed.
+    """
+    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    plan = plan_cls(sim, goal, tolerance=tolerance, max_generations=max_generations,
+                    **plan_kwargs)
+    results = drive(plan, seed_keys(seeds), chunk_size=chunk_size,
+                    progress_fn=progress_fn)
+    for seed, res in zip(seeds, results, strict=True):
+        res.info["seed"] = seed
+    return results

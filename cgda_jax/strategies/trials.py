@@ -5,13 +5,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
 from cgda_jax.strategies.iet import BACKTRACKS, RESTARTS, IETPlan
 from cgda_jax.strategies.oet import OETPlan
 from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import run
 
 #: Strategy name -> (plan class, defaults of its extra settings).
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
@@ -65,19 +64,10 @@ def run_trials(
     unknown = sorted(set(strategy_kwargs) - set(defaults))
     if unknown:
         raise ValueError(f"unknown settings {unknown} for strategy {strategy!r}")
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
-    extra = {**defaults, **strategy_kwargs}
-    if strategy == "oet" and extra["max_steps"] is None:
-        extra["max_steps"] = 2 * goal.shape[0]
-    seeds = [seed + r for r in range(int(n_trials))]
-    plan = plan_cls(
-        sim, goal, algorithm=algorithm, population_size=population_size,
-        tolerance=tolerance, max_generations=max_generations,
+    return run(
+        plan_cls, sim, goal, [seed + r for r in range(int(n_trials))],
+        algorithm=algorithm, population_size=population_size, tolerance=tolerance,
+        max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        **extra,
+        progress_fn=progress_fn, **{**defaults, **strategy_kwargs},
     )
-    results = drive(plan, seed_keys(seeds), chunk_size=chunk_size,
-                    progress_fn=progress_fn)
-    for r, res in zip(seeds, results, strict=True):
-        res.info["seed"] = r
-    return results
