@@ -28,7 +28,8 @@ class ProgressLine:
 
     Args:
         label: prefix (the experiment name).
-        total_points: goal points, to show "points done / total".
+        total_points: goal points, to show "points done / total" (default: the
+            ``points`` entry of each update, which the strategies report).
         stream: where to write (default stderr); nothing is written when ``quiet``.
         quiet: write nothing.
         interval_s: minimum time between two lines when ``stream`` is not a TTY.
@@ -59,8 +60,9 @@ class ProgressLine:
         for key, name in self._KEYS:
             if key in info:
                 text = _short(info[key])
-                if name in ("points", "point") and self.total:
-                    text = f"{text}/{self.total}"
+                n_points = self.total or info.get("points")
+                if name in ("points", "point") and n_points:
+                    text = f"{text}/{n_points}"
                 parts.append(f"{name} {text}")
         total = now - self.t0
         run = info.get("elapsed_s")

@@ -55,7 +55,18 @@ def test_gene_transform_stays_in_limits_and_inverts():
 
 
 def test_ie_converges_every_point(sim, goal):
-    res = run_ie(sim, goal, population_size=12, tolerance=0.01, max_generations=80)
+    import io
+
+    from cgda_jax.progress import ProgressLine
+
+    updates, shown = [], io.StringIO()
+    bar = ProgressLine("ie", stream=shown, interval_s=0.0)
+    res = run_ie(sim, goal, population_size=12, tolerance=0.01, max_generations=80,
+                 progress_fn=lambda info: (updates.append(info), bar(info)))
+    # progress reports the goal's point count; the line shows "points done/total"
+    assert updates and all(u["points"] == len(goal) for u in updates)
+    assert updates[-1]["done"] and updates[-1]["points_done"] == [len(goal)]
+    assert f"points {len(goal)}/{len(goal)}" in shown.getvalue().splitlines()[-1]
     assert res.success, res.point_errors
     assert res.point_errors.max() < 0.01
     # the reported features are a fresh execution of the reported joints

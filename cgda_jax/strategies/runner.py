@@ -85,6 +85,7 @@ def drive(
             progress_fn(
                 {
                     "strategy": plan.name,
+                    "points": plan.n_points,
                     "generations": generations,
                     "done": finished,
                     "elapsed_s": time.perf_counter() - t1,
