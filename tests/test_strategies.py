@@ -217,6 +217,10 @@ def test_iet_restarts_and_backtracks_recover_failed_points(paint_sim):
     np.testing.assert_allclose(restarted.features, goal, atol=1e-4)
     tries = restarted.info["point_tries"]
     assert tries[:2] == [1, 1] and tries[2] >= 2
+    # point 2's history is its last (committed) try only, ending at its fitness
+    row = restarted.fitness_history[2][np.isfinite(restarted.fitness_history[2])]
+    assert len(row) <= _TINY["max_generations"] < restarted.info["point_generations"][2]
+    assert row[-1] == pytest.approx(restarted.info["point_fitness"][2])
     # points before the restarted one come from the same (first) evolutions
     np.testing.assert_allclose(restarted.joints[:2], plain[6].joints[:2], atol=1e-5)
     assert restarted.evaluations == 6 * restarted.generations

@@ -211,8 +211,10 @@ class IETPlan(PlanBase):
         new = s.replace(evo=evo)
         new = jax.lax.cond(evo.done, self._end_evolution, lambda x: x, new)
         new = freeze(finished, s, new)
+        # which evolution (point, try) this generation belongs to
         metrics = {"best_fitness": metrics["best_fitness"],
-                   "point": jnp.where(finished, -1, s.point)}
+                   "point": jnp.where(finished, -1, s.point),
+                   "try": s.tries[p] - 1}
         return new, metrics
 
     def done(self, s):
@@ -235,9 +237,12 @@ class IETPlan(PlanBase):
         }
 
     def to_result(self, final, history, timing):
-        hist = ragged_rows(
-            [history["best_fitness"][history["point"] == i] for i in range(self.n_points)]
-        )
+        # each point's history: the generations of its last (committed) evolution
+        last_try = final["tries"] - 1
+        hist = ragged_rows([
+            history["best_fitness"][(history["point"] == i) & (history["try"] == t)]
+            for i, t in enumerate(last_try)
+        ])
         gens = final["point_generations"]
         return self.result(
             final, timing,
@@ -298,7 +303,8 @@ def run_iet(
     Returns:
         `ExecutionResult`; success = every executed point's error < epsilon;
         final_fitness = the whole trajectory's Euclidean fitness. ``info`` holds
-        per-point generations / evaluations / tries and the backtracks used.
+        per-point generations / evaluations / tries and the backtracks used;
+        fitness_history row i is point i's last (committed) evolution.
     """
     (result,) = run(
         IETPlan, sim, goal, [seed], algorithm=algorithm,

@@ -25,7 +25,10 @@ class ExecutionResult:
         point_errors: Euclidean error per goal point (N,) (OET: distance from each goal
             point to the nearest executed feature).
         fitness_history: best fitness so far per generation: (G,) for FTE; (N, G) per
-            point for IE, IET and OET (NaN after a point stopped / before it started).
+            point for IE, IET and OET (NaN-padded after a point's generations). IET:
+            each point's last evolution (the committed one) only; the generations of
+            its restarts and backtracked tries count in ``info["point_generations"]``
+            (tries: ``info["point_tries"]``).
         evaluations: fitness evaluations (individuals simulated) spent.
         generations: generations run (IE: the longest point; IET/OET: summed over points).
         wall_time_s: run time without compilation.
