@@ -12,28 +12,44 @@ References:
 
 __version__ = "0.1.0"
 
+# Every public name is imported on first access (PEP 562 ``__getattr__``), so
+# ``import cgda_jax`` costs almost nothing: JAX, MuJoCo, mujoco.mjx, evosax/flax and
+# matplotlib load only when a name that needs them is used.  Each section maps its
+# public names to the module that defines them (same names as ``from ... import``).
+
+import importlib as _importlib
+import sys as _sys
+import types as _types
+from typing import TYPE_CHECKING as _TYPE_CHECKING
+
+# The headless OpenGL back-end must be chosen before anything imports mujoco.
+import cgda_jax.sim._mujoco_env  # noqa: E402,F401  (cheap; runs choose_gl_backend)
+
 __all__: list[str] = ["__version__"]
+_LAZY: dict[str, str] = {}  # public name -> module that defines it
 
 # --- core (data, generalization, distances, recognition) ---------------------
-# (section owned by the core work; keep one import per line, extend __all__)
-from cgda_jax.data import Demonstration as Demonstration
-from cgda_jax.data import load_csv as load_csv
-from cgda_jax.data import load_npz as load_npz
-from cgda_jax.data import load_xgnitive as load_xgnitive
-from cgda_jax.data import save_csv as save_csv
-from cgda_jax.data import save_npz as save_npz
-from cgda_jax.data import validate_demonstrations as validate_demonstrations
-from cgda_jax.distance import dtw as dtw
-from cgda_jax.distance import dtw_multi as dtw_multi
-from cgda_jax.distance import euclidean as euclidean
-from cgda_jax.distance import resample as resample
-from cgda_jax.generalize import GeneralizedAction as GeneralizedAction
-from cgda_jax.generalize import generalize as generalize
-from cgda_jax.generalize import rbf_interpolate as rbf_interpolate
-from cgda_jax.recognize import ActionLibrary as ActionLibrary
-from cgda_jax.recognize import Recognition as Recognition
-from cgda_jax.recognize import cost_matrix as cost_matrix
-from cgda_jax.recognize import recognize as recognize
+# (section owned by the core work; one entry per name, extend __all__)
+_LAZY.update({
+    "Demonstration": "cgda_jax.data",
+    "load_csv": "cgda_jax.data",
+    "load_npz": "cgda_jax.data",
+    "load_xgnitive": "cgda_jax.data",
+    "save_csv": "cgda_jax.data",
+    "save_npz": "cgda_jax.data",
+    "validate_demonstrations": "cgda_jax.data",
+    "dtw": "cgda_jax.distance",
+    "dtw_multi": "cgda_jax.distance",
+    "euclidean": "cgda_jax.distance",
+    "resample": "cgda_jax.distance",
+    "GeneralizedAction": "cgda_jax.generalize",
+    "generalize": "cgda_jax.generalize",
+    "rbf_interpolate": "cgda_jax.generalize",
+    "ActionLibrary": "cgda_jax.recognize",
+    "Recognition": "cgda_jax.recognize",
+    "cost_matrix": "cgda_jax.recognize",
+    "recognize": "cgda_jax.recognize",
+})
 
 __all__ += [
     "Demonstration",
@@ -57,13 +73,15 @@ __all__ += [
 ]
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
-from cgda_jax.sim.execute import SimState as SimState
-from cgda_jax.sim.execute import Simulator as Simulator
-from cgda_jax.sim.render import render_trajectory as render_trajectory
-from cgda_jax.sim.robot import Robot as Robot
-from cgda_jax.sim.robot import model_path as model_path
-from cgda_jax.sim.scenes import MarkerScene as MarkerScene
-from cgda_jax.sim.scenes import PaintWall as PaintWall
+_LAZY.update({
+    "SimState": "cgda_jax.sim.execute",
+    "Simulator": "cgda_jax.sim.execute",
+    "render_trajectory": "cgda_jax.sim.render",
+    "Robot": "cgda_jax.sim.robot",
+    "model_path": "cgda_jax.sim.robot",
+    "MarkerScene": "cgda_jax.sim.scenes",
+    "PaintWall": "cgda_jax.sim.scenes",
+})
 
 __all__ += [
     "Robot",
@@ -76,16 +94,19 @@ __all__ += [
 ]
 
 # --- strategies (FTE, IE, IET, OET) ------------------------------------------
-from cgda_jax.strategies import (
-    ALGORITHMS as ALGORITHMS,
-    STRATEGIES as STRATEGIES,
-    ExecutionResult as ExecutionResult,
-    run_fte as run_fte,
-    run_ie as run_ie,
-    run_iet as run_iet,
-    run_oet as run_oet,
-    run_trials as run_trials,
-)
+_LAZY.update({
+    name: "cgda_jax.strategies"
+    for name in (
+        "ALGORITHMS",
+        "STRATEGIES",
+        "ExecutionResult",
+        "run_fte",
+        "run_ie",
+        "run_iet",
+        "run_oet",
+        "run_trials",
+    )
+})
 
 __all__ += [
     "ALGORITHMS",
@@ -99,11 +120,76 @@ __all__ += [
 ]
 
 # --- user layer (datasets, experiments) --------------------------------------
-from cgda_jax import datasets as datasets
-from cgda_jax.experiment import (
-    ExperimentConfig as ExperimentConfig,
-    load_config as load_config,
-    run_experiment as run_experiment,
-)
+_LAZY.update({
+    "ExperimentConfig": "cgda_jax.experiment",
+    "load_config": "cgda_jax.experiment",
+    "run_experiment": "cgda_jax.experiment",
+})
 
 __all__ += ["ExperimentConfig", "datasets", "load_config", "run_experiment"]
+
+_SUBMODULES = ("datasets",)
+
+
+def __getattr__(name: str):
+    """Import a public name (or the ``datasets`` subpackage) on first access."""
+    if name in _SUBMODULES:
+        module = _importlib.import_module(f"cgda_jax.{name}")
+    elif name in _LAZY:
+        module = getattr(_importlib.import_module(_LAZY[name]), name)
+    else:
+        raise AttributeError(f"module 'cgda_jax' has no attribute {name!r}")
+    globals()[name] = module
+    return module
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(_types.ModuleType):
+    """Keeps a public function bound when its same-named submodule is imported.
+
+    ``cgda_jax.generalize`` and ``cgda_jax.recognize`` are both functions and
+    modules; importing the module makes Python set the package attribute to the
+    module, which would hide the function.  The function wins, as with the former
+    eager ``from cgda_jax.recognize import recognize``.
+    """
+
+    def __setattr__(self, name: str, value) -> None:
+        if (
+            isinstance(value, _types.ModuleType)
+            and _LAZY.get(name) == f"{__name__}.{name}"
+            and hasattr(value, name)
+        ):
+            value = getattr(value, name)
+        super().__setattr__(name, value)
+
+
+_sys.modules[__name__].__class__ = _Package
+
+
+if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
+    from cgda_jax import datasets as datasets  # noqa: F401
+    from cgda_jax.data import (  # noqa: F401
+        Demonstration, load_csv, load_npz, load_xgnitive, save_csv, save_npz,
+        validate_demonstrations,
+    )
+    from cgda_jax.distance import dtw, dtw_multi, euclidean, resample  # noqa: F401
+    from cgda_jax.experiment import (  # noqa: F401
+        ExperimentConfig, load_config, run_experiment,
+    )
+    from cgda_jax.generalize import (  # noqa: F401
+        GeneralizedAction, generalize, rbf_interpolate,
+    )
+    from cgda_jax.recognize import (  # noqa: F401
+        ActionLibrary, Recognition, cost_matrix, recognize,
+    )
+    from cgda_jax.sim.execute import SimState, Simulator  # noqa: F401
+    from cgda_jax.sim.render import render_trajectory  # noqa: F401
+    from cgda_jax.sim.robot import Robot, model_path  # noqa: F401
+    from cgda_jax.sim.scenes import MarkerScene, PaintWall  # noqa: F401
+    from cgda_jax.strategies import (  # noqa: F401
+        ALGORITHMS, STRATEGIES, ExecutionResult, run_fte, run_ie, run_iet, run_oet,
+        run_trials,
+    )

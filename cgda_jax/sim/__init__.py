@@ -1,23 +1,26 @@
 """Simulation: robot models, scenes, batched execution in MJX, offscreen rendering."""
 
-# Before the first ``import mujoco``: headless OpenGL choice, quiet mujoco.mjx import.
-from cgda_jax.sim._mujoco_env import choose_gl_backend, import_mjx_quietly
+# Before the first ``import mujoco``: headless OpenGL choice.  ``mujoco.mjx`` is
+# imported (quietly) only when dynamic mode or the "mjx" kinematics needs it, and the
+# public names below are imported on first access, so ``import cgda_jax`` (which
+# runs this to choose the GL back-end) stays cheap.
+import importlib as _importlib
+
+from cgda_jax.sim._mujoco_env import choose_gl_backend
 
 choose_gl_backend()
-import_mjx_quietly()
 
-from cgda_jax.sim.execute import (  # noqa: E402
-    MODES as MODES,
-    SimState as SimState,
-    Simulator as Simulator,
-)
-from cgda_jax.sim.render import render_trajectory as render_trajectory  # noqa: E402
-from cgda_jax.sim.robot import (  # noqa: E402
-    KINEMATICS as KINEMATICS,
-    Robot as Robot,
-    model_path as model_path,
-)
-from cgda_jax.sim.scenes import MarkerScene as MarkerScene, PaintWall as PaintWall  # noqa: E402
+_LAZY = {
+    "MODES": "cgda_jax.sim.execute",
+    "SimState": "cgda_jax.sim.execute",
+    "Simulator": "cgda_jax.sim.execute",
+    "render_trajectory": "cgda_jax.sim.render",
+    "KINEMATICS": "cgda_jax.sim.robot",
+    "Robot": "cgda_jax.sim.robot",
+    "model_path": "cgda_jax.sim.robot",
+    "MarkerScene": "cgda_jax.sim.scenes",
+    "PaintWall": "cgda_jax.sim.scenes",
+}
 
 __all__ = [
     "KINEMATICS",
@@ -30,3 +33,12 @@ __all__ = [
     "model_path",
     "render_trajectory",
 ]
+
+
+def __getattr__(name: str):
+    """Import a public name on first access."""
+    if name not in _LAZY:
+        raise AttributeError(f"module 'cgda_jax.sim' has no attribute {name!r}")
+    value = getattr(_importlib.import_module(_LAZY[name]), name)
+    globals()[name] = value
+    return value

@@ -24,7 +24,7 @@ import os
 import re
 import sys
 
-__all__ = ["choose_gl_backend", "import_mjx_quietly"]
+__all__ = ["choose_gl_backend", "import_mjx_quietly", "mjx_module"]
 
 #: The lines ``mujoco.mjx.warp`` prints when Warp is simply not installed.
 _WARP_ABSENT = re.compile(
@@ -69,3 +69,15 @@ def import_mjx_quietly() -> None:
                 if not _WARP_ABSENT.match(line.strip())]
         if kept:
             print("\n".join(kept), flush=True)
+
+
+def mjx_module():
+    """``mujoco.mjx``, imported (quietly) on the first call.
+
+    Only dynamic mode and the "mjx" forward kinematics need it; importing it costs
+    about 1 s, so nothing imports it at ``import cgda_jax``.
+    """
+    if "mujoco.mjx" not in sys.modules:
+        choose_gl_backend()
+        import_mjx_quietly()
+    return sys.modules["mujoco.mjx"]

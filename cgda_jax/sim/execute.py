@@ -36,8 +36,8 @@ import mujoco
 import numpy as np
 from flax import struct
 from jax import Array
-from mujoco import mjx
 
+from cgda_jax.sim._mujoco_env import mjx_module
 from cgda_jax.sim.robot import Robot
 
 __all__ = ["MODES", "SimState", "Simulator"]
@@ -72,6 +72,13 @@ class Simulator:
             waypoint (1 = jump straight to it).
         physics_steps: dynamic mode: ``mjx.step`` calls per waypoint
             (x ``robot.mj_model.opt.timestep`` seconds).
+        batch_size: dynamic mode: `execute_population` simulates the population in
+            slices of at most this many candidates (``lax.map`` over ``vmap``ped
+            slices; the result is the same).  On the CPU, XLA's LAPACK kernels
+            (Cholesky / triangular solve of the mass matrix in ``mjx.step``) split
+            large batches over the intra-op thread pool and can deadlock in it
+            (P >= 512 on 2 cores hangs with every thread idle); slices of 256 run.
+            None: the whole population in one ``vmap`` (fine on a GPU).
 
     Attributes:
         n_dof, n_features, feature_names, lower (DoF,), upper (DoF,).
@@ -84,6 +91,7 @@ class Simulator:
         mode: str = "kinematic",
         substeps: int = 8,
         physics_steps: int = 100,
+        batch_size: int | None = 256,
     ):
         if mode not in MODES:
             raise ValueError(f"mode={mode!r}; expected one of {MODES}")
@@ -91,11 +99,14 @@ class Simulator:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
         if int(physics_steps) < 1:
             raise ValueError(f"physics_steps must be >= 1, got {physics_steps}")
+        if batch_size is not None and int(batch_size) < 1:
+            raise ValueError(f"batch_size must be >= 1 or None, got {batch_size}")
         self.robot = robot
         self.scene = scene
         self.mode = mode
         self.substeps = int(substeps)
         self.physics_steps = int(physics_steps)
+        self.batch_size = None if batch_size is None else int(batch_size)
         self.n_dof = robot.n_dof
         self.n_features = scene.n_features
         self.feature_names = tuple(scene.feature_names)
@@ -104,13 +115,15 @@ class Simulator:
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
         if mode == "dynamic":
             self._act_qadr = self._actuated_qpos()
+            robot.make_data()  # mujoco.mjx and the device model, outside any trace
         self.n_traces = 0  # how often execute_population was traced (tests read it)
-        self._execute_population = jax.jit(jax.vmap(self._execute_traced))
+        self._execute_population = jax.jit(self._execute_batched)
 
     def __repr__(self) -> str:
         return (
             f"Simulator({self.robot!r}, {type(self.scene).__name__}, mode={self.mode!r}, "
-            f"substeps={self.substeps}, physics_steps={self.physics_steps})"
+            f"substeps={self.substeps}, physics_steps={self.physics_steps}, "
+            f"batch_size={self.batch_size})"
         )
 
     # -- set-up ------------------------------------------------------------------
@@ -152,7 +165,7 @@ class Simulator:
         if self.mode == "dynamic":
             qpos = self.robot.qpos(genes0)
             data = self.robot.make_data(qpos).replace(ctrl=qpos[self._act_qadr])
-            data = mjx.forward(self.robot.mjx_model, data)
+            data = mjx_module().forward(self.robot.mjx_model, data)
             marker = data.site_xpos[self.robot.site_id]
         else:
             marker = self.robot.marker_position(genes0)
@@ -188,6 +201,7 @@ class Simulator:
         return state.replace(genes=target, scene=scene_state), features
 
     def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+        mjx = mjx_module()
         model, site = self.robot.mjx_model, self.robot.site_id
         ctrl = self.robot.qpos(target)[self._act_qadr]
 
@@ -247,8 +261,28 @@ class Simulator:
         self.n_traces += 1
         return self.execute(waypoints)
 
+    def map_population(self, fn, xs):
+        """``vmap(fn)(xs)``, in dynamic mode as ``lax.map`` over slices of at most
+        ``batch_size`` candidates (see the class doc: large LAPACK batches deadlock
+        XLA's CPU thread pool).  Kinematic mode: a plain ``vmap``.
+
+        Args:
+            fn: a function of one candidate (pytree of arrays).
+            xs: the candidates, stacked on axis 0 (P, ...).
+        """
+        if self.mode != "dynamic" or self.batch_size is None:
+            return jax.vmap(fn)(xs)
+        n = jax.tree_util.tree_leaves(xs)[0].shape[0]
+        if n <= self.batch_size:
+            return jax.vmap(fn)(xs)
+        return jax.lax.map(fn, xs, batch_size=self.batch_size)
+
+    def _execute_batched(self, population: Array) -> Array:
+        return self.map_population(self._execute_traced, population)
+
     def execute_population(self, population: Array) -> Array:
-        """Execute a population of trajectories at once (jitted ``vmap`` of `execute`).
+        """Execute a population of trajectories at once (jitted ``vmap`` of `execute`;
+        dynamic mode: in slices of ``batch_size``, see `map_population`).
 
         Args:
             population: (P, N, DoF) waypoints, each starting from `init_state()`.

@@ -23,11 +23,13 @@ import math
 import pathlib
 from collections.abc import Callable, Mapping, Sequence
 
+import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
 from jax import Array
-from mujoco import mjx
+
+from cgda_jax.sim._mujoco_env import mjx_module
 
 __all__ = ["KINEMATICS", "Robot", "model_path"]
 
@@ -158,8 +160,8 @@ class Robot:
         self._qpos0_np = qpos0
         self.qpos0 = jnp.asarray(qpos0, dtype=jnp.float32)
 
-        self.mjx_model = mjx.put_model(mj_model, impl="jax")
-        self._data0 = mjx.make_data(self.mjx_model, impl="jax")
+        self._mjx_model = None  # mjx.put_model on first use (dynamic / "mjx" FK)
+        self._data0 = None
         self._fk: Callable[[Array], Array] = self._build_fk(kinematics)
 
     @classmethod
@@ -214,6 +216,7 @@ class Robot:
                 [int(j) for j in self.joint_ids],
                 self.site_id,
             )
+        self.make_data()  # the mjx model and data template, outside any trace
         return lambda genes: self.kinematics_data(self.qpos(genes)).site_xpos[
             self.site_id
         ]
@@ -245,13 +248,27 @@ class Robot:
         """The evolved joints' values in a (nq,) posture -> (DoF,)."""
         return qpos[self.qpos_adr]
 
-    def make_data(self, qpos: Array | None = None) -> mjx.Data:
+    @property
+    def mjx_model(self):
+        """The ``mjx.Model`` (JAX impl), put on the device on first use: the chain
+        kinematics never needs it, so neither ``mujoco.mjx`` (about 1 s to import)
+        nor the model transfer is paid unless dynamic mode or "mjx" FK asks."""
+        if self._mjx_model is None:
+            with jax.ensure_compile_time_eval():  # concrete arrays even inside a trace
+                self._mjx_model = mjx_module().put_model(self.mj_model, impl="jax")
+        return self._mjx_model
+
+    def make_data(self, qpos: Array | None = None):
         """An ``mjx.Data`` (from the template made once) with ``qpos`` set."""
+        if self._data0 is None:
+            with jax.ensure_compile_time_eval():
+                self._data0 = mjx_module().make_data(self.mjx_model, impl="jax")
         return self._data0 if qpos is None else self._data0.replace(qpos=qpos)
 
-    def kinematics_data(self, qpos: Array) -> mjx.Data:
-        """``mjx.kinematics`` at a (nq,) posture (every body and site placed)."""
-        return mjx.kinematics(self.mjx_model, self.make_data(qpos))
+    def kinematics_data(self, qpos: Array):
+        """``mjx.kinematics`` at a (nq,) posture (every body and site placed) ->
+        ``mjx.Data``."""
+        return mjx_module().kinematics(self.mjx_model, self.make_data(qpos))
 
     def marker_position(self, genes: Array) -> Array:
         """Marker site position (3,) in the model's root frame for (DoF,) genes."""
