@@ -233,6 +233,24 @@ def test_iet_restarts_and_backtracks_recover_failed_points(paint_sim):
     assert backtracked.info["carried_matches_rollout"]
 
 
+def test_iet_commits_best_try_when_every_try_fails(sim):
+    # Goal points 4-6 m away from the tiny arm: no try can meet the tolerance, so each
+    # point is committed after its 3 tries; the committed posture must be the best of
+    # them, not the last one (seed 0: the best try is not the last for either point).
+    goal = np.array([[0.0, 0.0, 5.0], [0.0, 5.0, 0.0]])
+    res = run_iet(sim, goal, seed=0, restarts=2, backtracks=0, population_size=6,
+                  tolerance=0.01, max_generations=4, chunk_size=4)
+    assert not res.success and res.info["point_tries"] == [3, 3]
+    tries = np.asarray(res.info["try_best_fitness"])  # (N, 3), from the histories
+    committed = np.asarray(res.info["point_fitness"])
+    np.testing.assert_allclose(committed, tries.min(axis=1), rtol=1e-6)
+    assert np.any(tries.argmin(axis=1) != 2)  # the last try is not always the best
+    # the committed postures, re-executed from scratch, give those fitnesses
+    feats = np.asarray(sim.execute(jnp.asarray(res.joints)), float)
+    prefix = np.sqrt(np.cumsum(np.sum((feats - goal) ** 2, axis=1)))
+    np.testing.assert_allclose(committed, prefix, rtol=1e-5)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

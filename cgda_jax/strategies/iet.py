@@ -46,7 +46,8 @@ class IETState:
             backtrack); the next one of point i is number ``tries[i]``.
         restart: restarts of the current point since it was (re)entered.
         backtracks: backtracks spent.
-        best_u, best_fitness: best genes / fitness over the current point's restarts.
+        best_u, best_fitness: best genes / fitness over the tries of the current
+            point since it was (re)entered (its restarts); the committed posture.
         sim_states: simulator state before each point (stacked, N + 1).
         prefix_sq: summed squared feature error of the frozen prefix before each point
             (N + 1,).
@@ -135,9 +136,13 @@ class IETPlan(PlanBase):
         evo = self.start(
             k_evo, self._fitness(_at(s.sim_states, p), prefix_sq, point), mean=mean
         )
+        # a restart keeps the best of the point's earlier tries (same prefix); a new
+        # point or a revisit after a backtrack (new prefix) starts from this try's
+        keep = restart > 0
         return s.replace(
             evo=evo, point=point, restart=restart, tries=s.tries.at[p].add(1),
-            best_u=evo.best_u, best_fitness=evo.best_fitness,
+            best_u=jnp.where(keep, s.best_u, evo.best_u),
+            best_fitness=jnp.where(keep, s.best_fitness, evo.best_fitness),
         )
 
     def init(self, key):
@@ -258,6 +263,12 @@ class IETPlan(PlanBase):
             point_generations=gens.tolist(),
             point_evaluations=final["point_evaluations"].tolist(),
             point_fitness=final["point_fitness"].tolist(),
+            try_best_fitness=[
+                [float(history["best_fitness"][(history["point"] == i)
+                                               & (history["try"] == t)].min(initial=np.inf))
+                 for t in range(n_tries)]
+                for i, n_tries in enumerate(final["tries"])
+            ],
             carried_matches_rollout=bool(
                 np.allclose(final["carried_features"], final["features"], atol=1e-4)
             ),
@@ -303,8 +314,10 @@ def run_iet(
     Returns:
         `ExecutionResult`; success = every executed point's error < epsilon;
         final_fitness = the whole trajectory's Euclidean fitness. ``info`` holds
-        per-point generations / evaluations / tries and the backtracks used;
-        fitness_history row i is point i's last (committed) evolution.
+        per-point generations / evaluations / tries, each try's best fitness
+        (``try_best_fitness[i][t]``) and the backtracks used; fitness_history row i
+        is point i's last evolution. The committed posture of a point is the best
+        over its restarts (``point_fitness[i]``), also when every one missed epsilon.
     """
     (result,) = run(
         IETPlan, sim, goal, [seed], algorithm=algorithm,
