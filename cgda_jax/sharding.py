@@ -17,6 +17,11 @@ of the batch on that device, with no change to the kernels:
   and cut back to P rows.  Use it in a strategy's fitness evaluation.
 - `sharded_execute`: one jitted, sharded call of e.g. ``sim.execute_population``.
 
+The strategies expose this as ``devices=None | K | "all"`` (`resolve_devices`):
+``run_trials(..., devices=...)`` splits the trials axis (R padded to a multiple of K
+by repeating the last trial), ``run_ie/run_fte/run_iet/run_oet(..., devices=...)``
+the population of each generation's simulator call (P padded likewise).
+
 Results are the same as unsharded evaluation (each candidate is computed by the same
 per-candidate program; tests/test_sharding.py checks this on 4 forced host devices).
 
@@ -47,6 +52,7 @@ JAX is imported) splits the CPU into K devices, which is how the tests run this.
 from __future__ import annotations
 
 import functools
+import numbers
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -60,6 +66,7 @@ __all__ = [
     "pad_leading",
     "population_mesh",
     "population_sharding",
+    "resolve_devices",
     "shard_leading",
     "shard_population",
     "sharded_execute",
@@ -103,6 +110,33 @@ def population_sharding(
     """
     mesh = population_mesh(n_devices) if mesh is None else mesh
     return NamedSharding(mesh, PartitionSpec(AXIS))
+
+
+def resolve_devices(
+    devices: int | str | NamedSharding | None,
+) -> NamedSharding | None:
+    """The sharding a ``devices=`` option of the strategies asks for.
+
+    Args:
+        devices: None (no sharding: today's single-device program), ``"all"`` (every
+            device of ``jax.devices()``), an int K (the first K devices) or a
+            ``NamedSharding`` from `population_sharding` (used as is).
+
+    Returns:
+        None or a `population_sharding`.
+
+    Raises:
+        ValueError: anything else, or more devices than there are.
+    """
+    if devices is None or isinstance(devices, NamedSharding):
+        return devices
+    if isinstance(devices, str):
+        if devices != "all":
+            raise ValueError(f"devices={devices!r}: use None, 'all' or a device count")
+        return population_sharding()
+    if isinstance(devices, bool) or not isinstance(devices, numbers.Integral):
+        raise ValueError(f"devices={devices!r}: use None, 'all' or a device count")
+    return population_sharding(devices)
 
 
 def _n_shards(sharding: NamedSharding) -> int:

@@ -10,7 +10,12 @@ import jax
 import numpy as np
 import pytest
 
-from cgda_jax.sharding import pad_leading, population_sharding, shard_leading
+from cgda_jax.sharding import (
+    pad_leading,
+    population_sharding,
+    resolve_devices,
+    shard_leading,
+)
 
 SCRIPT = textwrap.dedent(
     """
@@ -53,46 +58,60 @@ SCRIPT = textwrap.dedent(
     """
 )
 
-# A strategy (IE) whose R = 4 trials are split over 4 devices with `axis_shardings`,
-# the way a runner given a sharding would jit its init and chunk functions; it must
-# give the same result per seed as the unsharded `drive`.
-TRIALS_SCRIPT = """
+# The strategies' ``devices=`` option: trials (IE, IET padded 3 -> 4) and one IE run's
+# population (6 -> padded 8) split over 4 devices give the results of the unsharded
+# runs, and the compiled chunks are partitioned (per-device shapes in the HLO).
+STRATEGIES_SCRIPT = """
 import jax, jax.numpy as jnp, numpy as np
 from cgda_jax import sharding as sh
-from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
+from cgda_jax.sim import MarkerScene, PaintWall, Robot, Simulator, model_path
+from cgda_jax.strategies import run_ie, run_trials
 from cgda_jax.strategies.ie import IEPlan
-from cgda_jax.strategies.runner import drive, seed_keys
+from cgda_jax.strategies.runner import compile_plan, seed_keys
 
+assert jax.device_count() == 4, jax.devices()
 robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                         "marker")
 sim = Simulator(robot, MarkerScene(), substeps=2)
 goal = sim.execute(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
-plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
-              max_generations=20)
-keys = seed_keys(np.arange(4))
-ref = drive(plan, keys, chunk_size=5)
+kw = dict(population_size=6, tolerance=0.02, max_generations=12, chunk_size=4)
 
-# The same plan, its 4 trials split over 4 devices (a runner with a sharding).
+def same(a, b):
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        # same per-candidate programs; only float32 rounding of fused code differs
+        np.testing.assert_allclose(x.joints, y.joints, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(x.point_errors, y.point_errors, atol=1e-5)
+        assert x.evaluations == y.evaluations and x.generations == y.generations
+
+# IE trials split over 4 devices: 4 trials, one per device
+ref = run_trials("ie", sim, goal, 4, **kw)
+out = run_trials("ie", sim, goal, 4, devices=4, **kw)
+same(out, ref)
+assert out[0].info["devices"] == 4 and ref[0].info["devices"] == 1
+# IET trials: 3 trials padded to 4
+paint = Simulator(robot, PaintWall(jnp.array([[0.2, 0.0, 0.3], [0.0, 0.2, 0.3]])),
+                  substeps=2)
+pgoal = np.array([[50.0], [100.0]])
+ref = run_trials("iet", paint, pgoal, 3, restarts=1, backtracks=1, **kw)
+out = run_trials("iet", paint, pgoal, 3, devices="all", restarts=1, backtracks=1, **kw)
+same(out, ref)
+# one IE run, its population (6 -> padded 8) split over 4 devices
+same([run_ie(sim, goal, devices=4, **kw)], [run_ie(sim, goal, **kw)])
+
 s4 = sh.population_sharding()
-chunk = lambda c: jax.lax.scan(lambda c, _: jax.vmap(plan.step)(c), c, None, length=5)
-carry_shape = jax.eval_shape(jax.vmap(plan.init), keys)
-metric_shape = jax.eval_shape(chunk, carry_shape)[1]
-cs = sh.axis_shardings(carry_shape, s4)
-init_c = jax.jit(jax.vmap(plan.init), in_shardings=s4, out_shardings=cs)
-chunk_c = jax.jit(chunk, in_shardings=(cs,),
-                  out_shardings=(cs, sh.axis_shardings(metric_shape, s4, axis=1)))
-carry = init_c(sh.shard_leading(keys, s4))
-for _ in range(4):
-    carry, _ = chunk_c(carry)
-    if bool(jnp.all(jax.vmap(plan.done)(carry))):
-        break
-assert len(carry.best_u.sharding.device_set) == 4, carry.best_u.sharding
-hlo = chunk_c.lower(carry).compile().as_text()
-assert "f32[1,2,8,3]" in hlo, "each device should evolve 1 trial x 2 points x 8"
-final = jax.tree.map(np.asarray, jax.vmap(plan.finish)(carry))
-for r, res in enumerate(ref):
-    np.testing.assert_allclose(final["joints"][r], res.joints, rtol=1e-5, atol=1e-6)
-print("TRIALS-OK")
+plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
+              max_generations=8)
+# trials: each device evolves 1 trial x 2 points x 8 candidates
+hlo = compile_plan(plan, sh.shard_leading(seed_keys(np.arange(4)), s4),
+                   chunk_size=2, sharding=s4)[1].as_text()
+assert "f32[1,2,8,3]" in hlo and "f32[4,2,8,3]" not in hlo
+# population: each device simulates 2 of the 8 candidates of each of the 2 points
+plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
+              max_generations=8, sharding=s4)
+hlo = compile_plan(plan, seed_keys(np.arange(1)), chunk_size=2)[1].as_text()
+assert "f32[1,2,2,3]" in hlo and "all-gather" in hlo
+print("STRATEGIES-OK")
 """
 
 
@@ -118,9 +137,8 @@ def test_sharded_execute_matches_unsharded_on_4_devices():
     assert "SHARDING-OK" in _run(SCRIPT)
 
 
-def test_sharded_strategy_trials_match_unsharded_on_4_devices():
-    pytest.importorskip("cgda_jax.strategies.runner")
-    assert "TRIALS-OK" in _run(TRIALS_SCRIPT)
+def test_strategies_devices_option_matches_unsharded_on_4_devices():
+    assert "STRATEGIES-OK" in _run(STRATEGIES_SCRIPT)
 
 
 def test_pad_leading_repeats_last_row():
@@ -140,3 +158,10 @@ def test_single_device_mesh_and_errors():
     np.testing.assert_array_equal(shard_leading(np.ones((3, 2)), s), np.ones((3, 2)))
     with pytest.raises(ValueError, match="n_devices=99"):
         population_sharding(99)
+    assert resolve_devices(None) is None
+    assert resolve_devices(np.int64(1)).mesh.size == 1
+    assert resolve_devices("all").mesh.size == jax.device_count()
+    assert resolve_devices(s) is s
+    for bad in ("some", 1.5, True):
+        with pytest.raises(ValueError, match="devices="):
+            resolve_devices(bad)

@@ -29,7 +29,9 @@ import numpy as np
 from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
 from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
 from flax import struct
+from jax.sharding import NamedSharding, PartitionSpec
 
+from cgda_jax.sharding import shard_population
 from cgda_jax.strategies.result import ExecutionResult
 
 #: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
@@ -305,6 +307,11 @@ class PlanBase:
     A plan is built from an already checked goal (`check_config`); subclasses add their
     own settings (checked in their ``__init__``) and the plan functions ``init``,
     ``step``, ``finish``, ``progress`` and ``to_result`` (see `runner`).
+
+    With ``sharding`` (`cgda_jax.sharding.population_sharding`) every fitness
+    evaluation, the one batched simulator call of a generation, has its population
+    (P, ...) padded to a multiple of the device count and split over the devices
+    (`cgda_jax.sharding.shard_population`); the rest of the step is unchanged.
     """
 
     name = "base"
@@ -322,8 +329,10 @@ class PlanBase:
         algorithm_kwargs: dict[str, Any] | None = None,
         algorithm_params: dict[str, Any] | None = None,
         info: dict[str, Any] | None = None,
+        sharding: NamedSharding | None = None,
     ):
         self.sim, self.goal = sim, goal
+        self.sharding = sharding
         self.n_points = int(goal.shape[0])
         self.lower = jnp.asarray(sim.lower, jnp.float32)
         self.upper = jnp.asarray(sim.upper, jnp.float32)
@@ -347,12 +356,26 @@ class PlanBase:
         }
 
     # ---- evolutions and fitness
+    def _sharded(self, fitness_u: FitnessFn) -> FitnessFn:
+        if self.sharding is None:
+            return fitness_u
+        # only the simulator call is split: candidates in and fitness out stay
+        # replicated, so ask/tell run as on one device (same reduction order)
+        sharded = shard_population(fitness_u, self.sharding)
+        replicated = NamedSharding(self.sharding.mesh, PartitionSpec())
+
+        def fitness(pop):
+            pop = jax.lax.with_sharding_constraint(pop, replicated)
+            return jax.lax.with_sharding_constraint(sharded(pop), replicated)
+
+        return fitness
+
     def start(
         self, key: jax.Array, fitness_u: FitnessFn, mean: jax.Array | None = None
     ) -> Evolution:
         """`evolution_init` with this plan's algorithm and gene count."""
-        return evolution_init(self.algo, self.params, key, fitness_u, self.n_genes,
-                              mean=mean)
+        return evolution_init(self.algo, self.params, key, self._sharded(fitness_u),
+                              self.n_genes, mean=mean)
 
     def evolve(
         self,
@@ -361,7 +384,7 @@ class PlanBase:
         stop: Callable[[Evolution], jax.Array] | None = None,
     ) -> tuple[Evolution, dict[str, jax.Array]]:
         """`evolution_step` with this plan's algorithm (default stop: `self.stop`)."""
-        return evolution_step(self.algo, self.params, evo, fitness_u,
+        return evolution_step(self.algo, self.params, evo, self._sharded(fitness_u),
                               self.stop if stop is None else stop)
 
     def joints(self, u: jax.Array) -> jax.Array:

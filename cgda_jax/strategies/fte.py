@@ -113,6 +113,7 @@ def run_fte(
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
+    devices: int | str | None = None,
 ) -> ExecutionResult:
     """Full Trajectory Evolution of a goal feature trajectory.
 
@@ -120,7 +121,7 @@ def run_fte(
         sim: a simulator (see `run_ie`).
         goal: goal feature trajectory (N, F).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
-            algorithm_params, progress_fn: as in `run_ie`.
+            algorithm_params, progress_fn, devices: as in `run_ie`.
         tolerance: success threshold on every point's executed error (FTE itself does
             not stop on it; it stops on stagnation).
         stagnation: stop after this many generations without improvement (paper: 10).
@@ -138,6 +139,7 @@ def run_fte(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        stagnation=stagnation, distance=distance, progress_fn=progress_fn,
+        stagnation=stagnation, distance=distance,
+        progress_fn=progress_fn, devices=devices,
     )
     return result

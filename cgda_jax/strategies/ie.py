@@ -92,6 +92,7 @@ def run_ie(
     algorithm_params: dict | None = None,
     keys: jax.Array | None = None,
     progress_fn: Callable[[dict], None] | None = None,
+    devices: int | str | None = None,
 ) -> ExecutionResult:
     """Individual Evolution of every goal point, all points in one batched evolution.
 
@@ -110,6 +111,12 @@ def run_ie(
         keys: optional explicit per-point keys (N,) replacing the seed's (to re-run
             one point of a batched run alone).
         progress_fn: called with a dict after each chunk.
+        devices: None (default: one device, the unsharded program), "all" or a
+            device count: each generation's batched simulator call (N points x
+            population) has its population axis split over these devices (padded
+            to a multiple of their count by repeating the last candidate, whose
+            results are dropped); same results as unsharded. Multi-host: see
+            `cgda_jax.sharding`.
 
     Returns:
         `ExecutionResult`; success = every point's executed error < tolerance.
@@ -123,6 +130,6 @@ def run_ie(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        keys=keys, progress_fn=progress_fn,
+        keys=keys, progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -264,8 +264,9 @@ class IETPlan(PlanBase):
             point_evaluations=final["point_evaluations"].tolist(),
             point_fitness=final["point_fitness"].tolist(),
             try_best_fitness=[
-                [float(history["best_fitness"][(history["point"] == i)
-                                               & (history["try"] == t)].min(initial=np.inf))
+                [float(np.min(history["best_fitness"][(history["point"] == i)
+                                                      & (history["try"] == t)],
+                              initial=np.inf))
                  for t in range(n_tries)]
                 for i, n_tries in enumerate(final["tries"])
             ],
@@ -290,6 +291,7 @@ def run_iet(
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
+    devices: int | str | None = None,
 ) -> ExecutionResult:
     """Incrementally Evolved Trajectories (paper Algorithm 1).
 
@@ -309,7 +311,7 @@ def run_iet(
             re-evolve the previous point (fresh key) and try again, up to this many
             times per run. 0 and 0 give the paper's plain Algorithm 1.
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
-            algorithm_params, progress_fn: as in `run_ie`.
+            algorithm_params, progress_fn, devices: as in `run_ie`.
 
     Returns:
         `ExecutionResult`; success = every executed point's error < epsilon;
@@ -324,6 +326,7 @@ def run_iet(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        restarts=restarts, backtracks=backtracks, progress_fn=progress_fn,
+        restarts=restarts, backtracks=backtracks,
+        progress_fn=progress_fn, devices=devices,
     )
     return result

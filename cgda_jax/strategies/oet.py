@@ -162,6 +162,7 @@ def run_oet(
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
+    devices: int | str | None = None,
 ) -> ExecutionResult:
     """Online Evolved Trajectories: localize, evolve one posture, execute, repeat.
 
@@ -174,7 +175,7 @@ def run_oet(
         max_steps: budget of executed postures (default 2 N).
         lookahead: localization window size beyond the current step (>= 1).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
-            algorithm_params, progress_fn: as in `run_ie`.
+            algorithm_params, progress_fn, devices: as in `run_ie`.
 
     Returns:
         `ExecutionResult` with joints (S, DoF) / features (S, F) the executed steps;
@@ -186,6 +187,7 @@ def run_oet(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        max_steps=max_steps, lookahead=lookahead, progress_fn=progress_fn,
+        max_steps=max_steps, lookahead=lookahead,
+        progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -15,9 +15,15 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 common settings, builds the plan and drives it for a list of seeds.
 
 `drive` compiles ``init``, a chunk of ``chunk_size`` generations and ``finish`` once each
-(timed apart with ``jit(...).lower(...).compile()``), then calls the compiled chunk until
-``done``; between chunks it syncs one boolean and calls ``progress_fn``. With several
-keys the whole plan is vmapped over them (independent trials in one batched call).
+(`compile_plan`, timed apart with ``jit(...).lower(...).compile()``), then calls the
+compiled chunk until ``done``; between chunks it syncs one boolean and calls
+``progress_fn``. With several keys the whole plan is vmapped over them (independent
+trials in one batched call).
+
+Several devices (``devices=`` of the ``run_*`` functions and `run_trials`, see
+`cgda_jax.sharding`): `run_trials` splits the trials axis over them (`drive` with a
+sharding), a single run splits the population of each generation's batched simulator
+call (`PlanBase` with a sharding). Without ``devices`` the programs are unchanged.
 """
 
 from __future__ import annotations
@@ -29,7 +35,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
 
+from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
 from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.result import ExecutionResult
 
@@ -38,22 +46,25 @@ from cgda_jax.strategies.result import ExecutionResult
 TRACE_COUNTS: dict[str, int] = {}
 
 
-def drive(
+def _replicated(sharding: NamedSharding) -> NamedSharding:
+    return NamedSharding(sharding.mesh, PartitionSpec())
+
+
+def compile_plan(
     plan: Any,
     keys: jax.Array,
     *,
     chunk_size: int = 10,
-    progress_fn: Callable[[dict[str, Any]], None] | None = None,
-) -> list[Any]:
-    """Runs `plan` for each key in `keys` (R,) in one batched call.
+    sharding: NamedSharding | None = None,
+) -> tuple[Any, Any, Any, Any]:
+    """Compiled ``(init, chunk, done, finish)`` of `plan` vmapped over `keys` (R,).
 
-    Returns:
-        One `ExecutionResult` per key; wall and compile times are those of the whole
-        batch (``info["trials_in_batch"]`` says how many shared it).
+    With `sharding` (see `cgda_jax.sharding.population_sharding`) the trials axis of
+    the keys, the carry (R, ...) and the chunk's metrics (G, R, ...) is split over its
+    devices (R must be a multiple of the device count); each device then runs R / K
+    trials of the same per-trial program. Without it, a plan whose own ``sharding``
+    splits the population keeps its keys and carry replicated over that mesh.
     """
-    if int(chunk_size) < 1:
-        raise ValueError(f"chunk_size must be >= 1; got {chunk_size}")
-    n_trials = keys.shape[0]
 
     def chunk(carry):
         TRACE_COUNTS[plan.name] = TRACE_COUNTS.get(plan.name, 0) + 1
@@ -64,12 +75,62 @@ def drive(
     def all_done(carry):
         return jnp.all(jax.vmap(plan.done)(carry))
 
-    t0 = time.perf_counter()
-    init_c = jax.jit(jax.vmap(plan.init)).lower(keys).compile()
     carry_shape = jax.eval_shape(jax.vmap(plan.init), keys)
-    chunk_c = jax.jit(chunk).lower(carry_shape).compile()
-    done_c = jax.jit(all_done).lower(carry_shape).compile()
-    finish_c = jax.jit(jax.vmap(plan.finish)).lower(carry_shape).compile()
+    init_kw: dict[str, Any] = {}
+    chunk_kw: dict[str, Any] = {}
+    carry_kw: dict[str, Any] = {}
+    if sharding is not None:  # trials split over the mesh
+        cs = axis_shardings(carry_shape, sharding)
+        metric_shape = jax.eval_shape(chunk, carry_shape)[1]
+        ms = axis_shardings(metric_shape, sharding, axis=1)
+    elif getattr(plan, "sharding", None) is not None:  # only the population is split
+        sharding = cs = ms = _replicated(plan.sharding)
+    if sharding is not None:
+        init_kw = {"in_shardings": sharding, "out_shardings": cs}
+        chunk_kw = {"in_shardings": (cs,), "out_shardings": (cs, ms)}
+        carry_kw = {"in_shardings": (cs,)}
+    return (
+        jax.jit(jax.vmap(plan.init), **init_kw).lower(keys).compile(),
+        jax.jit(chunk, **chunk_kw).lower(carry_shape).compile(),
+        jax.jit(all_done, **carry_kw).lower(carry_shape).compile(),
+        jax.jit(jax.vmap(plan.finish), **carry_kw).lower(carry_shape).compile(),
+    )
+
+
+def drive(
+    plan: Any,
+    keys: jax.Array,
+    *,
+    chunk_size: int = 10,
+    progress_fn: Callable[[dict[str, Any]], None] | None = None,
+    sharding: NamedSharding | None = None,
+) -> list[Any]:
+    """Runs `plan` for each key in `keys` (R,) in one batched call.
+
+    Args:
+        plan, keys, chunk_size, progress_fn: see the module docstring.
+        sharding: split the R trials over the devices of this sharding (see
+            `compile_plan`). When R is not a multiple of the device count the keys
+            are padded by repeating the last one (the extra trials duplicate the last
+            trial, so they do not change when the batch stops) and their results
+            are dropped.
+
+    Returns:
+        One `ExecutionResult` per key; wall and compile times are those of the whole
+        batch (``info["trials_in_batch"]`` says how many shared it).
+    """
+    if int(chunk_size) < 1:
+        raise ValueError(f"chunk_size must be >= 1; got {chunk_size}")
+    n_trials = keys.shape[0]
+    if sharding is not None:
+        keys = shard_leading(keys, sharding, pad=True)
+    elif getattr(plan, "sharding", None) is not None:
+        keys = jax.device_put(keys, _replicated(plan.sharding))
+
+    t0 = time.perf_counter()
+    init_c, chunk_c, done_c, finish_c = compile_plan(
+        plan, keys, chunk_size=chunk_size, sharding=sharding
+    )
     compile_time = time.perf_counter() - t0
 
     t1 = time.perf_counter()
@@ -128,6 +189,8 @@ def run(
     max_generations: int,
     chunk_size: int = 10,
     progress_fn: Callable[[dict[str, Any]], None] | None = None,
+    devices: int | str | NamedSharding | None = None,
+    shard: str = "population",
     **plan_kwargs: Any,
 ) -> list[ExecutionResult]:
     """Checks `goal` and the common settings, builds the plan, runs it for `seeds`.
@@ -136,16 +199,29 @@ def run(
         plan_cls: a plan class (e.g. `IEPlan`).
         sim, goal, tolerance, max_generations, chunk_size, progress_fn: as in `run_ie`.
         seeds: R seeds, run as R independent trials in one batched call.
+        devices: None (one device, no sharding), "all", a device count or a
+            sharding (see `cgda_jax.sharding.resolve_devices`).
+        shard: which axis `devices` splits: "population" (the candidates of each
+            generation's batched simulator call, see `PlanBase`) or "trials" (the R
+            runs, see `drive`).
         **plan_kwargs: the rest of the plan's constructor arguments.
 
     Returns:
-        R results, ``info["seed"]`` set to each one's seed.
+        R results, ``info["seed"]`` set to each one's seed and ``info["devices"]``
+        to the number of devices the run was split over.
     """
+    if shard not in ("population", "trials"):
+        raise ValueError(f"shard must be 'population' or 'trials'; got {shard!r}")
+    sharding = resolve_devices(devices)
     goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
     plan = plan_cls(sim, goal, tolerance=tolerance, max_generations=max_generations,
+                    sharding=sharding if shard == "population" else None,
                     **plan_kwargs)
     results = drive(plan, seed_keys(seeds), chunk_size=chunk_size,
-                    progress_fn=progress_fn)
+                    progress_fn=progress_fn,
+                    sharding=sharding if shard == "trials" else None)
+    n_devices = 1 if sharding is None else int(sharding.mesh.size)
     for seed, res in zip(seeds, results, strict=True):
         res.info["seed"] = seed
+        res.info["devices"] = n_devices
     return results

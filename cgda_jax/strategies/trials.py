@@ -36,6 +36,7 @@ def run_trials(
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
+    devices: int | str | None = None,
     **strategy_kwargs: Any,
 ) -> list[ExecutionResult]:
     """Runs `n_trials` independent trials of a strategy at once.
@@ -50,6 +51,12 @@ def run_trials(
             functions.
         n_trials: R.
         seed: first seed.
+        devices: None (default: one device, the unsharded program), "all" or a
+            device count K: the R trials are split over K devices, R / K per device
+            (R is padded up to a multiple of K by repeating the last trial, whose
+            copies are dropped; choose R a multiple of K to waste nothing). Each
+            trial gives the same result as unsharded. Multi-host: see
+            `cgda_jax.sharding`.
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IET: restarts, backtracks;
             OET: max_steps, lookahead).
 
@@ -69,5 +76,6 @@ def run_trials(
         algorithm=algorithm, population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        progress_fn=progress_fn, **{**defaults, **strategy_kwargs},
+        progress_fn=progress_fn, devices=devices, shard="trials",
+        **{**defaults, **strategy_kwargs},
     )
