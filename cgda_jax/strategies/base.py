@@ -394,7 +394,14 @@ class PlanBase:
     def point_features(self, state: Any, pop_u: jax.Array) -> jax.Array:
         """Features (P, F) after one step from `state` to each posture of `pop_u` (P, DoF)."""
         q = self.joints(pop_u)
-        return jax.vmap(lambda w: self.sim.step(state, w)[1])(q)
+        return self.map_population(lambda w: self.sim.step(state, w)[1], q)
+
+    def map_population(self, fn: Callable, xs: Any) -> Any:
+        """``vmap(fn)(xs)`` over the population, through the simulator's
+        ``map_population`` when it has one (dynamic MJX mode slices large populations
+        there: big batched LAPACK calls deadlock XLA's CPU thread pool)."""
+        mapper = getattr(self.sim, "map_population", None)
+        return jax.vmap(fn)(xs) if mapper is None else mapper(fn, xs)
 
     def point_fitness(
         self, state: Any, goal_point: jax.Array, prefix_sq: jax.Array | None = None

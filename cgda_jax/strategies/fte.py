@@ -63,7 +63,9 @@ class FTEPlan(PlanBase):
         return self.joints(u_flat.reshape(self.n_points, self.n_dof))
 
     def _fitness(self, pop):
-        feats = jax.vmap(lambda u: self.execution(self._trajectory(u))["features"])(pop)
+        feats = self.map_population(
+            lambda u: self.execution(self._trajectory(u))["features"], pop
+        )
         return jax.vmap(lambda f: self.distance(f, self.goal))(feats)
 
     def stop(self, evo):
