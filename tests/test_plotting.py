@@ -73,3 +73,13 @@ def test_flat_3d_trajectory_keeps_room_for_its_ticks():
     spans = [np.ptp(lim) for lim in (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())]
     assert min(spans) >= 0.39 * max(spans)
     assert len([t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]) <= 4
+
+
+def test_host_sampling_matches_the_generalized_action():
+    """Plots sample a GeneralizedAction in NumPy; same curve as ``sample``."""
+    from cgda_jax.generalize import generalize
+
+    demos = clean_circle_demos(n=3, seed=1)
+    for gen in (generalize(demos, interval_s=1.0), generalize(demos, interval_s=0.7)):
+        np.testing.assert_allclose(plotting._as_curve(gen, 57), np.asarray(gen.sample(57)),
+                                   rtol=1e-5, atol=1e-5)
