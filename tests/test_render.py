@@ -72,3 +72,24 @@ def test_render_gif_and_frames_show_the_painting(tmp_path):
     assert _red(first) < 20 and _red(last) > _red(first) + 100
     gif = Image.open(tmp_path / "run.gif")
     assert gif.n_frames == len(frames)
+
+
+def test_host_paint_states_match_the_scene_update_per_frame():
+    """The renderer's NumPy paint states equal PaintWall.update run marker by marker."""
+    import cgda_jax as c
+    from cgda_jax.sim.render import _scene_states
+
+    wall = c.PaintWall.grid()
+    rng = np.random.default_rng(0)
+    # markers sweeping past the wall, grouped into frames of 1-3 markers
+    path = np.linspace(wall.centres.min(0) - 0.1, wall.centres.max(0) + 0.1, 23)
+    path += rng.normal(0, 0.05, path.shape)
+    trails = np.split(path, [1, 3, 4, 7, 9, 10, 14, 15, 18, 21])
+    got = _scene_states(wall, trails)
+    state = wall.init_state()
+    assert len(got) == len(trails)
+    for frame, trail in zip(got, trails):
+        for marker in trail:
+            state = wall.update(state, np.asarray(marker, np.float32))
+        np.testing.assert_array_equal(frame, np.asarray(state))
+    assert 0 < np.sum(got[-1]) and np.sum(got[0]) < np.sum(got[-1])

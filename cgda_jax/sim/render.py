@@ -21,7 +21,6 @@ from __future__ import annotations
 import pathlib
 from collections.abc import Sequence
 
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 
@@ -114,6 +113,30 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
         genes = wp
 
 
+def _scene_states(scene, trails: list[np.ndarray]) -> list:
+    """The scene state after each frame's marker trail (K_i, 3), on the host.
+
+    A paint wall (``centres`` (S, 3), ``radius``) is evaluated in NumPy for all
+    markers at once (the same rule as ``PaintWall.update``: painted for good once
+    within ``radius``); other scenes go through ``scene.update`` per marker.
+    """
+    state = scene.init_state()
+    centres = getattr(scene, "centres", None)
+    if centres is not None and hasattr(scene, "radius"):
+        markers = np.concatenate(trails).astype(np.float32)  # (K, 3) as simulated
+        d2 = np.sum((np.asarray(centres, np.float32)[None] - markers[:, None]) ** 2, axis=-1)
+        hit = np.logical_or.accumulate(d2 <= np.float32(scene.radius) ** 2, axis=0)
+        hit |= np.asarray(state, bool)
+        ends = np.cumsum([len(t) for t in trails]) - 1
+        return [hit[k] for k in ends]
+    out = []
+    for trail in trails:
+        for marker in trail:
+            state = scene.update(state, np.asarray(marker, np.float32))
+        out.append(state)
+    return out
+
+
 def render_trajectory(
     sim,
     waypoints,
@@ -156,14 +179,14 @@ def render_trajectory(
     model = sim.robot.mj_model
     data = mujoco.MjData(model)
     cam = _camera(sim, lookat, distance, azimuth, elevation)
-    scene, state = sim.scene, sim.scene.init_state()
+    scene = sim.scene
 
+    postures = list(_postures(sim, waypoints, frames_per_waypoint))
+    states = _scene_states(scene, [trail for _, trail in postures])
     images = []
     renderer = _renderer(model, height, width)
     try:
-        for qpos, trail in _postures(sim, waypoints, frames_per_waypoint):
-            for marker in trail:
-                state = scene.update(state, jnp.asarray(marker, jnp.float32))
+        for (qpos, _), state in zip(postures, states):
             data.qpos[:] = qpos
             mujoco.mj_kinematics(model, data)
             renderer.update_scene(data, camera=cam)
