@@ -88,7 +88,9 @@ def make_algorithm(
         ) from None
     except TypeError as err:
         raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
-    params = algo.default_params
+    # evosax computes its default parameters with many small eager ops (each one a
+    # compile on first use); tracing them as ONE program costs one compile instead.
+    params = jax.jit(lambda: algo.default_params)()
     overrides = dict(algorithm_params or {})
     unknown = sorted(set(overrides) - set(params.__dataclass_fields__))
     if unknown:
@@ -97,10 +99,8 @@ def make_algorithm(
             f"{sorted(params.__dataclass_fields__)}"
         )
     params = params.replace(**{k: jnp.asarray(v) for k, v in overrides.items()})
-    finite = jax.tree.leaves(
-        jax.tree.map(lambda x: jnp.all(jnp.isfinite(jnp.asarray(x, float))), params)
-    )
-    if not all(bool(f) for f in finite):
+    finite = [np.all(np.isfinite(np.asarray(x, float))) for x in jax.tree.leaves(params)]
+    if not all(finite):
         raise ValueError(
             f"population_size={population_size} is too small for {name} with "
             f"{n_genes} genes: its default parameters are not finite"
