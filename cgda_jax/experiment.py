@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import inspect
 import json
 import logging
 import math
@@ -390,6 +391,7 @@ def validate_config(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'strategy.{key}' must be >= 1")
     if not cfg.strategy.tolerance > 0:
         raise ConfigError("key 'strategy.tolerance' must be > 0")
+    _check_strategy_options(cfg.strategy)
     if not cfg.robot.joints:
         raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
     resolve_model(cfg.robot.model)
@@ -579,6 +581,27 @@ def strategy_function(name: str) -> Callable:
             raise ConfigError(f"key 'strategy.name': strategy {name!r} is not available") from None
         fn = getattr(mod, f"run_{name}")
     return fn
+
+
+#: Arguments of ``run_<name>`` that the config sets itself (not through ``options``).
+_SET_BY_CONFIG = ("sim", "goal", "algorithm", "population_size", "tolerance",
+                  "max_generations", "seed", "chunk_size", "progress_fn")
+
+
+def _check_strategy_options(s: StrategyConfig) -> None:
+    """Every ``strategy.options`` key must be a keyword of ``run_<name>``."""
+    params = inspect.signature(strategy_function(s.name)).parameters
+    allowed = sorted(k for k in params if k not in _SET_BY_CONFIG)
+    for key in s.options:
+        if key in _SET_BY_CONFIG:
+            raise ConfigError(
+                f"key 'strategy.options.{key}': set it as 'strategy.{key}' instead"
+            )
+        if key not in params:
+            raise ConfigError(
+                f"key 'strategy.options.{key}': not an option of strategy "
+                f"'{s.name}'; it takes {allowed}"
+            )
 
 
 def run_execution(

@@ -49,6 +49,9 @@ def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, tmp_path):
         (["--set", "robot.model=/nowhere/robot.xml"], ["/nowhere/robot.xml", "not found"]),
         (["--set", "data.source=xgnitive", "--set", "data.data_dir=/nowhere/data"],
          ["/nowhere/data", "not found"]),
+        (["--set", "strategy.options.bogus=3"],
+         ["strategy.options.bogus", "not an option of strategy 'ie'", "devices"]),
+        (["--set", "strategy.options.seed=3"], ["strategy.options.seed", "strategy.seed"]),
     ],
 )
 def test_user_mistakes_exit_nonzero_with_one_line(args, words, capsys):
