@@ -25,11 +25,9 @@ from typing import TYPE_CHECKING as _TYPE_CHECKING
 # The headless OpenGL back-end must be chosen before anything imports mujoco.
 import cgda_jax.sim._mujoco_env  # noqa: E402,F401  (cheap; runs choose_gl_backend)
 
-__all__: list[str] = ["__version__"]
 _LAZY: dict[str, str] = {}  # public name -> module that defines it
 
 # --- core (data, generalization, distances, recognition) ---------------------
-# (section owned by the core work; one entry per name, extend __all__)
 _LAZY.update({
     "Demonstration": "cgda_jax.data",
     "load_csv": "cgda_jax.data",
@@ -51,26 +49,6 @@ _LAZY.update({
     "recognize": "cgda_jax.recognize",
 })
 
-__all__ += [
-    "Demonstration",
-    "validate_demonstrations",
-    "load_csv",
-    "load_npz",
-    "save_csv",
-    "save_npz",
-    "load_xgnitive",
-    "dtw",
-    "dtw_multi",
-    "euclidean",
-    "resample",
-    "GeneralizedAction",
-    "generalize",
-    "rbf_interpolate",
-    "ActionLibrary",
-    "Recognition",
-    "cost_matrix",
-    "recognize",
-]
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
 _LAZY.update({
@@ -83,15 +61,6 @@ _LAZY.update({
     "PaintWall": "cgda_jax.sim.scenes",
 })
 
-__all__ += [
-    "Robot",
-    "model_path",
-    "MarkerScene",
-    "PaintWall",
-    "SimState",
-    "Simulator",
-    "render_trajectory",
-]
 
 # --- strategies (FTE, IE, IET, OET) ------------------------------------------
 _LAZY.update({
@@ -108,16 +77,6 @@ _LAZY.update({
     )
 })
 
-__all__ += [
-    "ALGORITHMS",
-    "STRATEGIES",
-    "ExecutionResult",
-    "run_fte",
-    "run_ie",
-    "run_iet",
-    "run_oet",
-    "run_trials",
-]
 
 # --- user layer (datasets, experiments) --------------------------------------
 _LAZY.update({
@@ -126,9 +85,10 @@ _LAZY.update({
     "run_experiment": "cgda_jax.experiment",
 })
 
-__all__ += ["ExperimentConfig", "datasets", "load_config", "run_experiment"]
 
 _SUBMODULES = ("datasets",)
+
+__all__: list[str] = ["__version__", *_LAZY, *_SUBMODULES]
 
 
 def __getattr__(name: str):
