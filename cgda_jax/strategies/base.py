@@ -133,8 +133,11 @@ def check_config(
     max_generations: int | None = None,
     min_points: int = 1,
 ) -> jax.Array:
-    """Checks a goal (N, F) against a simulator and common settings; returns it f32."""
-    g = jnp.asarray(goal, dtype=jnp.float32)
+    """Checks a goal (N, F) against a simulator and common settings; returns it f32.
+
+    The checks run in NumPy on the host (eager JAX ops would each compile once).
+    """
+    g = np.asarray(goal, dtype=np.float32)
     if g.ndim == 1 and sim.n_features == 1:
         g = g[:, None]
     if g.ndim != 2:
@@ -147,14 +150,14 @@ def check_config(
         )
     if g.shape[0] < min_points:
         raise ValueError(f"goal needs at least {min_points} point(s); got {g.shape[0]}")
-    if not bool(jnp.all(jnp.isfinite(g))):
-        bad = int(jnp.argmax(~jnp.all(jnp.isfinite(g), axis=1)))
+    if not np.all(np.isfinite(g)):
+        bad = int(np.argmax(~np.all(np.isfinite(g), axis=1)))
         raise ValueError(f"goal has a non-finite value at point {bad}")
     if tolerance is not None and not tolerance > 0:
         raise ValueError(f"tolerance must be > 0; got {tolerance}")
     if max_generations is not None and int(max_generations) < 1:
         raise ValueError(f"max_generations must be >= 1; got {max_generations}")
-    return g
+    return jnp.asarray(g)
 
 
 # --------------------------------------------------------------------------- one evolution
