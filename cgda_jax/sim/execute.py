@@ -9,10 +9,15 @@ Modes:
         equally spaced joint-space sub-steps (the last one is the waypoint); forward
         kinematics of the marker at each, the scene updated at each, so the marker
         sweeps the path (a wall is painted along it).  No dynamics.
-    dynamic: position actuators track the waypoint for ``physics_steps`` ``mjx.step``
-        calls with gravity on; the scene is updated at every physics step.  Every
-        evolved joint needs a position actuator; joints held by ``fixed`` (or at 0)
-        are held by theirs.
+    dynamic: a waypoint lasts ``waypoint_s`` seconds of physics (gravity, position
+        actuators, joint limits).  The actuators track a smooth reference: a
+        minimum-jerk move from the previous waypoint to this one over the first
+        ``move_fraction`` of the time, then the waypoint is held while the arm
+        settles; the features are read at the end.  The scene is updated at every
+        physics step.  Every evolved joint needs a position actuator; fixed joints
+        are held by theirs; joints neither evolved nor fixed are welded where they
+        start (see `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
+        or MuJoCo C (``physics``); both give the same features.
 
 Waypoints outside the joint limits are clipped into them (the robot cannot go there).
 
@@ -37,7 +42,6 @@ import numpy as np
 from flax import struct
 from jax import Array
 
-from cgda_jax.sim._mujoco_env import mjx_module
 from cgda_jax.sim.robot import Robot
 
 __all__ = ["MODES", "SimState", "Simulator"]
@@ -50,9 +54,11 @@ class SimState:
     """What the simulator carries between waypoints.
 
     Attributes:
-        genes: (DoF,) current values of the evolved joints.
+        genes: (DoF,) the last waypoint (kinematic mode: the posture; dynamic mode:
+            the last commanded target, which the next move starts from).
         scene: the scene's state (e.g. painted (S,) bool).
-        data: the ``mjx.Data`` in dynamic mode, ``None`` in kinematic mode.
+        data: dynamic mode: the physics state ``concat(qpos, qvel)`` of the simulated
+            model (see `cgda_jax.sim.physics.Physics`); ``None`` in kinematic mode.
     """
 
     genes: Array
@@ -70,9 +76,18 @@ class Simulator:
         substeps: kinematic mode: forward-kinematics evaluations per waypoint, equally
             spaced in joint space from the previous posture, the last one at the
             waypoint (1 = jump straight to it).
-        physics_steps: dynamic mode: ``mjx.step`` calls per waypoint
-            (x ``robot.mj_model.opt.timestep`` seconds).
-        batch_size: dynamic mode: `execute_population` simulates the population in
+        waypoint_s: dynamic mode: seconds of physics per waypoint (the experiments
+            default it to the demonstrations' timing: mean duration / knots).
+        physics_steps: dynamic mode: physics steps per waypoint; None (default):
+            ``round(waypoint_s / timestep)``.
+        timestep: dynamic mode: physics step (s); None: the model's own.
+        move_fraction: dynamic mode: share of a waypoint's time spent moving (the
+            minimum-jerk reference); the rest holds the waypoint so the arm settles.
+        physics: dynamic mode backend, "auto" (MuJoCo C on a CPU-only JAX, MJX on
+            accelerators), "mjx" or "mujoco" (see `cgda_jax.sim.physics`).
+        reduce: dynamic mode: weld joints that are neither evolved nor fixed
+            (default True; False simulates every joint).
+        batch_size: dynamic mode, MJX: `execute_population` simulates the population in
             slices of at most this many candidates (``lax.map`` over ``vmap``ped
             slices; the result is the same).  On the CPU, XLA's LAPACK kernels
             (Cholesky / triangular solve of the mass matrix in ``mjx.step``) split
@@ -90,64 +105,68 @@ class Simulator:
         scene,
         mode: str = "kinematic",
         substeps: int = 8,
-        physics_steps: int = 100,
+        *,
+        waypoint_s: float = 1.0,
+        physics_steps: int | None = None,
+        timestep: float | None = None,
+        move_fraction: float = 0.6,
+        physics: str = "auto",
+        reduce: bool = True,
         batch_size: int | None = 256,
     ):
         if mode not in MODES:
             raise ValueError(f"mode={mode!r}; expected one of {MODES}")
         if int(substeps) < 1:
             raise ValueError(f"substeps must be >= 1, got {substeps}")
-        if int(physics_steps) < 1:
+        if not (np.isfinite(waypoint_s) and waypoint_s > 0):
+            raise ValueError(f"waypoint_s must be > 0 seconds, got {waypoint_s}")
+        if physics_steps is not None and int(physics_steps) < 1:
             raise ValueError(f"physics_steps must be >= 1, got {physics_steps}")
+        if not 0 < move_fraction <= 1:
+            raise ValueError(f"move_fraction must be in (0, 1], got {move_fraction}")
         if batch_size is not None and int(batch_size) < 1:
             raise ValueError(f"batch_size must be >= 1 or None, got {batch_size}")
         self.robot = robot
         self.scene = scene
         self.mode = mode
         self.substeps = int(substeps)
-        self.physics_steps = int(physics_steps)
         self.batch_size = None if batch_size is None else int(batch_size)
+        self.move_fraction = float(move_fraction)
         self.n_dof = robot.n_dof
         self.n_features = scene.n_features
         self.feature_names = tuple(scene.feature_names)
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
+        self.physics = self.backend = None
+        self.physics_steps = 0
         if mode == "dynamic":
-            self._act_qadr = self._actuated_qpos()
-            robot.make_data()  # mujoco.mjx and the device model, outside any trace
+            from cgda_jax.sim.physics import Physics, make_backend
+
+            self.physics = Physics(robot, timestep=timestep, reduce=reduce)
+            self.backend = make_backend(self.physics, physics)
+            if physics_steps is None:
+                physics_steps = max(1, round(waypoint_s / self.physics.timestep))
+            self.physics_steps = int(physics_steps)
+            if self.backend.name == "mujoco":
+                self.batch_size = None  # C threads, no XLA LAPACK batches to slice
+            k = max(1, round(self.move_fraction * self.physics_steps))
+            tau = np.minimum(np.arange(1, self.physics_steps + 1) / k, 1.0)
+            self._profile = (10 * tau**3 - 15 * tau**4 + 6 * tau**5).astype(np.float32)
+        self.waypoint_s = (self.physics_steps * self.physics.timestep
+                           if mode == "dynamic" else None)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
 
     def __repr__(self) -> str:
-        return (
-            f"Simulator({self.robot!r}, {type(self.scene).__name__}, mode={self.mode!r}, "
-            f"substeps={self.substeps}, physics_steps={self.physics_steps}, "
-            f"batch_size={self.batch_size})"
-        )
-
-    # -- set-up ------------------------------------------------------------------
-    def _actuated_qpos(self) -> np.ndarray:
-        """(nu,) qpos address each position actuator drives; checks coverage."""
-        m = self.robot.mj_model
-        joint_trn = int(mujoco.mjtTrn.mjTRN_JOINT)
-        adr = []
-        for a in range(m.nu):
-            if int(m.actuator_trntype[a]) != joint_trn:
-                name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
-                raise ValueError(f"actuator {name!r} does not drive a joint")
-            adr.append(int(m.jnt_qposadr[m.actuator_trnid[a, 0]]))
-        missing = [
-            name
-            for name, q in zip(self.robot.joint_names, self.robot.qpos_adr)
-            if int(q) not in adr
-        ]
-        if missing:
-            raise ValueError(
-                f"dynamic mode needs a position actuator on every evolved joint; "
-                f"joints {missing} have none"
-            )
-        return np.asarray(adr, dtype=np.int32)
+        if self.mode == "dynamic":
+            extra = (f"physics={self.backend.name!r}, waypoint_s={self.waypoint_s:g}, "
+                     f"physics_steps={self.physics_steps}, "
+                     f"timestep={self.physics.timestep:g}")
+        else:
+            extra = f"substeps={self.substeps}"
+        return (f"Simulator({self.robot!r}, {type(self.scene).__name__}, "
+                f"mode={self.mode!r}, {extra})")
 
     # -- the one-example functions -----------------------------------------------
     def init_state(self, genes0: Array | None = None) -> SimState:
@@ -163,12 +182,8 @@ class Simulator:
         genes0 = self.robot.clip(jnp.asarray(genes0, jnp.float32))
         data = None
         if self.mode == "dynamic":
-            qpos = self.robot.qpos(genes0)
-            data = self.robot.make_data(qpos).replace(ctrl=qpos[self._act_qadr])
-            data = mjx_module().forward(self.robot.mjx_model, data)
-            marker = data.site_xpos[self.robot.site_id]
-        else:
-            marker = self.robot.marker_position(genes0)
+            data = self.physics.start_state(genes0)  # at rest
+        marker = self.robot.marker_position(genes0)  # welded joints sit at qpos0
         scene = self.scene.update(self.scene.init_state(), marker)
         return SimState(genes=genes0, scene=scene, data=data)
 
@@ -201,26 +216,19 @@ class Simulator:
         return state.replace(genes=target, scene=scene_state), features
 
     def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
-        mjx = mjx_module()
-        model, site = self.robot.mjx_model, self.robot.site_id
-        ctrl = self.robot.qpos(target)[self._act_qadr]
+        phys = self.physics
+        qpos0 = jnp.asarray(phys.qpos0, jnp.float32)
+        c0 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(state.genes))
+        c1 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(target))
+        ctrl = c0 + jnp.asarray(self._profile)[:, None] * (c1 - c0)  # (T, nu)
+        data, path = self.backend.segment(state.data, ctrl)
 
-        def physics(carry, _):
-            data, scene_state = carry
-            data = mjx.step(model, data)
-            # site_xpos holds the posture at the start of this step (mj_step order).
-            return (data, self.scene.update(scene_state, data.site_xpos[site])), None
+        def paint(scene_state, marker):
+            return self.scene.update(scene_state, marker), None
 
-        data0 = state.data.replace(ctrl=ctrl)
-        (data, scene_state), _ = jax.lax.scan(
-            physics, (data0, state.scene), None, length=self.physics_steps
-        )
-        data = mjx.kinematics(model, data)  # place the marker at the final posture
-        marker = data.site_xpos[site]
-        scene_state = self.scene.update(scene_state, marker)
-        features = self.scene.features(scene_state, marker)
-        genes = self.robot.genes_of(data.qpos)
-        return SimState(genes=genes, scene=scene_state, data=data), features
+        scene_state, _ = jax.lax.scan(paint, state.scene, path)
+        features = self.scene.features(scene_state, path[-1])
+        return SimState(genes=target, scene=scene_state, data=data), features
 
     def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:
         shape = tuple(jnp.shape(waypoints))
@@ -262,9 +270,10 @@ class Simulator:
         return self.execute(waypoints)
 
     def map_population(self, fn, xs):
-        """``vmap(fn)(xs)``, in dynamic mode as ``lax.map`` over slices of at most
-        ``batch_size`` candidates (see the class doc: large LAPACK batches deadlock
-        XLA's CPU thread pool).  Kinematic mode: a plain ``vmap``.
+        """``vmap(fn)(xs)``, in dynamic MJX mode as ``lax.map`` over slices of at
+        most ``batch_size`` candidates (see the class doc: large LAPACK batches
+        deadlock XLA's CPU thread pool).  Otherwise a plain ``vmap`` (the MuJoCo C
+        backend gets the whole batch in one call).
 
         Args:
             fn: a function of one candidate (pytree of arrays).
@@ -282,7 +291,7 @@ class Simulator:
 
     def execute_population(self, population: Array) -> Array:
         """Execute a population of trajectories at once (jitted ``vmap`` of `execute`;
-        dynamic mode: in slices of ``batch_size``, see `map_population`).
+        dynamic MJX mode: in slices of ``batch_size``, see `map_population`).
 
         Args:
             population: (P, N, DoF) waypoints, each starting from `init_state()`.

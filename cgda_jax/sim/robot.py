@@ -85,7 +85,9 @@ class Robot:
         lower, upper: (DoF,) joint limits from the model (radians / metres).
         mj_model: the compiled ``mujoco.MjModel``.
         mjx_model: the same model on the device (``mjx.put_model``, JAX impl).
-        qpos0: (nq,) posture with the fixed values applied; every other joint at 0.
+        qpos0: (nq,) start posture: the model's own ``qpos0`` (or the keyframe's
+            ``qpos``) with the fixed values applied; free and ball joints keep their
+            valid quaternions from there.
         qpos_adr: (DoF,) qpos addresses of the evolved joints.
         joint_ids: (DoF,) joint ids of the evolved joints.
         site_id: id of the marker site.
@@ -102,6 +104,8 @@ class Robot:
         *,
         kinematics: str = "chain",
         source: str = "the model",
+        keyframe: str | None = None,
+        spec_factory: Callable[[], mujoco.MjSpec] | None = None,
     ):
         joints = tuple(joints)
         if not joints:
@@ -148,7 +152,16 @@ class Robot:
         self.upper = jnp.asarray(upper, dtype=jnp.float32)
         self.qpos_adr = np.asarray(mj_model.jnt_qposadr[self.joint_ids], dtype=np.int32)
 
-        qpos0 = np.zeros(mj_model.nq)
+        if keyframe is None:
+            qpos0 = np.array(mj_model.qpos0, dtype=np.float64)
+        else:
+            kid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_KEY, keyframe)
+            if kid < 0:
+                keys = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_KEY, i)
+                        for i in range(mj_model.nkey)]
+                raise KeyError(f"keyframe {keyframe!r} not found in {source}; it has "
+                               f"{keys}")
+            qpos0 = np.array(mj_model.key_qpos[kid], dtype=np.float64)
         for name, value in fixed.items():
             jid = _id(mj_model, jt, name, "fixed joint", source)
             if int(mj_model.jnt_type[jid]) not in (_HINGE, _SLIDE):
@@ -157,6 +170,9 @@ class Robot:
                 )
             qpos0[mj_model.jnt_qposadr[jid]] = float(value)
         self.fixed = fixed
+        self.keyframe = keyframe
+        self.source = source
+        self._spec_factory = spec_factory
         self._qpos0_np = qpos0
         self.qpos0 = jnp.asarray(qpos0, dtype=jnp.float32)
 
@@ -173,6 +189,7 @@ class Robot:
         fixed: Mapping[str, float] | None = None,
         *,
         kinematics: str = "chain",
+        keyframe: str | None = None,
     ) -> Robot:
         """Load an MJCF file and choose the evolved joints and the marker site.
 
@@ -181,7 +198,9 @@ class Robot:
             joints: (DoF,) names of the evolved joints, in gene order.
             marker_site: name of the site whose position the scenes read.
             fixed: joint name -> value (RADIANS / metres) held during execution;
-                joints neither evolved nor fixed stay at 0.
+                joints neither evolved nor fixed stay at the model's ``qpos0`` (the
+                joints' ``ref``; free joints at their body's pose) or the keyframe's.
+            keyframe: name of a ``<key>`` whose ``qpos`` is the start posture.
             kinematics: forward-kinematics back-end, "chain" (default, faster) or
                 "mjx"; both match ``mujoco.mj_kinematics``.
 
@@ -204,6 +223,8 @@ class Robot:
             fixed,
             kinematics=kinematics,
             source=str(path),
+            keyframe=keyframe,
+            spec_factory=lambda: mujoco.MjSpec.from_file(str(path)),
         )
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
@@ -283,4 +304,22 @@ class Robot:
             self.marker_site,
             self.fixed,
             kinematics=kinematics,
+            source=self.source,
+            keyframe=self.keyframe,
+            spec_factory=self._spec_factory,
         )
+
+    def spec(self) -> mujoco.MjSpec:
+        """A fresh ``mujoco.MjSpec`` of the robot's model (dynamic mode rebuilds the
+        model from it, see `cgda_jax.sim.physics`).
+
+        Raises:
+            ValueError: the robot was built from a compiled ``MjModel`` without its
+                source (use `Robot.from_mjcf`, or pass ``spec_factory``).
+        """
+        if self._spec_factory is None:
+            raise ValueError(
+                f"{self.source}: dynamic mode rebuilds the model with mujoco.MjSpec and "
+                "needs its MJCF; build the robot with Robot.from_mjcf(path, ...)"
+            )
+        return self._spec_factory()

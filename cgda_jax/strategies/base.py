@@ -124,6 +124,16 @@ def from_joints(q: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
     return jnp.arcsin(s) * (2.0 / jnp.pi)
 
 
+def points_independent(sim: Any) -> bool:
+    """Whether a step's features depend only on its waypoint, not on where it starts:
+    kinematic mode (``sim.mode``, default kinematic) and a scene state with no arrays
+    (the marker; a paint wall remembers what was painted)."""
+    if getattr(sim, "mode", "kinematic") != "kinematic":
+        return False
+    scene = getattr(sim, "scene", None)
+    return scene is None or not jax.tree.leaves(scene.init_state())
+
+
 # --------------------------------------------------------------------------- validation
 def check_config(
     sim: Any,

@@ -5,6 +5,16 @@ between the features reached by moving from the start state to the candidate pos
 and goal point i. The N evolutions are independent, so they run as ONE batched
 evolution (`vmap` over points); each point stops when its error drops below
 `tolerance` (or at `max_generations`) and is frozen from then on.
+
+Points are only independent when a step's features do not depend on where it starts:
+kinematic mode with a scene that carries no state (the marker).  Otherwise (dynamic
+mode: the arm moves from the previous posture and may not have settled; a scene with
+state, e.g. a painted wall) every generation first executes the current best
+postures of all points in order, from the start (one sequential rollout of N
+waypoints), and evaluates point i's candidates from the state reached after points
+0..i-1, the way the final sequential execution will run them; each point's best is
+re-scored in that context before the stop test.  ``info["sequential_context"]`` says
+which variant ran.
 """
 
 from __future__ import annotations
@@ -16,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from cgda_jax.strategies.base import PlanBase, ragged_rows
+from cgda_jax.strategies.base import PlanBase, points_independent, ragged_rows
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
@@ -40,18 +50,45 @@ class IEPlan(PlanBase):
             raise ValueError(
                 f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
             )
-        super().__init__(sim, goal, int(sim.n_dof), **kwargs)
+        self.sequential = not points_independent(sim)
+        info = {**(kwargs.pop("info", None) or {}),
+                "sequential_context": self.sequential}
+        super().__init__(sim, goal, int(sim.n_dof), info=info, **kwargs)
         self.keys = keys
 
-    def _fitness(self, goal_point: jax.Array) -> Callable[[jax.Array], jax.Array]:
-        return self.point_fitness(self.sim.init_state(), goal_point)
+    def _contexts(self, best_u: jax.Array) -> tuple[Any, jax.Array]:
+        """Start states of every point (stacked, N) and each point's error (N,)
+        when the postures ``joints(best_u)`` (N, DoF) are executed in order."""
+        start = self.sim.init_state()
+        if not self.sequential:
+            states = jax.tree.map(
+                lambda x: jnp.broadcast_to(x, (self.n_points, *jnp.shape(x))), start)
+            return states, jnp.full((self.n_points,), jnp.inf)
+
+        def body(state, w):
+            new, feats = self.sim.step(state, w)
+            return new, (state, feats)
+
+        _, (states, feats) = jax.lax.scan(body, start, self.joints(best_u))
+        return states, jnp.linalg.norm(feats - self.goal, axis=-1)
 
     def init(self, key):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
-        return jax.vmap(lambda k, g: self.start(k, self._fitness(g)))(keys, self.goal)
+        states, _ = self._contexts(jnp.zeros((self.n_points, self.n_dof)))
+        return jax.vmap(
+            lambda k, g, st: self.start(k, self.point_fitness(st, g))
+        )(keys, self.goal, states)
 
     def step(self, evo):
-        return jax.vmap(lambda e, g: self.evolve(e, self._fitness(g)))(evo, self.goal)
+        states, errors = self._contexts(evo.best_u)
+        if self.sequential:  # re-score each best where the others now leave it
+            fresh = evo.replace(
+                best_fitness=jnp.where(jnp.isfinite(evo.best_fitness), errors,
+                                       evo.best_fitness))
+            evo = fresh.replace(done=jax.vmap(self.stop)(fresh))
+        return jax.vmap(
+            lambda e, g, st: self.evolve(e, self.point_fitness(st, g))
+        )(evo, self.goal, states)
 
     def progress(self, evo):
         return {
