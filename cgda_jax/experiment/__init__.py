@@ -1,0 +1,98 @@
+"""Experiments: typed config -> objects -> run -> results folder.
+
+A config is :class:`ExperimentConfig`: typed defaults in code, overridden by a TOML
+file, overridden again by dotted ``key=value`` settings (``strategy.population_size=64``).
+Unknown keys and wrong types are errors that name the key (and the file). Two kinds:
+
+- ``recognition``: synthetic MOVE/ROTATE/CLEAN/PAINT demonstrations (paper 4.1-4.2):
+  ``n_train`` repetitions generalize each action, the next one is the test query;
+  writes the cost matrix (paper Tables 2-4) and the accuracy.
+- ``execution``: a goal feature trajectory (generalized clean circle, the paint ramp,
+  or generalized real TEO demonstrations) executed on a simulated robot by an
+  evolutionary strategy (FTE / IE / IET / OET, paper 3-4).
+
+Each run writes to its folder: ``config.toml`` (resolved), ``result.json``,
+``arrays.npz``, ``plots/*.png`` and ``report.md``.
+
+Modules, one job each:
+
+- :mod:`~cgda_jax.experiment.config`: schema, TOML reading and writing, overrides,
+  validation.
+- :mod:`~cgda_jax.experiment.build`: the goal, the simulator and the strategy
+  function from a config.
+- :mod:`~cgda_jax.experiment.run`: recognition and execution runs, the results folder.
+- :mod:`~cgda_jax.experiment.report`: JSON, plots, rendered frames, ``report.md``.
+- :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo``.
+
+Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
+"""
+
+from cgda_jax.experiment.build import (
+    _SET_BY_CONFIG as _SET_BY_CONFIG,
+    _check_strategy_options as _check_strategy_options,
+    build_goal as build_goal,
+    build_simulator as build_simulator,
+    strategy_function as strategy_function,
+)
+from cgda_jax.experiment.config import (
+    KINDS as KINDS,
+    SCENES as SCENES,
+    SOURCES as SOURCES,
+    STRATEGIES as STRATEGIES,
+    XGNITIVE_ENV as XGNITIVE_ENV,
+    ConfigError as ConfigError,
+    DataConfig as DataConfig,
+    ExperimentConfig as ExperimentConfig,
+    OutputConfig as OutputConfig,
+    RecognitionConfig as RecognitionConfig,
+    RobotConfig as RobotConfig,
+    SceneConfig as SceneConfig,
+    StrategyConfig as StrategyConfig,
+    _apply_override as _apply_override,
+    _choice as _choice,
+    _coerce as _coerce,
+    _merge as _merge,
+    _parse_value as _parse_value,
+    _toml_value as _toml_value,
+    _type_name as _type_name,
+    dump_config as dump_config,
+    load_config as load_config,
+    resolve_data_dir as resolve_data_dir,
+    resolve_model as resolve_model,
+    validate_config as validate_config,
+)
+from cgda_jax.experiment.demo import (
+    _SMALL as _SMALL,
+    DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
+    demo_configs as demo_configs,
+)
+from cgda_jax.experiment.report import (
+    _close_all as _close_all,
+    _execution_plots as _execution_plots,
+    _jsonable as _jsonable,
+    _report as _report,
+    _write_json as _write_json,
+    log as log,
+    render_execution as render_execution,
+)
+from cgda_jax.experiment.run import (
+    _synthetic as _synthetic,
+    run_execution as run_execution,
+    run_experiment as run_experiment,
+    run_recognition as run_recognition,
+)
+
+__all__ = [
+    "ConfigError",
+    "DataConfig",
+    "ExperimentConfig",
+    "OutputConfig",
+    "RecognitionConfig",
+    "RobotConfig",
+    "SceneConfig",
+    "StrategyConfig",
+    "dump_config",
+    "load_config",
+    "run_experiment",
+    "validate_config",
+]

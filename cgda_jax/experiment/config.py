@@ -1,0 +1,395 @@
+"""Experiment configs: typed schema, TOML reading and writing, overrides, validation.
+
+A config is :class:`ExperimentConfig`: typed defaults in code, overridden by a TOML
+file, overridden again by dotted ``key=value`` settings (``strategy.population_size=64``).
+Unknown keys and wrong types are errors that name the key (and the file).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import pathlib
+import tomllib
+import typing
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+KINDS = ("recognition", "execution")
+SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive")
+STRATEGIES = ("fte", "ie", "iet", "oet")
+SCENES = ("marker", "paint")
+XGNITIVE_ENV = "CGDA_XGNITIVE_DIR"
+
+
+class ConfigError(ValueError):
+    """A bad configuration: unknown key, wrong type, bad value, missing file."""
+
+
+# --------------------------------------------------------------------------- config
+
+
+@dataclasses.dataclass
+class DataConfig:
+    """Where the demonstrations (or the goal) come from.
+
+    Attributes:
+        source: "synthetic" (MOVE/ROTATE/CLEAN/PAINT, recognition), "clean_circle"
+            (circle demos -> clean goal), "paint_ramp" (0 -> 100 % in
+            ``goal_points`` steps) or "xgnitive" (real TEO demonstrations).
+        features: synthetic: "marker" (8 object features), "spatial" (X, Y, Z) or
+            "arm" (12 arm-point coordinates).
+        n_repetitions, n_train: synthetic: repetitions per action; the first
+            ``n_train`` generalize, the rest are test queries.
+        seed: seed of the synthetic demonstrations.
+        interval_s, method: generalization interval (s) and method ("paper" |
+            "xgnitive").
+        centre, diameter, n_demos: clean circle (metres, waist frame).
+        goal_points: paint ramp length.
+        data_dir: xgnitive data folder (default: $CGDA_XGNITIVE_DIR).
+        action, stream, columns: xgnitive action ("paint" | "iron"), stream and
+            feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``).
+        scale: factor applied to the goal's features (e.g. unit changes).
+    """
+
+    source: str = "synthetic"
+    features: str = "marker"
+    n_repetitions: int = 7
+    n_train: int = 6
+    seed: int = 0
+    interval_s: float = 1.0
+    method: str = "paper"
+    centre: list[float] = dataclasses.field(default_factory=lambda: [0.55, -0.45, 0.35])
+    diameter: float = 0.30
+    n_demos: int = 6
+    goal_points: int = 17
+    data_dir: str = ""
+    action: str = "paint"
+    stream: str = "paintSquaresOnScreen"
+    columns: list[str] = dataclasses.field(default_factory=lambda: ["percent"])
+    scale: float = 1.0
+
+
+@dataclasses.dataclass
+class RecognitionConfig:
+    """Recognition: metric ("dtw" | "dtw_multi" | "euclidean"), query form, samples.
+
+    ``query = "reduced"`` compares the test repetition after the same interval
+    averaging as the generalized actions (the paper's "reduced test actions");
+    ``"raw"`` compares the raw test samples.
+    """
+
+    metric: str = "dtw"
+    query: str = "reduced"
+    n_samples: int = 100
+
+
+@dataclasses.dataclass
+class RobotConfig:
+    """The robot: MJCF model (built-in name or path), evolved joints, marker site.
+
+    ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    """
+
+    model: str = "teo.xml"
+    joints: list[str] = dataclasses.field(
+        default_factory=lambda: ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
+    )
+    marker_site: str = "marker"
+    fixed: dict[str, float] = dataclasses.field(
+        default_factory=lambda: {"r_forearm_rotation": 45.0}
+    )
+    mode: str = "kinematic"
+    substeps: int = 8
+
+
+@dataclasses.dataclass
+class SceneConfig:
+    """The scene: "marker" (features X, Y, Z) or "paint" (painted %, a 4 x 4 wall).
+
+    ``params`` go to the scene: for "paint", keyword arguments of
+    ``PaintWall.grid`` (x, ys, zs, root_height, radius, size).
+    """
+
+    kind: str = "marker"
+    params: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class StrategyConfig:
+    """The execution strategy and its evolutionary algorithm (evosax name).
+
+    ``options`` are extra keyword arguments of the strategy function (e.g.
+    ``stagnation`` for FTE).
+    """
+
+    name: str = "ie"
+    algorithm: str = "CMA_ES"
+    population_size: int = 16
+    tolerance: float = 0.02
+    max_generations: int = 100
+    seed: int = 0
+    chunk_size: int = 10
+    options: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class OutputConfig:
+    """Results: ``dir`` (parent folder), ``plots`` on/off, ``render`` on/off.
+
+    ``render`` (execution runs): an animated GIF of the robot executing the best
+    trajectory and a strip of frames (paper Fig. 8/11), rendered offscreen by
+    MuJoCo (``MUJOCO_GL=egl`` or ``osmesa``). Without a working offscreen OpenGL
+    the run goes on and one warning says why nothing was rendered.
+    """
+
+    dir: str = "results"
+    plots: bool = True
+    render: bool = True
+
+
+@dataclasses.dataclass
+class ExperimentConfig:
+    """A whole experiment (see the module docstring)."""
+
+    name: str = "experiment"
+    kind: str = "recognition"
+    description: str = ""
+    data: DataConfig = dataclasses.field(default_factory=DataConfig)
+    recognition: RecognitionConfig = dataclasses.field(default_factory=RecognitionConfig)
+    robot: RobotConfig = dataclasses.field(default_factory=RobotConfig)
+    scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)
+    strategy: StrategyConfig = dataclasses.field(default_factory=StrategyConfig)
+    output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
+
+
+def _type_name(tp) -> str:
+    return getattr(tp, "__name__", None) or str(tp).replace("typing.", "")
+
+
+def _coerce(value: Any, tp, key: str) -> Any:
+    """``value`` checked against the annotation ``tp`` (int accepted for float)."""
+    origin = typing.get_origin(tp)
+    bad = ConfigError(
+        f"key '{key}': expected {_type_name(tp)}, got {type(value).__name__} {value!r}"
+    )
+    if tp is Any:
+        return value
+    if origin is list:
+        (item,) = typing.get_args(tp)
+        if not isinstance(value, list):
+            raise bad
+        return [_coerce(v, item, f"{key}[{i}]") for i, v in enumerate(value)]
+    if origin is dict:
+        _, item = typing.get_args(tp)
+        if not isinstance(value, dict):
+            raise bad
+        return {str(k): _coerce(v, item, f"{key}.{k}") for k, v in value.items()}
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad
+        return value
+    if tp is bool or tp is str:
+        if not isinstance(value, tp):
+            raise bad
+        return value
+    raise bad  # pragma: no cover
+
+
+def _merge(obj: Any, table: Mapping[str, Any], prefix: str = "") -> None:
+    """Apply a (nested) table to a config dataclass in place, checking keys and types."""
+    hints = typing.get_type_hints(type(obj))
+    for k, v in table.items():
+        key = f"{prefix}{k}"
+        if k not in hints:
+            known = ", ".join(f.name for f in dataclasses.fields(obj))
+            raise ConfigError(f"unknown key '{key}' (known here: {known})")
+        tp = hints[k]
+        if dataclasses.is_dataclass(tp):
+            if not isinstance(v, Mapping):
+                raise ConfigError(f"key '{key}' must be a table, got {v!r}")
+            _merge(getattr(obj, k), v, key + ".")
+        else:
+            setattr(obj, k, _coerce(v, tp, key))
+
+
+def _parse_value(text: str) -> Any:
+    """A TOML value (``64``, ``1e-3``, ``true``, ``[1, 2]``, ``"x"``) or a bare string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
+    if "=" not in setting:
+        raise ConfigError(f"--set {setting!r}: expected key=value, e.g. strategy.seed=3")
+    key, text = setting.split("=", 1)
+    parts = key.strip().split(".")
+    table: Any = _parse_value(text.strip())
+    # dict-valued fields accept deeper keys: robot.fixed.r_elbow=30
+    obj: Any = cfg
+    for i, part in enumerate(parts[:-1]):
+        if dataclasses.is_dataclass(obj):
+            hints = typing.get_type_hints(type(obj))
+            if part in hints and typing.get_origin(hints[part]) is dict:
+                sub = ".".join(parts[i + 1:])
+                current = dict(getattr(obj, part))
+                current[sub] = table
+                _merge(obj, {part: current}, ".".join(parts[:i]) + "." if i else "")
+                return
+            obj = getattr(obj, part, None)
+    for part in reversed(parts):
+        table = {part: table}
+    _merge(cfg, table)
+
+
+def load_config(
+    path: str | os.PathLike | None = None, overrides: Sequence[str] = ()
+) -> ExperimentConfig:
+    """Defaults, then the TOML file at ``path``, then ``key=value`` overrides.
+
+    Raises:
+        ConfigError: unknown key, wrong type, unparsable file (message names the
+            key and the file).
+        FileNotFoundError: ``path`` does not exist.
+    """
+    cfg = ExperimentConfig()
+    if path is not None:
+        path = pathlib.Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"config file not found: {path}")
+        try:
+            table = tomllib.loads(path.read_text())
+        except tomllib.TOMLDecodeError as e:
+            raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        try:
+            _merge(cfg, table)
+        except ConfigError as e:
+            raise ConfigError(f"{path}: {e}") from None
+        if "name" not in table:
+            cfg.name = path.stem
+    for setting in overrides:
+        try:
+            _apply_override(cfg, setting)
+        except ConfigError as e:
+            raise ConfigError(f"--set: {e}") from None
+    return cfg
+
+
+def _choice(value: str, options: Sequence[str], key: str) -> None:
+    if value not in options:
+        raise ConfigError(f"key '{key}': {value!r} is not one of {list(options)}")
+
+
+def resolve_model(model: str) -> pathlib.Path:
+    """A model file: an existing path, else a built-in name from ``models/``."""
+    p = pathlib.Path(model).expanduser()
+    if p.is_file():
+        return p
+    if p.name == model:  # a bare name: try the built-in models
+        from cgda_jax.sim.robot import model_path
+
+        try:
+            builtin = pathlib.Path(model_path(model))
+        except (FileNotFoundError, KeyError, ValueError):
+            builtin = None
+        if builtin is not None and builtin.is_file():
+            return builtin
+    raise FileNotFoundError(f"robot model file not found: {model} (key 'robot.model')")
+
+
+def resolve_data_dir(cfg: ExperimentConfig) -> pathlib.Path:
+    """The xgnitive data folder from ``data.data_dir`` or $CGDA_XGNITIVE_DIR."""
+    raw = cfg.data.data_dir or os.environ.get(XGNITIVE_ENV, "")
+    if not raw:
+        raise ConfigError(
+            f"key 'data.data_dir' is empty and ${XGNITIVE_ENV} is not set: "
+            f"point one of them at your copy of the xgnitive data"
+        )
+    p = pathlib.Path(raw).expanduser()
+    if not p.is_dir():
+        raise FileNotFoundError(f"data folder not found: {p} (key 'data.data_dir')")
+    return p
+
+
+def validate_config(cfg: ExperimentConfig) -> None:
+    """Check values and that the files and folders named by ``cfg`` exist.
+
+    Raises:
+        ConfigError / FileNotFoundError naming the key or the path.
+    """
+    _choice(cfg.kind, KINDS, "kind")
+    _choice(cfg.data.source, SOURCES, "data.source")
+    _choice(cfg.data.method, ("paper", "xgnitive"), "data.method")
+    if not cfg.data.interval_s > 0:
+        raise ConfigError(f"key 'data.interval_s' must be > 0, got {cfg.data.interval_s}")
+    if cfg.kind == "recognition":
+        if cfg.data.source != "synthetic":
+            raise ConfigError("key 'data.source': recognition runs on 'synthetic' data")
+        _choice(cfg.data.features, ("marker", "spatial", "arm"), "data.features")
+        _choice(cfg.recognition.metric, ("dtw", "dtw_multi", "euclidean"),
+                "recognition.metric")
+        _choice(cfg.recognition.query, ("reduced", "raw"), "recognition.query")
+        if not 1 <= cfg.data.n_train < cfg.data.n_repetitions:
+            raise ConfigError(
+                f"keys 'data.n_train'={cfg.data.n_train} and 'data.n_repetitions'="
+                f"{cfg.data.n_repetitions}: need 1 <= n_train < n_repetitions"
+            )
+        return
+    if cfg.data.source == "synthetic":
+        raise ConfigError(
+            "key 'data.source': execution needs a goal: 'clean_circle', 'paint_ramp' "
+            "or 'xgnitive'"
+        )
+    if cfg.data.source == "xgnitive":
+        resolve_data_dir(cfg)
+    _choice(cfg.scene.kind, SCENES, "scene.kind")
+    _choice(cfg.strategy.name, STRATEGIES, "strategy.name")
+    _choice(cfg.robot.mode, ("kinematic", "dynamic"), "robot.mode")
+    for key in ("population_size", "max_generations", "chunk_size"):
+        if getattr(cfg.strategy, key) < 1:
+            raise ConfigError(f"key 'strategy.{key}' must be >= 1")
+    if not cfg.strategy.tolerance > 0:
+        raise ConfigError("key 'strategy.tolerance' must be > 0")
+    from cgda_jax.experiment.build import _check_strategy_options
+
+    _check_strategy_options(cfg.strategy)
+    if not cfg.robot.joints:
+        raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
+    resolve_model(cfg.robot.model)
+
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(f"cannot write {v!r} as TOML")
+
+
+def dump_config(cfg: ExperimentConfig) -> str:
+    """The resolved config as TOML text (loads back to an equal config)."""
+    top, tables = [], []
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(v):
+            lines = [f"[{f.name}]"] + [
+                f"{g.name} = {_toml_value(getattr(v, g.name))}" for g in dataclasses.fields(v)
+            ]
+            tables.append("\n".join(lines))
+        else:
+            top.append(f"{f.name} = {_toml_value(v)}")
+    return "\n".join(top) + "\n\n" + "\n\n".join(tables) + "\n"
