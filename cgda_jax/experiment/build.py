@@ -40,8 +40,22 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     return np.asarray(gen.knots, float) * d.scale, demos, gen
 
 
-def build_simulator(cfg: ExperimentConfig):
-    """Robot + scene + Simulator from the config."""
+def default_waypoint_s(demos: list, n_points: int) -> float:
+    """Seconds per waypoint from the demonstrations' timing: mean duration / points
+    (1 s without demonstrations)."""
+    if not demos or n_points < 1:
+        return 1.0
+    return float(np.mean([d.duration for d in demos])) / n_points
+
+
+def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None):
+    """Robot + scene + Simulator from the config.
+
+    Args:
+        cfg: the experiment.
+        waypoint_s: dynamic mode: seconds per waypoint when ``robot.waypoint_s`` is
+            0 (default 1 s; `run_execution` passes `default_waypoint_s`).
+    """
     from cgda_jax.sim.execute import Simulator
     from cgda_jax.sim.robot import Robot
     from cgda_jax.sim.scenes import MarkerScene, PaintWall
@@ -50,6 +64,7 @@ def build_simulator(cfg: ExperimentConfig):
     robot = Robot.from_mjcf(
         resolve_model(rc.model), list(rc.joints), rc.marker_site,
         {k: math.radians(v) for k, v in rc.fixed.items()},
+        keyframe=rc.keyframe or None,
     )
     if cfg.scene.kind == "paint":
         scene = PaintWall.grid(**cfg.scene.params)
@@ -57,7 +72,13 @@ def build_simulator(cfg: ExperimentConfig):
         if cfg.scene.params:
             raise ConfigError("key 'scene.params': the marker scene takes no parameters")
         scene = MarkerScene()
-    return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps)
+    if rc.mode != "dynamic":
+        return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps)
+    return Simulator(
+        robot, scene, mode="dynamic", substeps=rc.substeps,
+        waypoint_s=rc.waypoint_s or waypoint_s or 1.0, timestep=rc.timestep or None,
+        move_fraction=rc.move_fraction, physics=rc.physics, reduce=rc.reduce,
+    )
 
 
 def strategy_function(name: str) -> Callable:

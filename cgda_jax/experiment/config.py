@@ -90,6 +90,12 @@ class RobotConfig:
     """The robot: MJCF model (built-in name or path), evolved joints, marker site.
 
     ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    ``keyframe``: a ``<key>`` of the model whose qpos is the start posture ("" = the
+    model's qpos0).  Dynamic mode (``mode = "dynamic"``): ``physics`` "auto" | "mjx"
+    | "mujoco"; ``waypoint_s`` seconds per waypoint (0 = the demonstrations' timing,
+    mean duration / goal points; 1 s without demonstrations); ``timestep`` physics
+    step in seconds (0 = the model's own); ``move_fraction`` of a waypoint spent
+    moving (minimum jerk), the rest settling; ``reduce`` welds unmoved joints.
     """
 
     model: str = "teo.xml"
@@ -102,6 +108,12 @@ class RobotConfig:
     )
     mode: str = "kinematic"
     substeps: int = 8
+    keyframe: str = ""
+    physics: str = "auto"
+    waypoint_s: float = 0.0
+    timestep: float = 0.0
+    move_fraction: float = 0.6
+    reduce: bool = True
 
 
 @dataclasses.dataclass
@@ -352,6 +364,12 @@ def validate_config(cfg: ExperimentConfig) -> None:
     _choice(cfg.scene.kind, SCENES, "scene.kind")
     _choice(cfg.strategy.name, STRATEGIES, "strategy.name")
     _choice(cfg.robot.mode, ("kinematic", "dynamic"), "robot.mode")
+    _choice(cfg.robot.physics, ("auto", "mjx", "mujoco"), "robot.physics")
+    for key in ("waypoint_s", "timestep"):
+        if not getattr(cfg.robot, key) >= 0:
+            raise ConfigError(f"key 'robot.{key}' must be >= 0 (0 = default)")
+    if not 0 < cfg.robot.move_fraction <= 1:
+        raise ConfigError("key 'robot.move_fraction' must be in (0, 1]")
     for key in ("population_size", "max_generations", "chunk_size"):
         if getattr(cfg.strategy, key) < 1:
             raise ConfigError(f"key 'strategy.{key}' must be >= 1")

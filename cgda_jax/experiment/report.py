@@ -151,6 +151,20 @@ def _report(cfg: ExperimentConfig, result: dict) -> str:
             f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",
             f"| compile time | {result['compile_time_s']:.2f} s |",
         ]
+        phys, replay = result.get("physics"), result.get("replay")
+        if phys:
+            lines += [
+                f"| physics | {phys['backend']}, {phys['waypoint_s']:.3g} s per "
+                f"waypoint, timestep {phys['timestep']:g} s, "
+                f"{len(phys['welded_joints'])} joints welded |",
+            ]
+        if replay:
+            lines += [
+                f"| replay at timestep {replay['timestep']:g} s (MuJoCo C) | "
+                f"success {replay['success']}, max point error "
+                f"{replay['max_point_error']:.4g}, max feature difference "
+                f"{replay['max_feature_difference']:.3g} |",
+            ]
         render = result.get("render")
         if render and render.get("ok"):
             lines += ["", "The robot executing the best trajectory (paper Fig. 8/11):", "",

@@ -23,7 +23,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from cgda_jax.experiment.build import build_goal, build_simulator, strategy_function
+from cgda_jax.experiment.build import (
+    build_goal,
+    build_simulator,
+    default_waypoint_s,
+    strategy_function,
+)
 from cgda_jax.experiment.config import (
     ConfigError,
     ExperimentConfig,
@@ -112,13 +117,28 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
     return result
 
 
+def replay_check(sim, res, factor: int = 4) -> dict:
+    """Re-execute the reported joints with `factor` x finer physics on MuJoCo C
+    (`Simulator.finer`): the features must agree, or the optimiser exploited the
+    step size it was evaluated at."""
+    fine = sim.finer(factor)
+    feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
+    errors = np.linalg.norm(feats - np.asarray(res.goal), axis=-1)
+    return {
+        "timestep": fine.physics.timestep,
+        "max_feature_difference": float(np.abs(feats - res.features).max()),
+        "max_point_error": float(errors.max()),
+        "success": bool(np.all(errors < res.tolerance)),
+    }
+
+
 def run_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
 ) -> dict:
     """Build the goal and the simulator, run the strategy, save and plot."""
     goal, demos, gen = build_goal(cfg)
-    sim = build_simulator(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)))
     if goal.shape[1] != sim.n_features:
         raise ConfigError(
             f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "
@@ -134,6 +154,13 @@ def run_execution(
     summary = json.loads((out / "result.json").read_text())
     summary.update({"kind": "execution", "name": cfg.name,
                     "feature_names": list(sim.feature_names)})
+    if sim.mode == "dynamic":
+        summary["physics"] = {
+            "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,
+            "timestep": sim.physics.timestep, "physics_steps": sim.physics_steps,
+            "welded_joints": list(sim.physics.welded),
+        }
+        summary["replay"] = replay_check(sim, res)
     if cfg.output.plots:
         _execution_plots(cfg, out / "plots", res, sim, demos, gen)
     if cfg.output.render:

@@ -138,6 +138,7 @@ class Simulator:
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
+        self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce}
         self.physics = self.backend = None
         self.physics_steps = 0
         if mode == "dynamic":
@@ -157,6 +158,19 @@ class Simulator:
                            if mode == "dynamic" else None)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
+
+    def finer(self, factor: int = 4, physics: str = "mujoco") -> Simulator:
+        """The same simulator with ``factor`` times finer steps: kinematic mode
+        ``substeps * factor``; dynamic mode ``timestep / factor`` (same waypoint time
+        and reference), by default on MuJoCo C.  For replaying a result: an
+        optimiser may exploit the resolution it was evaluated at."""
+        if self.mode != "dynamic":
+            return Simulator(self.robot, self.scene, substeps=self.substeps * factor)
+        return Simulator(
+            self.robot, self.scene, mode="dynamic", physics=physics,
+            timestep=self.physics.timestep / factor,
+            physics_steps=self.physics_steps * factor, **self._dynamic_args,
+        )
 
     def __repr__(self) -> str:
         if self.mode == "dynamic":

@@ -13,7 +13,8 @@ paint wall's squares, red once painted) are drawn into each frame.
 Frames follow the simulator: in kinematic mode the joint-space interpolation from
 each posture to the next waypoint (``frames_per_waypoint`` frames, the last at the
 waypoint); in dynamic mode MuJoCo C runs the same position-actuator physics
-(``physics_steps`` ``mj_step`` calls per waypoint) and frames are sampled from it.
+on the simulated model (`cgda_jax.sim.physics`: ``physics_steps`` ``mj_step`` calls
+per waypoint tracking the same minimum-jerk reference) and frames are sampled from it.
 """
 
 from __future__ import annotations
@@ -75,35 +76,45 @@ def _add_decorations(scene: mujoco.MjvScene, decorations) -> None:
 
 
 def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
-    """Yield (qpos (nq,), marker positions since the last frame (K, 3)) per frame."""
+    """Yield (qpos (nq,) of `_model(sim)`, marker positions since the last frame
+    (K, 3)) per frame."""
     robot = sim.robot
-    model = robot.mj_model
-    data = mujoco.MjData(model)
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
-    qpos0 = np.asarray(robot.qpos0, np.float64)
     genes = np.clip(np.zeros(robot.n_dof), lo, hi)
-    data.qpos[:] = qpos0
-    data.qpos[robot.qpos_adr] = genes
-    mujoco.mj_kinematics(model, data)
-    yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
-    if sim.mode == "dynamic":
-        act = sim._act_qadr
-        data.ctrl[:] = data.qpos[act]
-        mujoco.mj_forward(model, data)
+    if sim.mode == "dynamic":  # MuJoCo C on the simulated model, same reference
+        phys = sim.physics
+        model, data = phys.model, mujoco.MjData(phys.model)
+
+        def ctrl(g):
+            q = phys.qpos0.copy()
+            q[phys.gene_qadr] = g
+            return q[phys.act_qadr]
+
+        data.qpos[:] = phys.qpos0
+        data.qpos[phys.gene_qadr] = genes
+        mujoco.mj_kinematics(model, data)
+        yield data.qpos.copy(), data.site_xpos[phys.site_id][None].copy()
         every = max(1, sim.physics_steps // frames_per_waypoint)
+        prev = ctrl(genes)
         for wp in waypoints:
-            target = qpos0.copy()
-            target[robot.qpos_adr] = np.clip(wp, lo, hi)
-            data.ctrl[:] = target[act]
+            target = ctrl(np.clip(wp, lo, hi))
             trail = []
             for k in range(1, sim.physics_steps + 1):
+                data.ctrl[:] = prev + float(sim._profile[k - 1]) * (target - prev)
                 mujoco.mj_step(model, data)
                 mujoco.mj_kinematics(model, data)
-                trail.append(data.site_xpos[robot.site_id].copy())
+                trail.append(data.site_xpos[phys.site_id].copy())
                 if k % every == 0 or k == sim.physics_steps:
                     yield data.qpos.copy(), np.array(trail)
                     trail = []
+            prev = target
         return
+    model = robot.mj_model
+    data = mujoco.MjData(model)
+    data.qpos[:] = np.asarray(robot.qpos0, np.float64)
+    data.qpos[robot.qpos_adr] = genes
+    mujoco.mj_kinematics(model, data)
+    yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
     for wp in waypoints:
         wp = np.clip(wp, lo, hi)
         for k in range(1, frames_per_waypoint + 1):
@@ -111,6 +122,11 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
             mujoco.mj_kinematics(model, data)
             yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
         genes = wp
+
+
+def _model(sim) -> mujoco.MjModel:
+    """The model that is drawn: the simulated one in dynamic mode."""
+    return sim.physics.model if sim.mode == "dynamic" else sim.robot.mj_model
 
 
 def _scene_states(scene, trails: list[np.ndarray]) -> list:
@@ -176,7 +192,7 @@ def render_trajectory(
     sim._check_waypoints(waypoints)
     frames_per_waypoint = int(frames_per_waypoint or sim.substeps)
     out_path = pathlib.Path(out_path)
-    model = sim.robot.mj_model
+    model = _model(sim)
     data = mujoco.MjData(model)
     cam = _camera(sim, lookat, distance, azimuth, elevation)
     scene = sim.scene
