@@ -115,14 +115,17 @@ def test_sensors_on_composed_world_and_mjx_support(teo_pair):
     mjx_module().put_model(teo_pair[1], impl="jax")
 
 
+PUSH_OBJECTS = [
+    {"piece": "table", "pos": [0.35, 0, 0], "size": [0.25, 0.4, 0.02], "height": 0.3},
+    {"piece": "box", "pos": [0.42, 0.10, 0.03], "size": [0.03, 0.03, 0.03],
+     "mass": 0.1},
+]
+
+
 def _push(contact_geoms):
     """Sweep the tiny arm (horizontal) 25 deg about z into a box on a table."""
-    m = compile_world(model_path("tiny_arm.xml"), [
-        {"piece": "table", "pos": [0.35, 0, 0], "size": [0.25, 0.4, 0.02],
-         "height": 0.3},
-        {"piece": "box", "pos": [0.42, 0.10, 0.03], "size": [0.03, 0.03, 0.03],
-         "mass": 0.1},
-    ], contact_geoms=contact_geoms)
+    m = compile_world(model_path("tiny_arm.xml"), PUSH_OBJECTS,
+                      contact_geoms=contact_geoms)
     d = mujoco.MjData(m)
     d.joint("shoulder").qpos = np.pi / 2  # link along +x at z = 0.05
     d.ctrl[:] = [0.0, np.pi / 2, 0.0]
@@ -194,3 +197,34 @@ def test_bad_world_arguments(tmp_path):
     with pytest.raises(FileNotFoundError, match="object piece file"):
         compose_world(model_path("tiny_arm.xml"),
                       [{"piece": str(tmp_path / "nope.xml"), "pos": [0, 0, 0]}])
+
+
+def test_c_rollout_sensordata_gives_the_features():
+    """mujoco.rollout's sensordata -> FeatureSet.from_sensordata (vmapped)."""
+    import jax
+    from mujoco import rollout
+
+    spec = compose_world(model_path("tiny_arm.xml"), PUSH_OBJECTS,
+                         contact_geoms=["link1", "link2"])
+    feats = [{"body": "box", "quantity": "xy"}, {"site": "marker", "quantity": "xyz"},
+             {"joint": "yaw", "quantity": "angle"}]
+    add_sensors(spec, feats)
+    m = spec.compile()
+    fs = FeatureSet(m, feats)
+    d = mujoco.MjData(m)
+    d.joint("shoulder").qpos = np.pi / 2
+    full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state0 = np.zeros(mujoco.mj_stateSize(m, full))
+    mujoco.mj_getState(m, d, state0, full)
+    t = np.arange(1000) * m.opt.timestep
+    yaw = np.minimum(t, 1.0) * np.deg2rad(25)
+    ctrl = np.stack([yaw, np.full_like(t, np.pi / 2), np.zeros_like(t)], axis=-1)
+    states, sensordata = rollout.rollout(m, d, state0[None], ctrl[None])
+    features = jax.vmap(fs.from_sensordata)(sensordata[0])  # (T, F)
+    assert features.shape == (1000, 6)
+    _, end, _ = _push(["link1", "link2"])  # the same push stepped by mj_step
+    np.testing.assert_allclose(features[-1, :2], end[:2], atol=1e-5)
+    assert features[-1, 5] == pytest.approx(np.deg2rad(25), abs=0.01)
+    # the marker is the arm tip, 0.30 + 0.25 m from the yaw axis
+    np.testing.assert_allclose(np.hypot(features[-1, 2], features[-1, 3]), 0.55,
+                               atol=0.01)
