@@ -129,13 +129,12 @@ class FeatureSpec:
 
         Raises:
             ValueError: an unknown key, none or several of body/site/joint, or no
-                quantity (the message names the key).
-            TypeError: ``entry`` is not a mapping.
+                quantity (the message names the key), or not a mapping.
         """
         if isinstance(entry, FeatureSpec):
             return entry
         if not isinstance(entry, Mapping):
-            raise TypeError(f"a feature must be a dict like {{'body': 'box', "
+            raise ValueError(f"a feature must be a dict like {{'body': 'box', "
                              f"'quantity': 'xy'}}, got {entry!r}")
         bad = sorted(set(entry) - {*KINDS, "quantity"})
         if bad:
