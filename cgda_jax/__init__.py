@@ -55,6 +55,10 @@ _LAZY.update({
     "SimState": "cgda_jax.sim.execute",
     "Simulator": "cgda_jax.sim.execute",
     "render_trajectory": "cgda_jax.sim.render",
+    "FeatureSet": "cgda_jax.sim.features",
+    "FeatureSpec": "cgda_jax.sim.features",
+    "compile_world": "cgda_jax.sim.world",
+    "compose_world": "cgda_jax.sim.world",
     "Robot": "cgda_jax.sim.robot",
     "model_path": "cgda_jax.sim.robot",
     "MarkerScene": "cgda_jax.sim.scenes",
@@ -146,9 +150,11 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
         ActionLibrary, Recognition, cost_matrix, recognize,
     )
     from cgda_jax.sim.execute import SimState, Simulator  # noqa: F401
+    from cgda_jax.sim.features import FeatureSet, FeatureSpec  # noqa: F401
     from cgda_jax.sim.render import render_trajectory  # noqa: F401
     from cgda_jax.sim.robot import Robot, model_path  # noqa: F401
     from cgda_jax.sim.scenes import MarkerScene, PaintWall  # noqa: F401
+    from cgda_jax.sim.world import compile_world, compose_world  # noqa: F401
     from cgda_jax.strategies import (  # noqa: F401
         ALGORITHMS, STRATEGIES, ExecutionResult, run_fte, run_ie, run_iet, run_oet,
         run_trials,

@@ -15,6 +15,12 @@ _LAZY = {
     "SimState": "cgda_jax.sim.execute",
     "Simulator": "cgda_jax.sim.execute",
     "render_trajectory": "cgda_jax.sim.render",
+    "FeatureSet": "cgda_jax.sim.features",
+    "FeatureSpec": "cgda_jax.sim.features",
+    "add_sensors": "cgda_jax.sim.features",
+    "compile_world": "cgda_jax.sim.world",
+    "compose_world": "cgda_jax.sim.world",
+    "list_pieces": "cgda_jax.sim.world",
     "KINEMATICS": "cgda_jax.sim.robot",
     "Robot": "cgda_jax.sim.robot",
     "model_path": "cgda_jax.sim.robot",
@@ -23,6 +29,8 @@ _LAZY = {
 }
 
 __all__ = [
+    "FeatureSet",
+    "FeatureSpec",
     "KINEMATICS",
     "MODES",
     "MarkerScene",
@@ -30,6 +38,10 @@ __all__ = [
     "Robot",
     "SimState",
     "Simulator",
+    "add_sensors",
+    "compile_world",
+    "compose_world",
+    "list_pieces",
     "model_path",
     "render_trajectory",
 ]
