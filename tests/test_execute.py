@@ -133,28 +133,10 @@ def test_population_equals_each_alone_and_does_not_recompile(teo):
     assert sim._execute_population._cache_size() == before == 1
 
 
-def test_dynamic_mode_tracks_waypoints_and_matches_mujoco_c(tiny):
-    sim = Simulator(tiny, MarkerScene(), mode="dynamic", physics_steps=150)
-    wps = np.radians([[30, 20, 40], [-20, 45, 60]]).astype(np.float32)
-    feats, state = jax.jit(sim.rollout)(wps)
-    # MuJoCo C on the same model, same controls (float64)
-    m = tiny.mj_model
-    data = mujoco.MjData(m)
-    for w in wps:
-        data.ctrl[:] = w
-        for _ in range(150):
-            mujoco.mj_step(m, data)
-    np.testing.assert_allclose(np.asarray(state.genes), data.qpos, atol=2e-3)
-    mujoco.mj_kinematics(m, data)
-    np.testing.assert_allclose(np.asarray(feats[-1]), data.site_xpos[0], atol=2e-3)
-    # the actuators track the target (gravity on: a small sag is allowed)
-    np.testing.assert_allclose(np.asarray(state.genes), wps[-1], atol=0.05)
-    assert not np.allclose(np.asarray(state.genes), wps[-1], atol=1e-5)  # it is physics
-
-
 def test_dynamic_population_in_slices_equals_each_candidate(tiny):
     # 5 candidates in slices of 2 (lax.map over vmapped slices, a ragged last one)
-    sim = Simulator(tiny, MarkerScene(), mode="dynamic", physics_steps=5, batch_size=2)
+    sim = Simulator(tiny, MarkerScene(), mode="dynamic", physics_steps=5, batch_size=2,
+                    physics="mjx")
     pop = _random_waypoints(tiny, (5, 3), seed=11)
     out = np.asarray(sim.execute_population(pop))
     one = jax.jit(sim.execute)
@@ -170,7 +152,8 @@ def test_dynamic_population_in_slices_equals_each_candidate(tiny):
 
 @pytest.mark.slow  # compiling mjx.step for TEO under vmap takes ~1 min on 2 CPU cores
 def test_dynamic_teo_population(teo):
-    sim = Simulator(teo, PaintWall.grid(), mode="dynamic", physics_steps=20)
+    sim = Simulator(teo, PaintWall.grid(), mode="dynamic", physics_steps=20,
+                    physics="mjx")
     pop = _random_waypoints(teo, (2, 3), seed=7)
     out = np.asarray(sim.execute_population(pop))
     assert out.shape == (2, 3, 1) and np.all(np.isfinite(out))
