@@ -63,6 +63,7 @@ _LAZY.update({
     "model_path": "cgda_jax.sim.robot",
     "MarkerScene": "cgda_jax.sim.scenes",
     "PaintWall": "cgda_jax.sim.scenes",
+    "ObjectScene": "cgda_jax.sim.scenes",
 })
 
 

@@ -204,3 +204,47 @@ def test_dynamic_ie_on_the_tiny_arm_succeeds_in_sequence(tiny):
                      waypoint_s=0.4, timestep=0.001)
     np.testing.assert_allclose(np.asarray(fine.execute(res.joints)), res.features,
                                atol=2e-3)
+
+
+def test_object_features_from_the_simulated_world_in_every_mode():
+    from cgda_jax import ObjectScene
+
+    objs = [{"piece": "table", "pos": [0.5, -0.35, -0.35]},
+            {"piece": "box", "pos": [0.45, -0.30, -0.30]}]
+    robot = Robot.from_world(model_path("teo.xml"), objs, TEO_JOINTS, "marker",
+                             {"r_forearm_rotation": np.radians(45)},
+                             contact_geoms=("r_hand", "r_tool"))
+    scene = ObjectScene([{"body": "box", "quantity": "xy"},
+                         {"body": "box", "quantity": "yaw"},
+                         {"site": "marker", "quantity": "z"}])
+    wps = np.radians([[30, -20, 40], [50, -20, 60]]).astype(np.float32)
+    sim = Simulator(robot, scene, mode="dynamic", physics="mujoco", timestep=0.005,
+                    waypoint_s=0.3)
+    assert sim.feature_names == ("box.x [m]", "box.y [m]", "box.yaw [rad]",
+                                 "marker.z [m]")
+    feats = np.asarray(jax.jit(sim.execute)(wps))
+    # MuJoCo C reference: same controls, features from mj_forward's state
+    phys = sim.physics
+    d = mujoco.MjData(phys.model)
+    d.qpos[:] = phys.qpos0
+    prev = d.qpos[phys.act_qadr].copy()
+    for w, got in zip(wps, feats):
+        q = phys.qpos0.copy()
+        q[phys.gene_qadr] = w
+        for k in range(sim.physics_steps):
+            d.ctrl[:] = prev + float(sim._profile[k]) * (q[phys.act_qadr] - prev)
+            mujoco.mj_step(phys.model, d)
+        prev = q[phys.act_qadr]
+        mujoco.mj_forward(phys.model, d)
+        box = mujoco.mj_name2id(phys.model, mujoco.mjtObj.mjOBJ_BODY, "box")
+        yaw = np.arctan2(d.xmat[box][3], d.xmat[box][0])
+        want = [*d.xpos[box][:2], yaw, d.site_xpos[phys.site_id][2]]
+        np.testing.assert_allclose(got, want, atol=1e-4)
+    # kinematic mode: the whole world's forward kinematics
+    kin = np.asarray(Simulator(robot, scene).execute(wps))
+    np.testing.assert_allclose(kin[:, :3], [[0.45, -0.30, 0.0]] * 2, atol=1e-6)
+    np.testing.assert_allclose(kin[:, 3], [robot.marker_position(jnp.asarray(w))[2]
+                                           for w in wps], atol=1e-5)
+    with pytest.raises(KeyError, match="boxx"):
+        Simulator(robot, ObjectScene([{"body": "boxx", "quantity": "xy"}]),
+                  mode="dynamic")

@@ -26,6 +26,7 @@ _LAZY = {
     "model_path": "cgda_jax.sim.robot",
     "MarkerScene": "cgda_jax.sim.scenes",
     "PaintWall": "cgda_jax.sim.scenes",
+    "ObjectScene": "cgda_jax.sim.scenes",
 }
 
 __all__ = [
@@ -34,6 +35,7 @@ __all__ = [
     "KINEMATICS",
     "MODES",
     "MarkerScene",
+    "ObjectScene",
     "PaintWall",
     "Robot",
     "SimState",

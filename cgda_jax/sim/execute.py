@@ -139,12 +139,21 @@ class Simulator:
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
         self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce}
+        # object scenes read the simulated world (`ObjectScene`), others the marker
+        self._world_specs = tuple(getattr(scene, "world_features", ()))
+        self._fset = None
+        if self._world_specs:  # names checked against the whole model first
+            from cgda_jax.sim.features import FeatureSet
+
+            self._fset = FeatureSet(robot.mj_model, self._world_specs)
         self.physics = self.backend = None
         self.physics_steps = 0
         if mode == "dynamic":
             from cgda_jax.sim.physics import Physics, make_backend
 
-            self.physics = Physics(robot, timestep=timestep, reduce=reduce)
+            self.physics = Physics(robot, timestep=timestep, reduce=reduce,
+                                   features=self._world_specs)
+            self._fset = self.physics.features
             self.backend = make_backend(self.physics, physics)
             if physics_steps is None:
                 physics_steps = max(1, round(waypoint_s / self.physics.timestep))
@@ -154,6 +163,8 @@ class Simulator:
             k = max(1, round(self.move_fraction * self.physics_steps))
             tau = np.minimum(np.arange(1, self.physics_steps + 1) / k, 1.0)
             self._profile = (10 * tau**3 - 15 * tau**4 + 6 * tau**5).astype(np.float32)
+        elif self._world_specs:
+            robot.make_data()  # mujoco.mjx and the device model, outside any trace
         self.waypoint_s = (self.physics_steps * self.physics.timestep
                            if mode == "dynamic" else None)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
@@ -226,7 +237,11 @@ class Simulator:
             return self.scene.update(scene_state, marker), None
 
         scene_state, _ = jax.lax.scan(paint, state.scene, markers)
-        features = self.scene.features(scene_state, markers[-1])
+        if self._fset is not None:  # objects: forward kinematics of the whole world
+            data = self.robot.kinematics_data(self.robot.qpos(target))
+            features = self._fset.from_data(data)
+        else:
+            features = self.scene.features(scene_state, markers[-1])
         return state.replace(genes=target, scene=scene_state), features
 
     def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
@@ -235,13 +250,17 @@ class Simulator:
         c0 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(state.genes))
         c1 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(target))
         ctrl = c0 + jnp.asarray(self._profile)[:, None] * (c1 - c0)  # (T, nu)
-        data, path = self.backend.segment(state.data, ctrl)
+        data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
+        path = sens[:, phys.marker_adr:phys.marker_adr + 3]
 
         def paint(scene_state, marker):
             return self.scene.update(scene_state, marker), None
 
         scene_state, _ = jax.lax.scan(paint, state.scene, path)
-        features = self.scene.features(scene_state, path[-1])
+        if self._fset is not None:  # objects: the world's sensors at the end
+            features = self._fset.from_sensordata(sens[-1])
+        else:
+            features = self.scene.features(scene_state, path[-1])
         return SimState(genes=target, scene=scene_state, data=data), features
 
     def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:

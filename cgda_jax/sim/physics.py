@@ -14,7 +14,7 @@ What is simulated (`reduced_model`) is the robot's MJCF rebuilt with ``mujoco.Mj
   divergence shows up as non-finite values instead of a silent jump back to qpos0;
 - ``timestep`` (optional) replaces the model's own.
 
-A *backend* steps that model for one example, `segment(state, ctrl) -> (state, path)`,
+A *backend* steps that model for one example, `segment(state, ctrl) -> (state, sens)`,
 written for ONE candidate and batched with ``vmap`` at the call site:
 
 - ``"mjx"``: ``mujoco.mjx`` (JAX implementation) under ``lax.scan``; runs unchanged
@@ -96,9 +96,11 @@ def reduced_model(
     *,
     weld: Sequence[str] = (),
     timestep: float | None = None,
+    features: Sequence = (),
 ) -> mujoco.MjModel:
     """Compile `spec` with the joints `weld` deleted (and their actuators), a
-    ``framepos`` sensor on `marker_site`, autoreset off and an optional timestep.
+    ``framepos`` sensor on `marker_site`, the sensors of object `features`
+    (`cgda_jax.sim.features.add_sensors`), autoreset off and an optional timestep.
 
     `spec` is modified (pass a copy you own).
     """
@@ -114,6 +116,10 @@ def reduced_model(
     sensor.type = mujoco.mjtSensor.mjSENS_FRAMEPOS
     sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
     sensor.objname = marker_site
+    if features:
+        from cgda_jax.sim.features import add_sensors
+
+        add_sensors(spec, features)
     model = spec.compile()
     model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     if timestep is not None:
@@ -132,6 +138,8 @@ class Physics:
         reduce: weld the joints `weldable_joints` finds (default); False simulates
             every joint of the model (each unevolved actuated joint held by its
             actuator at its start value).
+        features: object features (`FeatureSpec` or dicts) the scene reads; their
+            sensors are added and `features` is their `FeatureSet` on `model`.
 
     Attributes:
         model: the simulated ``MjModel``.
@@ -144,14 +152,20 @@ class Physics:
         marker_adr: sensordata address of the marker's ``framepos`` sensor.
     """
 
-    def __init__(self, robot, *, timestep: float | None = None, reduce: bool = True):
+    def __init__(self, robot, *, timestep: float | None = None, reduce: bool = True,
+                 features: Sequence = ()):
         full = robot.mj_model
         start = np.asarray(robot.qpos0, np.float64)
         keep = list(robot.joint_names)
         self.welded = weldable_joints(full, start, keep) if reduce else []
         spec = robot.spec()
         self.model = reduced_model(spec, robot.marker_site, weld=self.welded,
-                                   timestep=timestep)
+                                   timestep=timestep, features=features)
+        self.features = None
+        if features:
+            from cgda_jax.sim.features import FeatureSet
+
+            self.features = FeatureSet(self.model, features)
         m = self.model
         self.nq, self.nv, self.nu = m.nq, m.nv, m.nu
         self.state_size = m.nq + m.nv
@@ -186,6 +200,7 @@ class Physics:
             )
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, _MARKER_SENSOR)
         self.marker_adr = int(m.sensor_adr[sid])
+        self.nsensordata = int(m.nsensordata)
         self.site_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, robot.marker_site)
 
     def __repr__(self) -> str:
@@ -226,19 +241,19 @@ class MjxBackend:
         """Step once per row of ``ctrl`` (T, nu) from ``state`` (nq + nv,).
 
         Returns:
-            (state after T steps, marker positions (T, 3) after each step).
+            (state after T steps, sensordata (T, nsensordata) after each step; the
+            marker's position is at ``physics.marker_adr``).
         """
         mjx = mjx_module()
-        site = self.physics.site_id
 
         def body(d, c):
             d = mjx.step(self.model, d.replace(ctrl=c))
-            return d, d.site_xpos[site]  # placed at the state before this step
+            return d, d.sensordata  # of the state before this step
 
         d, xs = jax.lax.scan(body, self._data(state), ctrl)
-        last = mjx.kinematics(self.model, d).site_xpos[site]
-        path = jnp.concatenate([xs[1:], last[None]], axis=0)
-        return jnp.concatenate([d.qpos, d.qvel]).astype(jnp.float32), path
+        last = mjx.forward(self.model, d).sensordata
+        sens = jnp.concatenate([xs[1:], last[None]], axis=0)
+        return jnp.concatenate([d.qpos, d.qvel]).astype(jnp.float32), sens
 
 
 class MujocoBackend:
@@ -282,16 +297,15 @@ class MujocoBackend:
                 p.model, self._datas, init, ctrl, nstep=t + 1
             )
         final = states[:, t - 1, 1:1 + p.state_size]
-        path = sens[:, 1:, p.marker_adr:p.marker_adr + 3]
         return (final.reshape(*batch, p.state_size).astype(np.float32),
-                path.reshape(*batch, t, 3).astype(np.float32))
+                sens[:, 1:].reshape(*batch, t, p.nsensordata).astype(np.float32))
 
     def segment(self, state: Array, ctrl: Array) -> tuple[Array, Array]:
         """As `MjxBackend.segment`, computed by MuJoCo C (float64 inside)."""
         p = self.physics
         t = ctrl.shape[0]
         shapes = (jax.ShapeDtypeStruct((p.state_size,), jnp.float32),
-                  jax.ShapeDtypeStruct((t, 3), jnp.float32))
+                  jax.ShapeDtypeStruct((t, p.nsensordata), jnp.float32))
         return jax.pure_callback(
             self._host_segment, shapes, state, jnp.asarray(ctrl, jnp.float32),
             vmap_method="broadcast_all",

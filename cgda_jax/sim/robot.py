@@ -227,6 +227,44 @@ class Robot:
             spec_factory=lambda: mujoco.MjSpec.from_file(str(path)),
         )
 
+    @classmethod
+    def from_world(
+        cls,
+        path: str | pathlib.Path,
+        objects: Sequence[Mapping],
+        joints: Sequence[str],
+        marker_site: str,
+        fixed: Mapping[str, float] | None = None,
+        *,
+        contact_geoms: Sequence[str] = (),
+        kinematics: str = "chain",
+        keyframe: str | None = None,
+    ) -> Robot:
+        """The robot's MJCF with object pieces attached (`cgda_jax.sim.world`), as one
+        model; otherwise as `from_mjcf`.
+
+        Args:
+            path: the robot's MJCF file.
+            objects: object dicts (``{"piece": "box", "pos": [x, y, z], ...}``, see
+                `cgda_jax.sim.world.compose_world`).
+            contact_geoms: robot geoms that touch the objects (e.g. the hand).
+            joints, marker_site, fixed, kinematics, keyframe: as in `from_mjcf`.
+        """
+        from cgda_jax.sim.world import compose_world
+
+        path = pathlib.Path(path)
+        objects = [dict(o) for o in objects]
+        contact_geoms = tuple(contact_geoms)
+
+        def factory() -> mujoco.MjSpec:
+            return compose_world(path, objects, contact_geoms)
+
+        mj_model = factory().compile()
+        names = ", ".join(str(o.get("name", o.get("piece"))) for o in objects)
+        return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
+                   source=f"{path} + objects [{names}]", keyframe=keyframe,
+                   spec_factory=factory)
+
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
         if kinematics == "chain":
             from cgda_jax.sim.chain import build_chain_fk

@@ -12,6 +12,10 @@ plus a small pytree state that the simulator carries through its scans:
 `PaintWall`: a wall of squares painted when the marker comes near their centres; the
 feature is the painted percentage.  The authors' TEO wall (Morante et al. 2015) is
 `PaintWall.grid()`'s default.
+`ObjectScene`: features of anything in the simulated world, declared by name (an
+object's position or yaw, a valve's angle; `cgda_jax.sim.features`); the simulator
+reads them from the world state (MuJoCo sensors in dynamic mode, forward kinematics
+of the whole model in kinematic mode).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["TEO_WALL_Y", "TEO_WALL_Z", "MarkerScene", "PaintWall"]
+__all__ = ["TEO_WALL_Y", "TEO_WALL_Z", "MarkerScene", "ObjectScene", "PaintWall"]
 
 #: The authors' paint wall (world frame, robot waist at z = 0.3).
 TEO_WALL_Y = (-0.8, -0.6, -0.4, -0.2)
@@ -145,3 +149,65 @@ class PaintWall:
             rgba = (0.85, 0.1, 0.1, 1.0) if p else (0.85, 0.85, 0.85, 1.0)
             out.append(("box", half, np.asarray(c, np.float64), rgba))
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectScene:
+    """Features of bodies, sites and joints of the simulated world, by name.
+
+    Args:
+        specs: `cgda_jax.sim.features.FeatureSpec` entries or their dict form,
+            e.g. ``[{"body": "box", "quantity": "xy"}, {"joint": "valve",
+            "quantity": "angle"}]``; names are resolved against the model when the
+            `Simulator` is built (an unknown name raises KeyError listing the
+            model's names).
+        goal_path: optional (K, 3) points drawn in renders (e.g. the goal path of a
+            pushed box), world frame.
+
+    The simulator computes the features (``world_features`` tells it which); this
+    scene carries no state.  Units are in `feature_names` (m, rad).
+    """
+
+    specs: tuple = ()
+    goal_path: np.ndarray | None = None
+
+    def __post_init__(self):
+        from cgda_jax.sim.features import FeatureSpec
+
+        specs = tuple(f if isinstance(f, FeatureSpec) else FeatureSpec.from_dict(f)
+                      for f in self.specs)
+        if not specs:
+            raise ValueError("ObjectScene needs at least one feature")
+        object.__setattr__(self, "specs", specs)
+        if self.goal_path is not None:
+            path = np.asarray(self.goal_path, np.float64)
+            if path.ndim != 2 or path.shape[1] != 3 or not np.all(np.isfinite(path)):
+                raise ValueError(f"goal_path must be finite (K, 3); got {path.shape}")
+            object.__setattr__(self, "goal_path", path)
+
+    @property
+    def world_features(self) -> tuple:
+        return self.specs
+
+    @property
+    def feature_names(self) -> tuple[str, ...]:
+        return tuple(f"{c} [{f.unit}]" for f in self.specs for c in f.columns())
+
+    @property
+    def n_features(self) -> int:
+        return len(self.feature_names)
+
+    def init_state(self) -> tuple:
+        return ()
+
+    def update(self, state: tuple, marker_pos: Array) -> tuple:
+        del marker_pos
+        return state
+
+    def decorations(self, state) -> list:
+        """The goal path as small green spheres (renders)."""
+        del state
+        if self.goal_path is None:
+            return []
+        half = np.full(3, 0.012)
+        return [("sphere", half, p, (0.1, 0.8, 0.2, 0.8)) for p in self.goal_path]
