@@ -54,6 +54,13 @@ _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _MARKER_SENSOR = "cgda_marker"
 
+#: A C rollout whose |qpos| or |qvel| passes this (rad, m, rad/s, m/s) diverged:
+#: ``mujoco.rollout`` stops a rollout at MuJoCo's "unstable simulation" warning and
+#: repeats its last (huge but finite) state, from which sensors read plausible-looking
+#: positions; such rollouts are turned into NaN (as MJX gives), which the strategies
+#: count as invalid.
+DIVERGED = 1e4
+
 
 def resolve_physics(name: str) -> str:
     """``"auto"`` -> ``"mujoco"`` on a CPU-only JAX, else ``"mjx"``; others unchanged."""
@@ -296,7 +303,13 @@ class MujocoBackend:
             states, sens = self._pool.rollout(
                 p.model, self._datas, init, ctrl, nstep=t + 1
             )
+        qv = states[:, :, 1:1 + p.state_size]
+        bad = ~np.all(np.isfinite(qv), axis=(1, 2)) | np.any(np.abs(qv) > DIVERGED,
+                                                            axis=(1, 2))
         final = states[:, t - 1, 1:1 + p.state_size]
+        sens = sens.copy() if bad.any() else sens
+        final[bad] = np.nan
+        sens[bad] = np.nan
         return (final.reshape(*batch, p.state_size).astype(np.float32),
                 sens[:, 1:].reshape(*batch, t, p.nsensordata).astype(np.float32))
 
