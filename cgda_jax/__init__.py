@@ -69,6 +69,7 @@ _LAZY.update({
         "ALGORITHMS",
         "STRATEGIES",
         "ExecutionResult",
+        "SimulationDiverged",
         "run_fte",
         "run_ie",
         "run_iet",
@@ -150,6 +151,6 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.sim.robot import Robot, model_path  # noqa: F401
     from cgda_jax.sim.scenes import MarkerScene, PaintWall  # noqa: F401
     from cgda_jax.strategies import (  # noqa: F401
-        ALGORITHMS, STRATEGIES, ExecutionResult, run_fte, run_ie, run_iet, run_oet,
-        run_trials,
+        ALGORITHMS, STRATEGIES, ExecutionResult, SimulationDiverged, run_fte, run_ie,
+        run_iet, run_oet, run_trials,
     )
