@@ -74,6 +74,7 @@ _LAZY.update({
         "ALGORITHMS",
         "STRATEGIES",
         "ExecutionResult",
+        "SimulationDiverged",
         "run_fte",
         "run_ie",
         "run_iet",
@@ -157,6 +158,6 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.sim.scenes import MarkerScene, PaintWall  # noqa: F401
     from cgda_jax.sim.world import compile_world, compose_world  # noqa: F401
     from cgda_jax.strategies import (  # noqa: F401
-        ALGORITHMS, STRATEGIES, ExecutionResult, run_fte, run_ie, run_iet, run_oet,
-        run_trials,
+        ALGORITHMS, STRATEGIES, ExecutionResult, SimulationDiverged, run_fte, run_ie,
+        run_iet, run_oet, run_trials,
     )

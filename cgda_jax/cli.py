@@ -16,6 +16,10 @@ import time
 
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
 
+#: Exit status when a simulation diverged (`cgda_jax.SimulationDiverged`); the
+#: others: 0 goal met, 1 goal not met, 2 bad input (config, files), 130 interrupted.
+EXIT_DIVERGED = 3
+
 
 def _cache_dir() -> pathlib.Path:
     env = os.environ.get("CGDA_JAX_CACHE")
@@ -46,7 +50,8 @@ The results folder gets report.md (start there), result.json, arrays.npz,
 config.toml (the resolved config; re-run it with `cgda run <folder>/config.toml`)
 and plots/ (PNGs; execution runs also plots/execution.gif of the robot).
 Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
-tables printed by --dry-run. Exit status: 0 goal met, 1 goal not met, 2 bad input.
+tables printed by --dry-run. Exit status: 0 goal met, 1 goal not met, 2 bad input,
+3 the simulation diverged (every candidate gave non-finite features).
 Rendering needs offscreen OpenGL: MUJOCO_GL=egl or osmesa (picked automatically on
 a headless Linux machine when unset).
 """
@@ -195,6 +200,12 @@ def cmd_demo(args) -> int:
     return 0 if success else 1
 
 
+def _diverged(err: BaseException) -> bool:
+    """`err` is a `cgda_jax.SimulationDiverged` (its module is loaded if it is one)."""
+    mod = sys.modules.get("cgda_jax.strategies.result")
+    return mod is not None and isinstance(err, mod.SimulationDiverged)
+
+
 def _log_warnings() -> None:
     """Library warnings (logger ``cgda_jax``) as ``cgda: warning: ...`` lines."""
     logger = logging.getLogger("cgda_jax")
@@ -219,6 +230,11 @@ def main(argv: list[str] | None = None) -> int:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
         print(f"cgda: error: {msg}", file=sys.stderr)
         return 2
+    except RuntimeError as e:
+        if not _diverged(e):
+            raise
+        print(f"cgda: error: {e}", file=sys.stderr)
+        return EXIT_DIVERGED
     except KeyboardInterrupt:
         print("cgda: interrupted", file=sys.stderr)
         return 130

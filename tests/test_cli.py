@@ -95,3 +95,21 @@ def test_help_texts_show_examples(capsys):
             main([cmd, "--help"])
         out = capsys.readouterr().out
         assert "examples:" in out and f"cgda {cmd}" in out and "report.md" in out
+
+
+def test_diverged_simulation_exits_3_with_one_line(monkeypatch, capsys, tmp_path):
+    import cgda_jax
+    from cgda_jax import SimulationDiverged
+
+    def diverging_run_ie(sim, goal, **kwargs):
+        raise SimulationDiverged("every one of the 96 candidate evaluations of the IE "
+                                 "run diverged (non-finite features): check the gains")
+
+    monkeypatch.setattr(cgda_jax, "run_ie", diverging_run_ie)
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--quiet",
+                 "--set", "output.render=false", "--set", "output.plots=false",
+                 "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 3
+    assert err.startswith("cgda: error: every one of the 96") and err.count("\n") == 1
+    assert "Traceback" not in err

@@ -14,6 +14,14 @@ clipping, no infeasible postures). ``u = 0`` is the middle of every joint range,
 start mean of distribution-based algorithms, and a step size of about 0.3 moves a joint
 by a few tenths of its range.
 
+Divergence. A candidate whose fitness is not finite (a simulation that blew up: NaN or
+inf features) is *invalid*: it is told to the algorithm with the finite fitness
+`INVALID_PENALTY` (ranked after every valid candidate, so no algorithm state turns
+NaN), it is never kept as the best, and it is counted (`Evolution.invalid`, the
+``invalid`` metric of every generation). The best of an evolution is always a
+candidate that was evaluated and finite; until there is one, ``best_fitness`` is inf
+and `Evolution.found` is False.
+
 References:
     Lange, "evosax: JAX-based Evolution Strategies", GECCO 2023 companion.
 """
@@ -36,6 +44,14 @@ from cgda_jax.strategies.result import ExecutionResult
 
 #: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
 ALGORITHMS: dict[str, type] = dict(_EVOSAX_ALGORITHMS)
+
+#: Fitness told to the algorithm for an invalid (non-finite) candidate. A constant,
+#: not a figure relative to the generation: population-based algorithms (DE, GA, PSO)
+#: compare fitness across generations, and an invalid candidate must lose against
+#: every valid one ever seen. Valid fitness is capped at it (ties, never inversions).
+#: Float32 keeps its square (1e20) finite, so algorithms that standardize fitness stay
+#: finite too.
+INVALID_PENALTY = 1e10
 
 FitnessFn = Callable[[jax.Array], jax.Array]
 """Maps joint genes (P, D) -> fitness (P,), minimized; the one batched sim call."""
@@ -183,6 +199,7 @@ class Evolution:
         stall: generations since the best fitness last improved.
         generation: generations run.
         evaluations: fitness evaluations spent.
+        invalid: how many of them were invalid (non-finite fitness).
         done: True once a stop condition held; the state is then frozen.
     """
 
@@ -193,11 +210,28 @@ class Evolution:
     stall: jax.Array
     generation: jax.Array
     evaluations: jax.Array
+    invalid: jax.Array
     done: jax.Array
 
+    @property
+    def found(self) -> jax.Array:
+        """True once a valid candidate was evaluated (`best_u` is one); bool array."""
+        return jnp.isfinite(self.best_fitness)
 
-def _sanitize(fitness: jax.Array) -> jax.Array:
-    return jnp.where(jnp.isfinite(fitness), fitness, jnp.inf)
+
+def screen(fitness: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Splits a population's raw fitness (P,) into what is told and what is ranked.
+
+    Returns:
+        ``(told, ranked, n_invalid)``: `told` (P,) is finite (invalid candidates get
+        `INVALID_PENALTY`, valid ones are capped at it), for the algorithm; `ranked`
+        (P,) is the fitness with inf for invalid candidates, for the best; `n_invalid`
+        is the int32 count of invalid candidates (traced, no host sync).
+    """
+    valid = jnp.isfinite(fitness)
+    told = jnp.where(valid, jnp.minimum(fitness, INVALID_PENALTY), INVALID_PENALTY)
+    ranked = jnp.where(valid, fitness, jnp.inf)
+    return told, ranked, jnp.sum(~valid).astype(jnp.int32)
 
 
 def evolution_init(
@@ -211,22 +245,25 @@ def evolution_init(
     """Starts an evolution (jittable, vmappable over `key` and `fitness_u`'s context).
 
     Distribution-based algorithms start at `mean` (normalized genes (D,); default 0 =
-    mid joint ranges); population-based ones get a uniform initial population in
-    ``[-1, 1]^D`` that is evaluated here.
+    mid joint ranges), which is not evaluated: the evolution has no best yet
+    (``best_fitness`` inf, `Evolution.found` False). Population-based ones get a
+    uniform initial population in ``[-1, 1]^D`` that is evaluated here (its best valid
+    candidate, if any, is the first best).
     """
     key, k_init, k_pop = jax.random.split(key, 3)
     if isinstance(algo, PopulationBasedAlgorithm):
         pop = jax.random.uniform(
             k_pop, (algo.population_size, n_genes), minval=-1.0, maxval=1.0
         )
-        fit = _sanitize(fitness_u(pop))
-        state = algo.init(k_init, pop, fit, params)
-        i = jnp.argmin(fit)
-        best_u, best_f, evals = pop[i], fit[i], algo.population_size
+        told, ranked, invalid = screen(fitness_u(pop))
+        state = algo.init(k_init, pop, told, params)
+        i = jnp.argmin(ranked)
+        best_u, best_f, evals = pop[i], ranked[i], algo.population_size
     else:
         mean = jnp.zeros((n_genes,)) if mean is None else mean
         state = algo.init(k_init, mean, params)
         best_u, best_f, evals = mean, jnp.asarray(jnp.inf), 0
+        invalid = jnp.zeros((), jnp.int32)
     return Evolution(
         algo=state,
         key=key,
@@ -235,6 +272,7 @@ def evolution_init(
         stall=jnp.asarray(0, jnp.int32),
         generation=jnp.asarray(0, jnp.int32),
         evaluations=jnp.asarray(evals, jnp.int32),
+        invalid=invalid,
         done=jnp.asarray(False),
     )
 
@@ -263,29 +301,33 @@ def evolution_step(
         stop: Evolution -> bool, evaluated after the update.
 
     Returns:
-        ``(evo, metrics)`` with metrics ``best_fitness`` (best so far) and
-        ``generation_best`` (this generation's best; inf when frozen).
+        ``(evo, metrics)`` with metrics ``best_fitness`` (best so far),
+        ``generation_best`` (this generation's best valid fitness; inf when frozen or
+        when none was valid) and ``invalid`` (invalid candidates of this generation;
+        0 when frozen). Invalid candidates are told `INVALID_PENALTY` (see `screen`).
     """
     k = jax.random.fold_in(evo.key, evo.generation)
     k_ask, k_tell = jax.random.split(k)
     pop, algo_state = algo.ask(k_ask, evo.algo, params)
-    fit = _sanitize(fitness_u(pop))
-    algo_state, _ = algo.tell(k_tell, pop, fit, algo_state, params)
-    i = jnp.argmin(fit)
-    better = fit[i] < evo.best_fitness
+    told, ranked, invalid = screen(fitness_u(pop))
+    algo_state, _ = algo.tell(k_tell, pop, told, algo_state, params)
+    i = jnp.argmin(ranked)
+    better = ranked[i] < evo.best_fitness
     new = evo.replace(
         algo=algo_state,
         best_u=jnp.where(better, pop[i], evo.best_u),
-        best_fitness=jnp.where(better, fit[i], evo.best_fitness),
+        best_fitness=jnp.where(better, ranked[i], evo.best_fitness),
         stall=jnp.where(better, 0, evo.stall + 1),
         generation=evo.generation + 1,
         evaluations=evo.evaluations + algo.population_size,
+        invalid=evo.invalid + invalid,
     )
     new = new.replace(done=stop(new))
     out = freeze(evo.done, evo, new)
     metrics = {
         "best_fitness": out.best_fitness,
-        "generation_best": jnp.where(evo.done, jnp.inf, fit[i]),
+        "generation_best": jnp.where(evo.done, jnp.inf, ranked[i]),
+        "invalid": jnp.where(evo.done, 0, invalid),
     }
     return out, metrics
 
@@ -404,6 +446,12 @@ class PlanBase:
         """Normalized genes (..., DoF) -> joint angles."""
         return to_joints(u, self.lower, self.upper)
 
+    def best_joints(self, evo: Evolution) -> jax.Array:
+        """Joint angles of `evo`'s best genes (..., D); NaN where nothing valid was
+        found (the start mean was never evaluated: it is no posture to report)."""
+        q = self.joints(evo.best_u)
+        return jnp.where(jnp.expand_dims(evo.found, -1), q, jnp.nan)
+
     def point_features(self, state: Any, pop_u: jax.Array) -> jax.Array:
         """Features (P, F) after one step from `state` to each posture of `pop_u` (P, DoF)."""
         q = self.joints(pop_u)
@@ -460,20 +508,25 @@ class PlanBase:
         final_fitness: float | None = None,
         point_errors: np.ndarray | None = None,
         complete: bool = True,
+        invalid_evaluations: int = 0,
         **info: Any,
     ) -> ExecutionResult:
         """The `ExecutionResult` of a finished run (host arrays).
 
         ``final`` holds ``joints`` and ``features``; `point_errors` defaults to each
-        executed point's Euclidean error to its goal point, `final_fitness` to the
-        largest of them; success = `complete` and every error < tolerance. `info`
+        executed point's Euclidean error to its goal point (inf where not finite),
+        `final_fitness` to the largest of them; success = `complete` and every error
+        < tolerance. `invalid_evaluations` counts the diverged evaluations. `info`
         extends the plan's settings.
         """
         goal = np.asarray(self.goal)
         if point_errors is None:
             point_errors = np.linalg.norm(final["features"] - goal, axis=-1)
+        point_errors = np.where(np.isfinite(point_errors), point_errors, np.inf)
         if final_fitness is None:
             final_fitness = point_errors.max()
+        if np.isnan(final_fitness):  # an execution without finite features
+            final_fitness = np.inf
         return ExecutionResult(
             strategy=self.name,
             joints=final["joints"],
@@ -489,4 +542,5 @@ class PlanBase:
             tolerance=self.tolerance,
             final_fitness=float(final_fitness),
             info={**self.info, "trials_in_batch": timing["trials_in_batch"], **info},
+            invalid_evaluations=int(invalid_evaluations),
         )

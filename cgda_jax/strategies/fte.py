@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.strategies.base import PlanBase
@@ -82,10 +83,14 @@ class FTEPlan(PlanBase):
 
     def finish(self, evo):
         return {
-            **self.execution(self._trajectory(evo.best_u)),
+            # NaN when nothing valid was found (the start mean was never evaluated)
+            **self.execution(
+                jnp.where(evo.found, self._trajectory(evo.best_u), jnp.nan)
+            ),
             "best_fitness": evo.best_fitness,
             "generation": evo.generation,
             "evaluations": evo.evaluations,
+            "invalid": evo.invalid,
         }
 
     def to_result(self, final, history, timing):
@@ -97,6 +102,10 @@ class FTEPlan(PlanBase):
             generations=gens,
             final_fitness=final["best_fitness"],
             stagnation=self.stagnation,
+            invalid_evaluations=final["invalid"],
+            points_without_valid=(
+                [] if np.isfinite(final["best_fitness"]) else list(range(self.n_points))
+            ),
         )
 
 

@@ -98,9 +98,11 @@ class IEPlan(PlanBase):
 
     def finish(self, evo):
         return {
-            **self.execution(self.joints(evo.best_u)),
+            **self.execution(self.best_joints(evo)),
             "generation": evo.generation,
             "evaluations": evo.evaluations,
+            "invalid": evo.invalid,
+            "found": evo.found,
         }
 
     def to_result(self, final, history, timing):
@@ -112,6 +114,9 @@ class IEPlan(PlanBase):
             evaluations=final["evaluations"].sum(),
             generations=gens.max(),
             point_generations=gens.tolist(),
+            invalid_evaluations=final["invalid"].sum(),
+            point_invalid=final["invalid"].tolist(),
+            points_without_valid=np.flatnonzero(~final["found"]).tolist(),
         )
 
 

@@ -55,6 +55,9 @@ class IETState:
         point_fitness: fitness (Euclidean over points 0..i) at commit (N,).
         point_generations, point_evaluations: spent per point (N,), restarts and
             revisits included.
+        point_invalid: how many of those evaluations were invalid (N,).
+        stopped: the run stopped at `point`: none of its evolutions (restarts,
+            backtracks) found a valid candidate, so there is no posture to commit.
     """
 
     evo: Evolution
@@ -72,6 +75,8 @@ class IETState:
     point_fitness: jax.Array
     point_generations: jax.Array
     point_evaluations: jax.Array
+    point_invalid: jax.Array
+    stopped: jax.Array
 
 
 def _at(tree: Any, i: jax.Array) -> Any:
@@ -93,6 +98,10 @@ class IETPlan(PlanBase):
             is re-evolved (fresh key) and the point tried again, up to this many times
             per run (escapes prefixes that leave no way to the goal, e.g. every
             remaining square only reachable by sweeping across another one).
+
+    A point whose every evolution (restarts and backtracks included) found no valid
+    candidate (every simulation diverged) is not committed: the run stops there
+    (``info["points_without_valid"]``; it and the later points have NaN joints).
     """
 
     name = "iet"
@@ -162,6 +171,8 @@ class IETPlan(PlanBase):
             point_fitness=jnp.full((n,), jnp.inf, jnp.float32),
             point_generations=jnp.zeros((n,), jnp.int32),
             point_evaluations=jnp.zeros((n,), jnp.int32),
+            point_invalid=jnp.zeros((n,), jnp.int32),
+            stopped=jnp.asarray(False),
         )
         return self._start(s, zero_i, zero_i)
 
@@ -175,11 +186,13 @@ class IETPlan(PlanBase):
             best_u=best_u, best_fitness=best_f,
             point_generations=s.point_generations.at[i].add(s.evo.generation),
             point_evaluations=s.point_evaluations.at[i].add(s.evo.evaluations),
+            point_invalid=s.point_invalid.at[i].add(s.evo.invalid),
         )
         q = self.joints(best_u)
         sim_state, feats = self.sim.step(_at(s.sim_states, i), q)
         own_sq = jnp.sum((feats - self.goal[i]) ** 2)
         met = own_sq < self.tolerance**2
+        found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try
         can_restart = s.restart < self.restarts
         can_backtrack = (i > 0) & (s.backtracks < self.backtracks)
 
@@ -203,9 +216,13 @@ class IETPlan(PlanBase):
             return self._start(s.replace(backtracks=s.backtracks + 1), i - 1,
                                jnp.zeros_like(i))
 
+        def stop(s):  # nothing valid to commit: every candidate diverged
+            return s.replace(stopped=jnp.asarray(True))
+
+        fallback = jnp.where(found, 0, 3)
         branch = jnp.where(met, 0, jnp.where(can_restart, 1,
-                                             jnp.where(can_backtrack, 2, 0)))
-        return jax.lax.switch(branch, [commit, restart, backtrack], s)
+                                             jnp.where(can_backtrack, 2, fallback)))
+        return jax.lax.switch(branch, [commit, restart, backtrack, stop], s)
 
     def step(self, s: IETState):
         finished = self.done(s)
@@ -218,20 +235,23 @@ class IETPlan(PlanBase):
         new = freeze(finished, s, new)
         # which evolution (point, try) this generation belongs to
         metrics = {"best_fitness": metrics["best_fitness"],
+                   "invalid": metrics["invalid"],
                    "point": jnp.where(finished, -1, s.point),
                    "try": s.tries[p] - 1}
         return new, metrics
 
     def done(self, s):
-        return s.point >= self.n_points
+        return (s.point >= self.n_points) | s.stopped
 
     def progress(self, s):
         return {"point": np.asarray(s.point).tolist(),
                 "backtracks": np.asarray(s.backtracks).tolist()}
 
     def finish(self, s):
+        # points never committed (a stopped run) have no posture: NaN
+        committed = jnp.arange(self.n_points) < s.point
         return {
-            **self.execution(s.joints),
+            **self.execution(jnp.where(committed[:, None], s.joints, jnp.nan)),
             "carried_features": s.features,
             "point": s.point,
             "tries": s.tries,
@@ -239,6 +259,8 @@ class IETPlan(PlanBase):
             "point_fitness": s.point_fitness,
             "point_generations": s.point_generations,
             "point_evaluations": s.point_evaluations,
+            "point_invalid": s.point_invalid,
+            "stopped": s.stopped,
         }
 
     def to_result(self, final, history, timing):
@@ -249,6 +271,7 @@ class IETPlan(PlanBase):
             for i, t in enumerate(last_try)
         ])
         gens = final["point_generations"]
+        n_done = min(int(final["point"]), self.n_points)
         return self.result(
             final, timing,
             fitness_history=hist,
@@ -256,6 +279,9 @@ class IETPlan(PlanBase):
             generations=gens.sum(),
             final_fitness=np.linalg.norm(final["features"] - np.asarray(self.goal)),
             complete=int(final["point"]) >= self.n_points,
+            invalid_evaluations=final["point_invalid"].sum(),
+            point_invalid=final["point_invalid"].tolist(),
+            points_without_valid=[n_done] if bool(final["stopped"]) else [],
             restarts=self.restarts,
             backtracks=self.backtracks,
             backtracks_used=int(final["backtracks"]),
@@ -271,7 +297,8 @@ class IETPlan(PlanBase):
                 for i, n_tries in enumerate(final["tries"])
             ],
             carried_matches_rollout=bool(
-                np.allclose(final["carried_features"], final["features"], atol=1e-4)
+                np.allclose(final["carried_features"][:n_done],
+                            final["features"][:n_done], atol=1e-4)
             ),
         )
 

@@ -8,6 +8,8 @@ Localization looks only at the window [k, k + lookahead] of the previous k (and 
 with k = -1, so the first target is g_0): progress along the goal is monotone, and a
 closed goal (a circle whose end meets its start) is not mistaken as already finished.
 Each step's evolution starts from the current posture (distribution-based algorithms).
+A step whose evolution found no valid candidate (every simulation diverged) executes
+nothing: the run stops there (``info["points_without_valid"]`` names its target).
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ from cgda_jax.strategies.runner import run
 @struct.dataclass
 class OETState:
     """Carry of an OET run: the current evolution, sim state, localized step k and the
-    executed postures (S, DoF) / features (S, F) / targets (S,) so far (`steps` of S)."""
+    executed postures (S, DoF) / features (S, F) / targets (S,) so far (`steps` of S),
+    the invalid evaluations (total and per step (S,)) and `stuck` (the last evolution
+    found no valid candidate; the run stopped)."""
 
     evo: Evolution
     key: jax.Array
@@ -40,6 +44,9 @@ class OETState:
     targets: jax.Array
     step_generations: jax.Array
     evaluations: jax.Array
+    invalid: jax.Array
+    step_invalid: jax.Array
+    stuck: jax.Array
 
 
 class OETPlan(PlanBase):
@@ -86,6 +93,9 @@ class OETPlan(PlanBase):
             targets=jnp.full((s,), -1, jnp.int32),
             step_generations=jnp.zeros((s,), jnp.int32),
             evaluations=jnp.zeros((), jnp.int32),
+            invalid=jnp.zeros((), jnp.int32),
+            step_invalid=jnp.zeros((s,), jnp.int32),
+            stuck=jnp.asarray(False),
         )
 
     def _execute(self, s: OETState) -> OETState:
@@ -106,18 +116,34 @@ class OETPlan(PlanBase):
             targets=s.targets.at[s.steps].set(self._target(s.k)),
             step_generations=s.step_generations.at[s.steps].set(s.evo.generation),
             evaluations=s.evaluations + s.evo.evaluations,
+            invalid=s.invalid + s.evo.invalid,
+            step_invalid=s.step_invalid.at[s.steps].set(s.evo.invalid),
         )
+
+    def _stuck(self, s: OETState) -> OETState:
+        """The step's evolution found no valid candidate: execute nothing, stop."""
+        return s.replace(
+            step_generations=s.step_generations.at[s.steps].set(s.evo.generation),
+            evaluations=s.evaluations + s.evo.evaluations,
+            invalid=s.invalid + s.evo.invalid,
+            step_invalid=s.step_invalid.at[s.steps].set(s.evo.invalid),
+            stuck=jnp.asarray(True),
+        )
+
+    def _end(self, s: OETState) -> OETState:
+        return jax.lax.cond(s.evo.found, self._execute, self._stuck, s)
 
     def step(self, s: OETState):
         finished = self.done(s)
         evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k))
-        new = jax.lax.cond(evo.done, self._execute, lambda x: x, s.replace(evo=evo))
+        new = jax.lax.cond(evo.done, self._end, lambda x: x, s.replace(evo=evo))
         new = freeze(finished, s, new)
         return new, {"best_fitness": metrics["best_fitness"],
+                     "invalid": metrics["invalid"],
                      "step": jnp.where(finished, -1, s.steps)}
 
     def done(self, s):
-        return (s.k >= self.n_points - 1) | (s.steps >= self.max_steps)
+        return (s.k >= self.n_points - 1) | (s.steps >= self.max_steps) | s.stuck
 
     def progress(self, s):
         return {"k": np.asarray(s.k).tolist(), "steps": np.asarray(s.steps).tolist()}
@@ -125,14 +151,16 @@ class OETPlan(PlanBase):
     def finish(self, s):
         return {"joints": s.joints, "features": s.features, "targets": s.targets,
                 "steps": s.steps, "k": s.k, "step_generations": s.step_generations,
-                "evaluations": s.evaluations}
+                "evaluations": s.evaluations, "invalid": s.invalid,
+                "step_invalid": s.step_invalid, "stuck": s.stuck}
 
     def to_result(self, final, history, timing):
         goal = np.asarray(self.goal)
         n = int(final["steps"])
         feats = final["features"][:n]
         dist = np.linalg.norm(goal[:, None, :] - feats[None, :, :], axis=-1)
-        gens = final["step_generations"][:n]
+        stuck = bool(final["stuck"])
+        gens = final["step_generations"][:n + stuck]  # the stuck evolution ran too
         return self.result(
             {"joints": final["joints"][:n], "features": feats}, timing,
             point_errors=dist.min(axis=1) if n else np.full(len(goal), np.inf),
@@ -144,6 +172,11 @@ class OETPlan(PlanBase):
             steps=n, reached_end=int(final["k"]) >= len(goal) - 1,
             targets=final["targets"][:n].tolist(),
             step_generations=gens.tolist(), lookahead=self.lookahead,
+            invalid_evaluations=final["invalid"],
+            step_invalid=final["step_invalid"][:n + stuck].tolist(),
+            points_without_valid=(
+                [min(int(final["k"]) + 1, len(goal) - 1)] if stuck else []
+            ),
         )
 
 

@@ -1,4 +1,5 @@
-"""`ExecutionResult`: what a strategy run returns, with a JSON + NPZ round trip."""
+"""`ExecutionResult`: what a strategy run returns, with a JSON + NPZ round trip; and
+`SimulationDiverged`, raised when no candidate of a run could be evaluated."""
 
 from __future__ import annotations
 
@@ -12,6 +13,14 @@ import numpy as np
 _ARRAYS = ("joints", "features", "goal", "point_errors", "fitness_history")
 
 
+class SimulationDiverged(RuntimeError):
+    """Every candidate evaluation of a run diverged (non-finite features).
+
+    Nothing was ever evaluated successfully, so there is no posture to report. The
+    message names the strategy and likely causes (actuator gains, timestep).
+    """
+
+
 @dataclasses.dataclass
 class ExecutionResult:
     """Outcome of one strategy run (host NumPy arrays).
@@ -23,7 +32,8 @@ class ExecutionResult:
             (OET: (S, F)).
         goal: the goal feature trajectory (N, F).
         point_errors: Euclidean error per goal point (N,) (OET: distance from each goal
-            point to the nearest executed feature).
+            point to the nearest executed feature); inf where the execution gave no
+            finite features (a point without any valid candidate).
         fitness_history: best fitness so far per generation: (G,) for FTE; (N, G) per
             point for IE, IET and OET (NaN-padded after a point's generations). IET:
             each point's last evolution (the committed one) only; the generations of
@@ -40,7 +50,12 @@ class ExecutionResult:
             means "each executed point is the nearest achievable value".
         final_fitness: final fitness (FTE: DTW; IE/OET: worst point error; IET: the full
             trajectory's Euclidean fitness).
-        info: extra settings (algorithm, population_size, seed, trial, ...).
+        info: extra settings (algorithm, population_size, seed, trial, ...); where the
+            plan has points, ``point_invalid`` (invalid evaluations per point or OET
+            step) and ``points_without_valid`` (points whose every candidate diverged:
+            their joints are NaN, no posture was found).
+        invalid_evaluations: evaluations whose fitness was not finite (the simulation
+            diverged); they are ranked last and never reported as the best.
     """
 
     strategy: str
@@ -57,6 +72,7 @@ class ExecutionResult:
     tolerance: float
     final_fitness: float
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
+    invalid_evaluations: int = 0
 
     @property
     def points(self) -> int:
@@ -79,6 +95,7 @@ class ExecutionResult:
             "point_errors": [float(e) for e in self.point_errors],
             "final_fitness": float(self.final_fitness),
             "evaluations": int(self.evaluations),
+            "invalid_evaluations": int(self.invalid_evaluations),
             "generations": int(self.generations),
             "wall_time_s": float(self.wall_time_s),
             "compile_time_s": float(self.compile_time_s),
@@ -113,5 +130,6 @@ class ExecutionResult:
             tolerance=meta["tolerance"],
             final_fitness=meta["final_fitness"],
             info=meta.get("info", {}),
+            invalid_evaluations=meta.get("invalid_evaluations", 0),
             **arrays,
         )

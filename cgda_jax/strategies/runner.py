@@ -24,10 +24,15 @@ Several devices (``devices=`` of the ``run_*`` functions and `run_trials`, see
 `cgda_jax.sharding`): `run_trials` splits the trials axis over them (`drive` with a
 sharding), a single run splits the population of each generation's batched simulator
 call (`PlanBase` with a sharding). Without ``devices`` the programs are unchanged.
+
+Divergence (see `cgda_jax.strategies.base`): after a run, `run` logs ONE warning
+through the ``cgda_jax`` logger when some candidate evaluations were invalid, and
+raises `SimulationDiverged` when none was valid (`check_divergence`).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from typing import Any
@@ -39,7 +44,9 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
 from cgda_jax.strategies.base import check_config
-from cgda_jax.strategies.result import ExecutionResult
+from cgda_jax.strategies.result import ExecutionResult, SimulationDiverged
+
+log = logging.getLogger("cgda_jax")
 
 #: Number of times a chunk function was traced, per strategy name (tests use it to
 #: prove that IET compiles one step for all of its points).
@@ -174,6 +181,48 @@ def drive(
     return results
 
 
+def check_divergence(results: list[ExecutionResult]) -> None:
+    """Reports diverged (invalid) candidate evaluations of a run's results.
+
+    Logs one warning line (logger ``cgda_jax``; the CLI prints it as ``cgda:
+    warning: ...``) when some evaluations were invalid.
+
+    Raises:
+        SimulationDiverged: no evaluation of any result was valid (every candidate of
+            every evolution diverged): there is no posture to report.
+    """
+    invalid = sum(int(r.invalid_evaluations) for r in results)
+    if invalid == 0:
+        return
+    total = sum(int(r.evaluations) for r in results)
+    name = results[0].strategy.upper()
+    run = (f"{name} run" if len(results) == 1
+           else f"{name} runs ({len(results)} trials)")
+    if invalid >= total:
+        raise SimulationDiverged(
+            f"every one of the {total} candidate evaluations of the {run} diverged "
+            "(non-finite features): no posture could be evaluated. Check the "
+            "simulation: actuator gains (kp) too high for the timestep, a timestep "
+            "too large, or a model that is unstable from its initial state"
+        )
+    without = [(i, r.info.get("points_without_valid", [])) for i, r in
+               enumerate(results)]
+    without = [(i, p) for i, p in without if p]
+    detail = ""
+    if without:
+        where = "; ".join(
+            (f"trial {i}: " if len(results) > 1 else "") + f"points {p}"
+            for i, p in without
+        )
+        detail = (f"; no valid candidate at all for {where}: no posture there, "
+                  "goal not met")
+    log.warning(
+        "%d of %d candidate evaluations diverged (non-finite features): the %s ranked "
+        "them last and never reported one as the best%s. If many diverge, check the "
+        "simulation (actuator gains, timestep)", invalid, total, run, detail,
+    )
+
+
 def seed_keys(seeds: Any) -> jax.Array:
     """Typed keys (R,) from integer seeds (R,)."""
     return jax.vmap(jax.random.key)(jnp.asarray(seeds, dtype=jnp.uint32))
@@ -208,7 +257,11 @@ def run(
 
     Returns:
         R results, ``info["seed"]`` set to each one's seed and ``info["devices"]``
-        to the number of devices the run was split over.
+        to the number of devices the run was split over. Invalid (diverged)
+        evaluations are reported by one warning (see `check_divergence`).
+
+    Raises:
+        SimulationDiverged: every candidate evaluation of the run diverged.
     """
     if shard not in ("population", "trials"):
         raise ValueError(f"shard must be 'population' or 'trials'; got {shard!r}")
@@ -224,4 +277,5 @@ def run(
     for seed, res in zip(seeds, results, strict=True):
         res.info["seed"] = seed
         res.info["devices"] = n_devices
+    check_divergence(results)
     return results
