@@ -274,3 +274,49 @@ def test_screen_penalizes_and_counts():
     np.testing.assert_array_equal(ranked, [0.5, np.inf, np.inf, np.inf, 2e10, 1.0])
     assert int(n) == 3 and n.dtype == jnp.int32
     assert "invalid" in Evolution.__dataclass_fields__
+
+
+# --------------------------------------------------------------------------- real physics
+def _absurd_arm(tmp_path):
+    """The tiny arm with position gains no Euler step can hold (kp = 5e7)."""
+    from cgda_jax import model_path
+
+    xml = model_path("tiny_arm.xml").read_text().replace('<position kp="50"/>',
+                                                         '<position kp="5e7"/>')
+    path = tmp_path / "absurd_gains.xml"
+    path.write_text(xml)
+    return path
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "mjx"])
+def test_absurd_gains_diverge_and_are_reported(tmp_path, backend):
+    from cgda_jax import MarkerScene, Robot, Simulator, SimulationDiverged, run_ie
+
+    robot = Robot.from_mjcf(_absurd_arm(tmp_path), ["yaw", "shoulder", "elbow"],
+                            "marker")
+    sim = Simulator(robot, MarkerScene(), mode="dynamic", physics=backend,
+                    waypoint_s=0.05)
+    # every candidate diverges: non-finite features (MuJoCo C's stopped rollouts too)
+    feats = np.asarray(sim.execute_population(
+        np.random.default_rng(0).uniform(-1, 1, (4, 2, 3)).astype(np.float32)))
+    assert np.all(np.isnan(feats))
+    with pytest.raises(SimulationDiverged, match="IE run diverged.*gains"):
+        run_ie(sim, np.array([[0.2, 0.1, 0.4]]), population_size=4, max_generations=2)
+
+
+def test_absurd_gains_from_the_cli_exit_3_with_one_line(tmp_path, capsys, monkeypatch):
+    from cgda_jax.cli import main
+
+    monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path / "cache"))
+    cfg = tmp_path / "absurd.toml"
+    cfg.write_text(
+        'kind = "execution"\n[data]\nsource = "clean_circle"\ncentre = [0.3, 0.0, 0.4]\n'
+        'diameter = 0.1\nn_demos = 2\n'
+        f'[robot]\nmodel = "{_absurd_arm(tmp_path)}"\njoints = ["yaw", "shoulder", '
+        '"elbow"]\nfixed = {}\nmode = "dynamic"\nphysics = "mujoco"\nwaypoint_s = 0.05\n'
+        '[strategy]\npopulation_size = 4\nmax_generations = 2\n'
+        '[output]\nplots = false\nrender = false\n')
+    code = main(["run", str(cfg), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3
+    assert len(err) == 1 and err[0].startswith("cgda: error:") and "diverge" in err[0]

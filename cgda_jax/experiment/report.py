@@ -151,6 +151,9 @@ def _report(cfg: ExperimentConfig, result: dict) -> str:
             f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",
             f"| compile time | {result['compile_time_s']:.2f} s |",
         ]
+        if result.get("invalid_evaluations"):
+            lines += [f"| diverged (invalid) evaluations | "
+                      f"{result['invalid_evaluations']} of {result['evaluations']} |"]
         phys, replay = result.get("physics"), result.get("replay")
         if phys:
             lines += [

@@ -70,7 +70,8 @@ class IEPlan(PlanBase):
             return new, (state, feats)
 
         _, (states, feats) = jax.lax.scan(body, start, self.joints(best_u))
-        return states, jnp.linalg.norm(feats - self.goal, axis=-1)
+        errors = jnp.linalg.norm(feats - self.goal, axis=-1)
+        return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
     def init(self, key):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
