@@ -8,10 +8,12 @@ Runs the CLI in fresh processes with an empty persistent compilation cache
 3. second run with the cache (loads the compiled programs).
 
 Also times ``python -c "import cgda_jax"`` for the import share.
-Target (2-core CPU): the second run with the cache < 5 s, whole process.
+Targets (2-core CPU): the second run with the cache < 5 s, whole process
+(clean_ie.toml); experiments/clean_ie_dynamic.toml with an empty cache < 60 s
+(``--target-empty 60``).
 
     python benchmarks/bench_coldstart.py [--config experiments/clean_ie.toml]
-        [--repeats 1] [--no-plots]
+        [--repeats 1] [--no-plots] [--target-empty SECONDS]
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ def main() -> None:
     parser.add_argument("--config", default="experiments/clean_ie.toml")
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument("--target-empty", type=float, default=None,
+                        help="also report 'empty cache < SECONDS' (whole process)")
     args = parser.parse_args()
 
     cgda = [sys.executable, "-c", "from cgda_jax.cli import main; main()"]
@@ -76,13 +80,19 @@ def main() -> None:
     print(f"config: {args.config}{' (no plots)' if args.no_plots else ''}")
     print_table(rows, ["run", "seconds"])
     cached = rows[-1]["seconds"]
-    report_target(
-        f"second run with cache < {TARGET_CACHED_S:g} s (s)",
-        cached,
-        cached < TARGET_CACHED_S,
-    )
+    if args.config == "experiments/clean_ie.toml":
+        report_target(
+            f"second run with cache < {TARGET_CACHED_S:g} s (s)",
+            cached,
+            cached < TARGET_CACHED_S,
+        )
+    if args.target_empty is not None:
+        empty = rows[-2]["seconds"]
+        report_target(f"run with an empty cache < {args.target_empty:g} s (s)", empty,
+                      empty < args.target_empty)
     write_json(
-        "bench_coldstart",
+        "bench_coldstart" + ("_" + pathlib.Path(args.config).stem
+                             if args.config != "experiments/clean_ie.toml" else ""),
         {
             "config": args.config,
             "plots": not args.no_plots,
