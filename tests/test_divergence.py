@@ -300,6 +300,8 @@ def test_absurd_gains_diverge_and_are_reported(tmp_path, backend):
     feats = np.asarray(sim.execute_population(
         np.random.default_rng(0).uniform(-1, 1, (4, 2, 3)).astype(np.float32)))
     assert np.all(np.isnan(feats))
+    if backend == "mjx":  # the strategy layer is the same; spare CI an MJX plan compile
+        return
     with pytest.raises(SimulationDiverged, match="IE run diverged.*gains"):
         run_ie(sim, np.array([[0.2, 0.1, 0.4]]), population_size=4, max_generations=2)
 

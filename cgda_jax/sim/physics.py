@@ -89,7 +89,7 @@ def weldable_joints(
     out = []
     for j in range(m.njnt):
         name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
-        if name in keep or int(m.jnt_type[j]) not in (_HINGE, _SLIDE):
+        if not name or name in keep or int(m.jnt_type[j]) not in (_HINGE, _SLIDE):
             continue
         adr = int(m.jnt_qposadr[j])
         if j in actuated and abs(start_qpos[adr] - m.qpos0[adr]) < 1e-9:
@@ -131,7 +131,8 @@ def reduced_model(
     model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_AUTORESET)
     if timestep is not None:
         if not (np.isfinite(timestep) and timestep > 0):
-            raise ValueError(f"timestep must be a positive number of seconds, got {timestep}")
+            raise ValueError(
+                f"timestep must be a positive number of seconds, got {timestep}")
         model.opt.timestep = float(timestep)
     return model
 
@@ -178,11 +179,14 @@ class Physics:
         self.state_size = m.nq + m.nv
         self.timestep = float(m.opt.timestep)
         jt = mujoco.mjtObj.mjOBJ_JOINT
+        # deleting joints keeps the others' order: carry the robot's start values over
+        kept = [j for j in range(full.njnt)
+                if mujoco.mj_id2name(full, jt, j) not in self.welded]
+        assert len(kept) == m.njnt
+        width = {int(mujoco.mjtJoint.mjJNT_FREE): 7, int(mujoco.mjtJoint.mjJNT_BALL): 4}
         qpos0 = np.array(m.qpos0, np.float64)
-        for j in range(m.njnt):  # carry the robot's start values over by name
-            name = mujoco.mj_id2name(m, jt, j)
-            fj = mujoco.mj_name2id(full, jt, name)
-            n = {0: 7, 1: 4}.get(int(m.jnt_type[j]), 1)
+        for j, fj in enumerate(kept):
+            n = width.get(int(m.jnt_type[j]), 1)
             a, b = int(m.jnt_qposadr[j]), int(full.jnt_qposadr[fj])
             qpos0[a:a + n] = start[b:b + n]
         self.qpos0 = qpos0
@@ -198,13 +202,19 @@ class Physics:
         self.act_qadr = np.zeros(m.nu, np.int32)
         for j, a in actuated.items():
             self.act_qadr[a] = m.jnt_qposadr[j]
+        held = set(self.act_qadr.tolist())
         missing = [n for n, q in zip(robot.joint_names, self.gene_qadr)
-                   if int(q) not in set(self.act_qadr.tolist())]
+                   if int(q) not in held]
         if missing:
             raise ValueError(
                 f"dynamic mode needs a position actuator on every evolved joint; "
                 f"joints {missing} have none"
             )
+        loose = [n for n in getattr(robot, "fixed", {}) if n not in self.welded
+                 and int(m.jnt_qposadr[mujoco.mj_name2id(m, jt, n)]) not in held]
+        if loose:
+            raise ValueError(f"dynamic mode: fixed joints {loose} have no position "
+                             "actuator to hold them")
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, _MARKER_SENSOR)
         self.marker_adr = int(m.sensor_adr[sid])
         self.nsensordata = int(m.nsensordata)
