@@ -1,16 +1,6 @@
-"""Running an experiment: recognition or execution, into a results folder.
-
-Two kinds:
-
-- ``recognition``: synthetic MOVE/ROTATE/CLEAN/PAINT demonstrations (paper 4.1-4.2):
-  ``n_train`` repetitions generalize each action, the next one is the test query;
-  writes the cost matrix (paper Tables 2-4) and the accuracy.
-- ``execution``: a goal feature trajectory (generalized clean circle, the paint ramp,
-  or generalized real TEO demonstrations) executed on a simulated robot by an
-  evolutionary strategy (FTE / IE / IET / OET, paper 3-4).
-
-Each run writes to its folder: ``config.toml`` (resolved), ``result.json``,
-``arrays.npz``, ``plots/*.png`` and ``report.md``.
+"""Running an experiment (recognition or execution, see the package docstring) into
+a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``,
+``report.md``; dynamic runs also replay their result on finer physics.
 """
 
 from __future__ import annotations
