@@ -173,6 +173,30 @@ def test_oet_reaches_every_goal_point(sim, goal):
     assert res.info["targets"][: len(goal)] == list(range(len(goal)))
 
 
+def test_oet_success_needs_the_goal_in_order_and_its_end():
+    from cgda_jax.strategies.oet import ordered_point_errors
+
+    goal = np.array([[0.0], [1.0], [2.0], [3.0]])
+
+    def errors(executed):
+        dist = np.abs(goal - np.asarray(executed, float)[None, :])
+        return ordered_point_errors(dist, 0.1)
+
+    np.testing.assert_allclose(errors([0.0, 1.05, 2.0, 3.02]), [0, 0.05, 0, 0.02])
+    # every point visited, but 2 before 1: point 1 counts only after point 0's step,
+    # and once 1 is reached at step 3 nothing after it reaches 2 or 3
+    out = errors([0.0, 2.0, 3.0, 1.0])
+    assert out[:2].tolist() == [0.0, 0.0] and np.all(out[2:] >= 0.1)
+    # the old rule (nearest step anywhere) would have called that a success
+    assert np.abs(goal - np.array([0.0, 2.0, 3.0, 1.0])).min(axis=1).max() < 0.1
+    # the end never reached
+    assert errors([0.0, 1.0, 2.0])[-1] >= 0.1
+    # one step may reach two close points; no steps: inf
+    np.testing.assert_allclose(
+        ordered_point_errors(np.array([[0.01], [0.02]]), 0.1), [0.01, 0.02])
+    assert np.isinf(ordered_point_errors(np.zeros((2, 0)), 0.1)).all()
+
+
 def test_trials_equal_single_runs(sim, goal):
     trials = run_trials("ie", sim, goal[:2], 2, seed=5, population_size=8,
                         tolerance=0.01, max_generations=30)

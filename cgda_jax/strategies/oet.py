@@ -49,6 +49,37 @@ class OETState:
     stuck: jax.Array
 
 
+def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
+    """Each goal point's error when the goal must be followed IN ORDER.
+
+    Goal point j counts as reached by the first executed step, no earlier than the
+    step that reached point j-1, within `tolerance` of it (one step may reach
+    several close points); its error is that step's. A point not reached that way
+    gets its smallest error over the steps from there on (inf when none is left),
+    which is >= tolerance, so success (every error < tolerance) means every point
+    was reached in order, the last one included.
+
+    Args:
+        dist: (N, S) distances between goal point j and executed step i's features.
+        tolerance: the reach threshold.
+
+    Returns:
+        (N,) errors.
+    """
+    n_points, n_steps = dist.shape
+    out = np.full(n_points, np.inf)
+    start = 0
+    for j in range(n_points):
+        d = dist[j, start:]
+        hit = np.flatnonzero(d < tolerance)
+        if hit.size:
+            out[j] = d[hit[0]]
+            start += int(hit[0])
+        elif d.size:
+            out[j] = d.min()
+    return out
+
+
 class OETPlan(PlanBase):
     """OET as a plan for `runner.drive`.
 
@@ -163,7 +194,7 @@ class OETPlan(PlanBase):
         gens = final["step_generations"][:n + stuck]  # the stuck evolution ran too
         return self.result(
             {"joints": final["joints"][:n], "features": feats}, timing,
-            point_errors=dist.min(axis=1) if n else np.full(len(goal), np.inf),
+            point_errors=ordered_point_errors(dist, self.tolerance),
             fitness_history=ragged_rows(
                 [history["best_fitness"][history["step"] == i] for i in range(n)]
             ),
@@ -212,8 +243,9 @@ def run_oet(
 
     Returns:
         `ExecutionResult` with joints (S, DoF) / features (S, F) the executed steps;
-        point_errors (N,) = distance from each goal point to its nearest executed
-        feature; success = all of them < tolerance.
+        point_errors (N,) = each goal point's error when the goal must be followed
+        in order (`ordered_point_errors`); success = all of them < tolerance, i.e.
+        every point reached in order, the last one included.
     """
     (result,) = run(
         OETPlan, sim, goal, [seed], algorithm=algorithm,
