@@ -347,3 +347,27 @@ def test_population_goes_through_the_simulators_map_population(sim, goal, run):
     want = run(sim, goal[:2], **kw)
     assert sliced.mapped and set(sliced.mapped) == {8}
     np.testing.assert_allclose(got.point_errors, want.point_errors, rtol=1e-5, atol=1e-6)
+
+
+def test_algorithm_by_name_class_or_configured_instance(sim, goal):
+    from evosax.algorithms import CMA_ES
+
+    from cgda_jax.strategies.base import make_algorithm
+
+    kw = dict(population_size=8, tolerance=0.01, max_generations=40, seed=2)
+    by_name = run_ie(sim, goal[:2], algorithm="CMA_ES", **kw)
+    by_class = run_ie(sim, goal[:2], algorithm=CMA_ES, **kw)
+    inst = CMA_ES(population_size=8, solution=jnp.zeros(3))
+    by_instance = run_ie(sim, goal[:2], algorithm=inst, **kw)
+    for res in (by_class, by_instance):
+        assert res.info["algorithm"] == "CMA_ES"
+        np.testing.assert_allclose(res.joints, by_name.joints, atol=1e-5)
+    assert by_name.success
+    with pytest.raises(ValueError, match="population_size=16.*population_size=8"):
+        make_algorithm(CMA_ES(population_size=16, solution=jnp.zeros(3)), 8, 3)
+    with pytest.raises(ValueError, match="2 genes.*3 genes"):
+        make_algorithm(CMA_ES(population_size=8, solution=jnp.zeros(2)), 8, 3)
+    with pytest.raises(ValueError, match="not an evosax algorithm"):
+        make_algorithm(dict, 8, 3)
+    with pytest.raises(ValueError, match="already built"):
+        make_algorithm(inst, 8, 3, algorithm_kwargs={"std_schedule": 0.1})

@@ -58,18 +58,30 @@ FitnessFn = Callable[[jax.Array], jax.Array]
 
 
 # --------------------------------------------------------------------------- algorithms
+def algorithm_name(algorithm: Any) -> str:
+    """The name of an algorithm given by name, evosax class or configured instance."""
+    if isinstance(algorithm, str):
+        return algorithm
+    cls = algorithm if isinstance(algorithm, type) else type(algorithm)
+    return cls.__name__
+
+
 def make_algorithm(
-    name: str,
+    algorithm: Any,
     population_size: int,
     n_genes: int,
     *,
     algorithm_kwargs: dict[str, Any] | None = None,
     algorithm_params: dict[str, Any] | None = None,
 ) -> tuple[Any, Any]:
-    """Builds an evosax algorithm by name and its parameters.
+    """Builds an evosax algorithm and its parameters.
 
     Args:
-        name: a key of `ALGORITHMS`, e.g. "CMA_ES", "SimpleGA", "DifferentialEvolution".
+        algorithm: as users of evosax pass it: a name (a key of `ALGORITHMS`, e.g.
+            "CMA_ES", "SimpleGA", "DifferentialEvolution"), an algorithm class
+            (e.g. ``evosax.algorithms.CMA_ES``, built here), or a configured instance
+            (``CMA_ES(population_size=32, solution=jnp.zeros(3), ...)``, used as it
+            is: its population size and solution size must match).
         population_size: individuals per generation.
         n_genes: genes per individual (D).
         algorithm_kwargs: extra constructor arguments (e.g. ``std_schedule`` of SimpleGA).
@@ -84,7 +96,8 @@ def make_algorithm(
             algorithm (its constructor refuses it or its default parameters are not
             finite).
     """
-    if name not in ALGORITHMS:
+    name = algorithm_name(algorithm)
+    if isinstance(algorithm, str) and name not in ALGORITHMS:
         raise ValueError(
             f"unknown algorithm {name!r}; choose one of {sorted(ALGORITHMS)}"
         )
@@ -92,12 +105,31 @@ def make_algorithm(
         raise ValueError(
             f"population_size={population_size} is too small for {name}: need >= 2"
         )
+    cls = ALGORITHMS[name] if isinstance(algorithm, str) else algorithm
+    if isinstance(cls, type) and not hasattr(cls, "ask"):
+        raise ValueError(f"algorithm {name!r} is not an evosax algorithm class")
     try:
-        algo = ALGORITHMS[name](
-            population_size=int(population_size),
-            solution=jnp.zeros((n_genes,)),
-            **(algorithm_kwargs or {}),
-        )
+        if isinstance(cls, type):
+            algo = cls(
+                population_size=int(population_size),
+                solution=jnp.zeros((n_genes,)),
+                **(algorithm_kwargs or {}),
+            )
+        else:  # a configured instance
+            algo = cls
+            if not (hasattr(algo, "ask") and hasattr(algo, "default_params")):
+                raise ValueError(f"{algo!r} is not an evosax algorithm (no ask / "
+                                 "default_params)")
+            if algorithm_kwargs:
+                raise ValueError(f"algorithm_kwargs {sorted(algorithm_kwargs)} given "
+                                 f"with an already built {name}; configure it instead")
+            size, dims = int(algo.population_size), int(getattr(algo, "num_dims", -1))
+            if size != int(population_size) or dims != int(n_genes):
+                raise ValueError(
+                    f"the {name} instance has population_size={size} and "
+                    f"{dims} genes; this run needs population_size="
+                    f"{population_size} and {n_genes} genes (one per evolved joint"
+                    " and waypoint)")
     except AssertionError as err:
         raise ValueError(
             f"population_size={population_size} is not allowed for {name}: {err}"
@@ -377,7 +409,7 @@ class PlanBase:
         goal: jax.Array,
         n_genes: int,
         *,
-        algorithm: str,
+        algorithm: Any,
         population_size: int,
         tolerance: float,
         max_generations: int,
@@ -396,7 +428,9 @@ class PlanBase:
         self.tolerance = float(tolerance)
         self.max_generations = int(max_generations)
         self.max_generations_total = self.max_generations
-        kwargs = {**_default_kwargs(algorithm), **(algorithm_kwargs or {})}
+        kwargs = dict(algorithm_kwargs or {})
+        if isinstance(algorithm, str):
+            kwargs = {**_default_kwargs(algorithm), **kwargs}
         self.algo, self.params = make_algorithm(
             algorithm,
             population_size,
@@ -405,7 +439,7 @@ class PlanBase:
             algorithm_params=algorithm_params,
         )
         self.info = {
-            "algorithm": algorithm,
+            "algorithm": algorithm_name(algorithm),
             "population_size": int(population_size),
             **(info or {}),
         }

@@ -113,7 +113,7 @@ def run_fte(
     sim: Any,
     goal: Any,
     *,
-    algorithm: str = "CMA_ES",
+    algorithm: Any = "CMA_ES",
     population_size: int = 32,
     tolerance: float = 0.02,
     stagnation: int = 10,

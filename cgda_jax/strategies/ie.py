@@ -125,7 +125,7 @@ def run_ie(
     sim: Any,
     goal: Any,
     *,
-    algorithm: str = "CMA_ES",
+    algorithm: Any = "CMA_ES",
     population_size: int = 16,
     tolerance: float = 0.02,
     max_generations: int = 100,
@@ -143,7 +143,9 @@ def run_ie(
         sim: a simulator (`n_dof`, `n_features`, `lower`, `upper`, `init_state`,
             `step`, `rollout`).
         goal: goal feature trajectory (N, F).
-        algorithm: evosax algorithm name (see `ALGORITHMS`).
+        algorithm: an evosax algorithm: a name (see `ALGORITHMS`), a class, or a
+            configured instance (its population and solution sizes must match; see
+            `cgda_jax.strategies.base.make_algorithm`).
         population_size: individuals per generation and point.
         tolerance: a point is done when its error is below this (feature units; the
             paper used 20 mm).

@@ -307,7 +307,7 @@ def run_iet(
     sim: Any,
     goal: Any,
     *,
-    algorithm: str = "CMA_ES",
+    algorithm: Any = "CMA_ES",
     population_size: int = 16,
     tolerance: float = 0.02,
     max_generations: int = 100,

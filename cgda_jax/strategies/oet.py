@@ -215,7 +215,7 @@ def run_oet(
     sim: Any,
     goal: Any,
     *,
-    algorithm: str = "CMA_ES",
+    algorithm: Any = "CMA_ES",
     population_size: int = 16,
     tolerance: float = 0.02,
     max_generations: int = 100,

@@ -28,7 +28,7 @@ def run_trials(
     n_trials: int,
     *,
     seed: int = 0,
-    algorithm: str = "CMA_ES",
+    algorithm: Any = "CMA_ES",
     population_size: int = 16,
     tolerance: float = 0.02,
     max_generations: int = 100,
