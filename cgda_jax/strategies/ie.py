@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.strategies.base import PlanBase, points_independent, ragged_rows
+from cgda_jax.strategies.refine import REFINE, polish, reachability
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
@@ -41,20 +42,47 @@ class IEPlan(PlanBase):
 
     Args (beyond `PlanBase`'s):
         keys: optional explicit per-point keys (N,) replacing those of the run's key.
+        refine: "none", "adam" or "lbfgs": polish each point's best posture by
+            gradient descent afterwards (`cgda_jax.strategies.refine.polish`).
+        refine_steps: optimiser steps of the polish.
+        reach_check: sample the reachable features first and freeze the points no
+            posture brings within tolerance (`refine.reachability`).
+    Both need independent points (kinematic mode, stateless scene).
     """
 
     name = "ie"
 
-    def __init__(self, sim, goal, *, keys=None, **kwargs):
+    def __init__(self, sim, goal, *, keys=None, refine="none", refine_steps=100,
+                 reach_check=False, **kwargs):
         if keys is not None and keys.shape[0] != goal.shape[0]:
             raise ValueError(
                 f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
             )
+        if refine not in REFINE:
+            raise ValueError(f"refine={refine!r}; expected one of {REFINE}")
         self.sequential = not points_independent(sim)
+        if self.sequential and (refine != "none" or reach_check):
+            raise ValueError(
+                "refine and reach_check need independent points: kinematic mode and a "
+                "scene without state (e.g. the marker); this simulator is "
+                f"{getattr(sim, 'mode', '?')} with {type(sim.scene).__name__}")
         info = {**(kwargs.pop("info", None) or {}),
-                "sequential_context": self.sequential}
+                "sequential_context": self.sequential, "refine": refine}
         super().__init__(sim, goal, int(sim.n_dof), info=info, **kwargs)
         self.keys = keys
+        self.refine, self.refine_steps = refine, int(refine_steps)
+        self.unreachable = np.zeros(self.n_points, bool)
+        self.reach_genes = np.zeros((self.n_points, self.n_dof), np.float32)
+        self.reach_nearest = np.full(self.n_points, np.inf, np.float32)
+        if reach_check:
+            reach = reachability(sim, goal, self.tolerance)
+            self.unreachable[reach["unreachable"]] = True
+            self.reach_genes = reach["genes"].astype(np.float32)
+            self.reach_nearest = reach["nearest"].astype(np.float32)
+            self.info["reach_check_s"] = reach["seconds"]
+            self.info["unreachable_points"] = [
+                {"index": i, "nearest_approach": float(reach["nearest"][i])}
+                for i in reach["unreachable"]]
 
     def _contexts(self, best_u: jax.Array) -> tuple[Any, jax.Array]:
         """Start states of every point (stacked, N) and each point's error (N,)
@@ -76,9 +104,18 @@ class IEPlan(PlanBase):
     def init(self, key):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
         states, _ = self._contexts(jnp.zeros((self.n_points, self.n_dof)))
-        return jax.vmap(
+        evo = jax.vmap(
             lambda k, g, st: self.start(k, self.point_fitness(st, g))
         )(keys, self.goal, states)
+        if not self.unreachable.any():
+            return evo
+        # no posture reaches these points: keep the nearest approach, spend nothing
+        off = jnp.asarray(self.unreachable)
+        return evo.replace(
+            done=evo.done | off,
+            best_u=jnp.where(off[:, None], jnp.asarray(self.reach_genes), evo.best_u),
+            best_fitness=jnp.where(off, jnp.asarray(self.reach_nearest),
+                                   evo.best_fitness))
 
     def step(self, evo):
         states, errors = self._contexts(evo.best_u)
@@ -98,8 +135,13 @@ class IEPlan(PlanBase):
         }
 
     def finish(self, evo):
+        joints = self.best_joints(evo)
+        if self.refine != "none":
+            u, _ = polish(self.sim, evo.best_u, self.goal, method=self.refine,
+                          steps=self.refine_steps)
+            joints = jnp.where(evo.found[:, None], self.joints(u), joints)
         return {
-            **self.execution(self.best_joints(evo)),
+            **self.execution(joints),
             "generation": evo.generation,
             "evaluations": evo.evaluations,
             "invalid": evo.invalid,
@@ -134,6 +176,9 @@ def run_ie(
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     keys: jax.Array | None = None,
+    refine: str = "none",
+    refine_steps: int = 100,
+    reach_check: bool = False,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
 ) -> ExecutionResult:
@@ -155,6 +200,15 @@ def run_ie(
         algorithm_kwargs, algorithm_params: see `make_algorithm`.
         keys: optional explicit per-point keys (N,) replacing the seed's (to re-run
             one point of a batched run alone).
+        refine: "none" (default), "adam" or "lbfgs": after evolution, polish every
+            point's best posture by gradient descent through the differentiable
+            kinematic simulator (optax), keeping the best iterate (never worse).
+        refine_steps: optimiser steps of the polish.
+        reach_check: before evolving, sample 2,048 postures (one batched kinematics
+            call) and descend from the nearest ones; points no posture brings
+            within `tolerance` are not evolved (no budget spent) and listed in
+            ``info["unreachable_points"]`` with their nearest approach.
+            `refine` and `reach_check` need kinematic mode and a stateless scene.
         progress_fn: called with a dict after each chunk.
         devices: None (default: one device, the unsharded program), "all" or a
             device count: each generation's batched simulator call (N points x
@@ -175,6 +229,7 @@ def run_ie(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        keys=keys, progress_fn=progress_fn, devices=devices,
+        keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
+        progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -1,0 +1,173 @@
+"""Gradient descent through the differentiable simulator (optax): polish and reach.
+
+Where a step's features depend only on its posture and the simulator is differentiable
+(kinematic mode with a stateless scene: the marker; see `points_independent`), the
+squared error of one goal point is a smooth function of the normalized genes ``u``
+(joint angles ``to_joints(u)``, inside the limits by construction). Two uses:
+
+- `polish`: after evolution, descend each point's error from its best genes with an
+  optax optimiser ("adam" or "lbfgs"), keeping the best iterate (never worse than the
+  start);
+- `reachability`: before evolving, sample thousands of postures through the batched
+  forward kinematics, descend from the nearest few per goal point, and report the
+  points that no posture brings within tolerance (with their nearest approach), so a
+  run need not spend its budget on them.
+
+Discrete features (a painted percentage) have no useful gradient: both need
+`points_independent` (the caller checks).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from cgda_jax.strategies.base import to_joints
+
+__all__ = ["REFINE", "descend", "polish", "reachability"]
+
+#: Names accepted by ``refine=``.
+REFINE = ("none", "adam", "lbfgs")
+
+
+def _optimizer(method: str, learning_rate: float):
+    if method == "adam":
+        return optax.adam(learning_rate)
+    if method == "lbfgs":
+        return optax.lbfgs()
+    raise ValueError(f"refine={method!r}; expected one of {REFINE}")
+
+
+def descend(
+    loss: Callable[[jax.Array], jax.Array],
+    u0: jax.Array,
+    *,
+    method: str = "adam",
+    steps: int = 100,
+    learning_rate: float = 0.02,
+) -> tuple[jax.Array, jax.Array]:
+    """Minimize ``loss(u)`` from ``u0`` (D,) for `steps` optax steps (one example).
+
+    Returns:
+        ``(best u, its loss)``: the best iterate seen, ``u0`` included, so the result
+        is never worse than the start. Non-finite losses are never kept.
+    """
+    opt = _optimizer(method, learning_rate)
+    value_and_grad = (optax.value_and_grad_from_state(loss) if method == "lbfgs"
+                      else jax.value_and_grad(loss))
+
+    def body(carry, _):
+        u, state, best_u, best = carry
+        if method == "lbfgs":
+            value, grad = value_and_grad(u, state=state)
+            updates, state = opt.update(grad, state, u, value=value, grad=grad,
+                                        value_fn=loss)
+        else:
+            value, grad = value_and_grad(u)
+            updates, state = opt.update(grad, state, u)
+        better = jnp.isfinite(value) & (value < best)
+        best_u = jnp.where(better, u, best_u)
+        best = jnp.where(better, value, best)
+        u = optax.apply_updates(u, updates)
+        return (u, state, best_u, best), None
+
+    start = loss(u0)
+    start = jnp.where(jnp.isfinite(start), start, jnp.inf)
+    (u, _, best_u, best), _ = jax.lax.scan(
+        body, (u0, opt.init(u0), u0, start), None, length=int(steps))
+    last = loss(u)
+    keep = jnp.isfinite(last) & (last < best)
+    return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
+
+
+def point_loss(sim: Any, state: Any, goal_point: jax.Array, lower, upper):
+    """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``."""
+
+    def loss(u):
+        feats = sim.step(state, to_joints(u, lower, upper))[1]
+        return jnp.sum((feats - goal_point) ** 2)
+
+    return loss
+
+
+def polish(
+    sim: Any,
+    best_u: jax.Array,
+    goal: jax.Array,
+    *,
+    method: str = "adam",
+    steps: int = 100,
+    learning_rate: float = 0.02,
+) -> tuple[jax.Array, jax.Array]:
+    """Refine each point's genes (N, D) towards its goal point (N, F) from the start
+    state (points independent). Returns ``(genes (N, D), errors (N,))``."""
+    lower = jnp.asarray(sim.lower, jnp.float32)
+    upper = jnp.asarray(sim.upper, jnp.float32)
+    state = sim.init_state()
+
+    def one(u, g):
+        u, sq = descend(point_loss(sim, state, g, lower, upper), u, method=method,
+                        steps=steps, learning_rate=learning_rate)
+        return u, jnp.sqrt(sq)
+
+    return jax.vmap(one)(best_u, goal)
+
+
+def reachability(
+    sim: Any,
+    goal: Any,
+    tolerance: float,
+    *,
+    n_samples: int = 2048,
+    n_starts: int = 4,
+    steps: int = 60,
+    seed: int = 0,
+) -> dict[str, Any]:
+    """Which goal points (N, F) no posture brings within `tolerance`.
+
+    Samples `n_samples` postures uniformly in the joint limits (one batched forward
+    kinematics call), then descends (adam) from the `n_starts` nearest samples of each
+    goal point.
+
+    Returns:
+        dict with ``nearest`` (N,) nearest approach found, ``genes`` (N, D) the
+        normalized genes reaching it, ``unreachable`` (indices with nearest >=
+        tolerance) and ``seconds``.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    goal = jnp.asarray(goal, jnp.float32)
+    lower = jnp.asarray(sim.lower, jnp.float32)
+    upper = jnp.asarray(sim.upper, jnp.float32)
+
+    @jax.jit
+    def run(key):
+        state = sim.init_state()
+        u = jax.random.uniform(key, (n_samples, sim.n_dof), minval=-1.0, maxval=1.0)
+        feats = jax.vmap(lambda w: sim.step(state, w)[1])(to_joints(u, lower, upper))
+        dist = jnp.linalg.norm(goal[:, None, :] - feats[None], axis=-1)  # (N, S)
+        _, idx = jax.lax.top_k(-dist, n_starts)  # (N, K)
+
+        def refine(g, starts):
+            loss = point_loss(sim, state, g, lower, upper)
+            us, sq = jax.vmap(lambda s: descend(loss, s, steps=steps,
+                                                learning_rate=0.05))(u[starts])
+            i = jnp.argmin(sq)
+            return us[i], jnp.sqrt(sq[i])
+
+        return jax.vmap(refine)(goal, idx)
+
+    genes, nearest = run(jax.random.key(seed))
+    nearest = np.asarray(nearest, np.float64)
+    return {
+        "nearest": nearest,
+        "genes": np.asarray(genes),
+        "unreachable": [int(i) for i in np.flatnonzero(~(nearest < tolerance))],
+        "seconds": time.perf_counter() - t0,
+    }
