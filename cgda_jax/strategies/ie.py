@@ -25,16 +25,51 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import struct
 
-from cgda_jax.strategies.base import PlanBase, points_independent, ragged_rows
+from cgda_jax.strategies.base import (
+    Evolution,
+    PlanBase,
+    points_independent,
+    ragged_rows,
+)
 from cgda_jax.strategies.refine import REFINE, polish, reachability
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
 
+#: Default restarts of a point and generations without improvement that stop a try.
+RESTARTS = 2
+STAGNATION = 40
+
+
 def point_keys(key: jax.Array, n_points: int) -> jax.Array:
     """The per-point keys (N,) IE derives from a run's key: ``fold_in(key, i)``."""
     return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(n_points))
+
+
+@struct.dataclass
+class IEState:
+    """Carry of an IE run (every field stacked over the N points).
+
+    Attributes:
+        evo: the current try of each point.
+        keys: the point keys; try t > 0 uses ``fold_in(key, t)``.
+        tries: tries started per point (1 + restarts used).
+        best_u, best_fitness: the best over every try (inf: nothing valid yet).
+        done: the point is finished (tolerance met, or out of tries).
+        generations, evaluations, invalid: spent by the finished tries.
+    """
+
+    evo: Evolution
+    keys: jax.Array
+    tries: jax.Array
+    best_u: jax.Array
+    best_fitness: jax.Array
+    done: jax.Array
+    generations: jax.Array
+    evaluations: jax.Array
+    invalid: jax.Array
 
 
 class IEPlan(PlanBase):
@@ -47,13 +82,17 @@ class IEPlan(PlanBase):
         refine_steps: optimiser steps of the polish.
         reach_check: sample the reachable features first and freeze the points no
             posture brings within tolerance (`refine.reachability`).
-    Both need independent points (kinematic mode, stateless scene).
+            Both need independent points (kinematic mode, stateless scene).
+        restarts: tries of a point that stopped above tolerance are restarted (fresh
+            key, random start mean), up to this many times; the best is kept.
+        stagnation: a try also stops after this many generations without
+            improvement (None: only at `max_generations`).
     """
 
     name = "ie"
 
     def __init__(self, sim, goal, *, keys=None, refine="none", refine_steps=100,
-                 reach_check=False, **kwargs):
+                 reach_check=False, restarts=0, stagnation=None, **kwargs):
         if keys is not None and keys.shape[0] != goal.shape[0]:
             raise ValueError(
                 f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
@@ -71,6 +110,12 @@ class IEPlan(PlanBase):
         super().__init__(sim, goal, int(sim.n_dof), info=info, **kwargs)
         self.keys = keys
         self.refine, self.refine_steps = refine, int(refine_steps)
+        if int(restarts) < 0 or (stagnation is not None and int(stagnation) < 1):
+            raise ValueError(f"restarts must be >= 0 and stagnation >= 1 or None; got "
+                             f"{restarts}, {stagnation}")
+        self.restarts = int(restarts)
+        self.stagnation = None if stagnation is None else int(stagnation)
+        self.max_generations_total = self.max_generations * (1 + self.restarts)
         self.unreachable = np.zeros(self.n_points, bool)
         self.reach_genes = np.zeros((self.n_points, self.n_dof), np.float32)
         self.reach_nearest = np.full(self.n_points, np.inf, np.float32)
@@ -101,62 +146,106 @@ class IEPlan(PlanBase):
         errors = jnp.linalg.norm(feats - self.goal, axis=-1)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
+    def _stop(self, evo: Evolution) -> jax.Array:
+        """One try of a point stops: tolerance met, its budget spent, or stalled."""
+        stop = self.stop(evo)
+        if self.stagnation is not None:
+            stop = stop | (evo.stall >= self.stagnation)
+        return stop
+
+    def _try(self, key, goal_point, state, t):
+        """Try ``t`` of a point: try 0 from the mid-range mean, restarts from a
+        random mean with key ``fold_in(key, t)``."""
+        k_mean, k_evo = jax.random.split(jax.random.fold_in(key, t))
+        mean = jnp.where(
+            t > 0, jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0),
+            0.0)
+        return self.start(jnp.where(t > 0, k_evo, key),
+                          self.point_fitness(state, goal_point), mean=mean)
+
     def init(self, key):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
         states, _ = self._contexts(jnp.zeros((self.n_points, self.n_dof)))
-        evo = jax.vmap(
-            lambda k, g, st: self.start(k, self.point_fitness(st, g))
-        )(keys, self.goal, states)
-        if not self.unreachable.any():
-            return evo
-        # no posture reaches these points: keep the nearest approach, spend nothing
+        zero = jnp.zeros((self.n_points,), jnp.int32)
+        evo = jax.vmap(self._try)(keys, self.goal, states, zero)
+        # no posture reaches the unreachable points: keep the nearest approach
         off = jnp.asarray(self.unreachable)
-        return evo.replace(
-            done=evo.done | off,
-            best_u=jnp.where(off[:, None], jnp.asarray(self.reach_genes), evo.best_u),
-            best_fitness=jnp.where(off, jnp.asarray(self.reach_nearest),
-                                   evo.best_fitness))
+        best_u = jnp.where(off[:, None], jnp.asarray(self.reach_genes), evo.best_u)
+        best_f = jnp.where(off, jnp.asarray(self.reach_nearest), evo.best_fitness)
+        return IEState(
+            evo=evo.replace(done=evo.done | off), keys=keys, tries=zero + 1,
+            best_u=best_u, best_fitness=best_f, done=(best_f < self.tolerance) | off,
+            generations=zero, evaluations=zero, invalid=zero)
 
-    def step(self, evo):
-        states, errors = self._contexts(evo.best_u)
-        if self.sequential:  # re-score each best where the others now leave it
-            fresh = evo.replace(
-                best_fitness=jnp.where(jnp.isfinite(evo.best_fitness), errors,
-                                       evo.best_fitness))
-            evo = fresh.replace(done=jax.vmap(self.stop)(fresh))
-        return jax.vmap(
-            lambda e, g, st: self.evolve(e, self.point_fitness(st, g))
+    def step(self, s: IEState):
+        states, errors = self._contexts(s.best_u)
+        evo = s.evo
+        if self.sequential:  # re-score the bests where the others now leave them
+            fresh = jnp.where(jnp.isfinite(s.best_fitness), errors, s.best_fitness)
+            same = jnp.all(evo.best_u == s.best_u, axis=-1)
+            evo = evo.replace(best_fitness=jnp.where(
+                same & jnp.isfinite(evo.best_fitness), fresh, evo.best_fitness))
+            evo = evo.replace(done=jax.vmap(self._stop)(evo))
+            s = s.replace(best_fitness=fresh, done=(fresh < self.tolerance)
+                          | (evo.done & (s.tries > self.restarts)))
+        evo, metrics = jax.vmap(
+            lambda e, g, st: self.evolve(e, self.point_fitness(st, g), self._stop)
         )(evo, self.goal, states)
+        better = evo.best_fitness < s.best_fitness
+        best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
+        best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
+        met = best_f < self.tolerance
+        # a try that stopped short of the tolerance restarts while tries are left
+        again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
+        fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
+            jnp.any(again), lambda: jax.vmap(self._try)(s.keys, self.goal, states,
+                                                        s.tries), lambda: evo)
+        s = s.replace(
+            generations=s.generations + jnp.where(again, evo.generation, 0),
+            evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
+            invalid=s.invalid + jnp.where(again, evo.invalid, 0),
+            evo=jax.tree.map(
+                lambda f, e: jnp.where(again.reshape((-1,) + (1,) * (e.ndim - 1)),
+                                       f, e), fresh, evo),
+            tries=s.tries + again, best_u=best_u, best_fitness=best_f)
+        s = s.replace(done=met | (evo.done & ~again))
+        return s, {"best_fitness": best_f, "invalid": metrics["invalid"],
+                   "try": s.tries - 1}
 
-    def progress(self, evo):
+    def progress(self, s):
         return {
-            "points_done": np.asarray(evo.done).sum(axis=-1).tolist(),
-            "worst_error": np.asarray(evo.best_fitness).max(axis=-1).tolist(),
+            "points_done": np.asarray(s.done).sum(axis=-1).tolist(),
+            "worst_error": np.asarray(s.best_fitness).max(axis=-1).tolist(),
         }
 
-    def finish(self, evo):
-        joints = self.best_joints(evo)
+    def finish(self, s):
+        found = jnp.isfinite(s.best_fitness)
+        joints = jnp.where(found[:, None], self.joints(s.best_u), jnp.nan)
         if self.refine != "none":
-            u, _ = polish(self.sim, evo.best_u, self.goal, method=self.refine,
+            u, _ = polish(self.sim, s.best_u, self.goal, method=self.refine,
                           steps=self.refine_steps)
-            joints = jnp.where(evo.found[:, None], self.joints(u), joints)
+            joints = jnp.where(found[:, None], self.joints(u), joints)
         return {
             **self.execution(joints),
-            "generation": evo.generation,
-            "evaluations": evo.evaluations,
-            "invalid": evo.invalid,
-            "found": evo.found,
+            "generation": s.generations + s.evo.generation,
+            "evaluations": s.evaluations + s.evo.evaluations,
+            "invalid": s.invalid + s.evo.invalid,
+            "found": found,
+            "tries": s.tries,
         }
 
     def to_result(self, final, history, timing):
         gens = final["generation"]
         hist = history["best_fitness"].astype(np.float64)  # (G, N)
+        rows = [hist[: int(g), i] for i, g in enumerate(gens)]
         return self.result(
             final, timing,
-            fitness_history=ragged_rows([hist[:g, i] for i, g in enumerate(gens)]),
+            fitness_history=ragged_rows(rows),
             evaluations=final["evaluations"].sum(),
             generations=gens.max(),
             point_generations=gens.tolist(),
+            point_tries=final["tries"].tolist(),
+            restarts=self.restarts, stagnation=self.stagnation,
             invalid_evaluations=final["invalid"].sum(),
             point_invalid=final["invalid"].tolist(),
             points_without_valid=np.flatnonzero(~final["found"]).tolist(),
@@ -179,6 +268,8 @@ def run_ie(
     refine: str = "none",
     refine_steps: int = 100,
     reach_check: bool = False,
+    restarts: int = RESTARTS,
+    stagnation: int | None = STAGNATION,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
 ) -> ExecutionResult:
@@ -209,6 +300,12 @@ def run_ie(
             within `tolerance` are not evolved (no budget spent) and listed in
             ``info["unreachable_points"]`` with their nearest approach.
             `refine` and `reach_check` need kinematic mode and a stateless scene.
+        restarts: a point whose try stopped above `tolerance` (budget spent or
+            stalled) is tried again with a fresh key from a random start mean, up to
+            this many times (inside the compiled step); the best over its tries is
+            kept and ``info["point_tries"]`` says how many it took.
+        stagnation: a try stops after this many generations without improvement
+            (None: only at `max_generations`), so a stuck point restarts early.
         progress_fn: called with a dict after each chunk.
         devices: None (default: one device, the unsharded program), "all" or a
             device count: each generation's batched simulator call (N points x
@@ -230,6 +327,7 @@ def run_ie(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
+        restarts=restarts, stagnation=stagnation,
         progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -6,8 +6,9 @@ from collections.abc import Callable
 from typing import Any
 
 from cgda_jax.strategies.fte import FTEPlan
+from cgda_jax.strategies import ie, iet
 from cgda_jax.strategies.ie import IEPlan
-from cgda_jax.strategies.iet import BACKTRACKS, RESTARTS, IETPlan
+from cgda_jax.strategies.iet import IETPlan
 from cgda_jax.strategies.oet import OETPlan
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
@@ -15,8 +16,9 @@ from cgda_jax.strategies.runner import run
 #: Strategy name -> (plan class, defaults of its extra settings).
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
-    "ie": (IEPlan, {}),
-    "iet": (IETPlan, {"restarts": RESTARTS, "backtracks": BACKTRACKS}),
+    "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
+                    "refine": "none", "reach_check": False}),
+    "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
 }
 
@@ -57,7 +59,8 @@ def run_trials(
             copies are dropped; choose R a multiple of K to waste nothing). Each
             trial gives the same result as unsharded. Multi-host: see
             `cgda_jax.sharding`.
-        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IET: restarts, backtracks;
+        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
+            stagnation, refine, reach_check; IET: restarts, backtracks;
             OET: max_steps, lookahead).
 
     Returns:
