@@ -18,6 +18,7 @@ import threading
 import time
 import traceback
 
+#: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
 
 #: Exit statuses: goal met, goal not met, usage or config error (bad key, value or
@@ -356,6 +357,18 @@ def _interrupted(args, signum: int) -> int:
     return EXIT_SIGNAL.get(signum, 128 + signum)
 
 
+def _user_error(args, err: Exception) -> bool:
+    """Bad input (status 2): before the run starts, any of `USER_ERRORS`; once it
+    runs (everything was checked), only config and file errors, the rest is a
+    failure (status 3, with its traceback)."""
+    from cgda_jax.experiment.config import ConfigError
+
+    rf = getattr(args, "run_folder", None)
+    if rf is None or rf.committed:
+        return isinstance(err, USER_ERRORS)
+    return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError))
+
+
 def _dispatch(args, signals: _Signals) -> int:
     try:
         if not args.no_cache:
@@ -365,12 +378,12 @@ def _dispatch(args, signals: _Signals) -> int:
         return cmd_demo(args)
     except KeyboardInterrupt as e:
         return _interrupted(args, getattr(e, "signum", signal.SIGINT))
-    except USER_ERRORS as e:
-        print(f"cgda: error: {_first_line(e)}", file=sys.stderr)
-        return EXIT_USAGE
-    except Exception as e:  # noqa: BLE001 - every failure: one line, exit 3
+    except Exception as e:  # noqa: BLE001 - every failure: one line
         if signals.received is not None:  # an interrupt wrapped by a library
             return _interrupted(args, signals.received)
+        if _user_error(args, e):
+            print(f"cgda: error: {_first_line(e)}", file=sys.stderr)
+            return EXIT_USAGE
         if _diverged(e):
             print(f"cgda: error: {_first_line(e)}", file=sys.stderr)
             return EXIT_DIVERGED

@@ -340,12 +340,15 @@ def test_two_runs_started_at_once_one_wins_the_other_is_refused(env, tmp_path):
     no_leftovers(out)
 
 
+@pytest.mark.parametrize("error", [ZeroDivisionError, ValueError, MemoryError])
 def test_unexpected_failure_exits_3_with_the_traceback_in_a_log(
-        monkeypatch, capsys, tmp_path):
+        error, monkeypatch, capsys, tmp_path):
+    """Once the checks passed, anything the run raises is a failure (3), a
+    ValueError too: a bug, not the user's input."""
     import cgda_jax
 
     def broken_run_ie(sim, goal, **kwargs):
-        raise ZeroDivisionError("something inside broke")
+        raise error("something inside broke")
 
     monkeypatch.setattr(cgda_jax, "run_ie", broken_run_ie)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
@@ -355,7 +358,7 @@ def test_unexpected_failure_exits_3_with_the_traceback_in_a_log(
                  *sets(TINY)])
     line = one_error_line(capsys.readouterr().err)
     assert code == 3
-    assert line.startswith("cgda: error: ZeroDivisionError: something inside broke "
+    assert line.startswith(f"cgda: error: {error.__name__}: something inside broke "
                            "(traceback in ")
     log = pathlib.Path(line.split("traceback in ")[1].rstrip(")"))
     assert log.parent == tmp_path and "Traceback" in log.read_text()
