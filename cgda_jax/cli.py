@@ -66,7 +66,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
 
 RUN_EXAMPLES = """\
 examples:
-  cgda run experiments/clean_ie.toml                 # results/clean_ie/ (then -2, -3, ...)
+  cgda run experiments/clean_ie.toml       # results/clean_ie/ (then -2, -3, ...)
   cgda run experiments/paint_iet.toml --out /tmp/paint
   cgda run experiments/paint_iet.toml --out /tmp/paint --overwrite   # replace it
   cgda run experiments/clean_ie.toml --set strategy.population_size=64 \\

@@ -147,7 +147,8 @@ def test_run_folder_failure_keeps_the_previous_results_and_cleans_up(tmp_path):
 def test_run_folder_lock_and_leftovers_of_a_killed_run(tmp_path):
     target = tmp_path / "exp"
     with RunFolder(target) as first:
-        with pytest.raises(FolderBusy, match=f"in use by another run \\(pid {os.getpid()}"):
+        busy = f"in use by another run \\(pid {os.getpid()}"
+        with pytest.raises(FolderBusy, match=busy):
             RunFolder(target).__enter__()
         with RunFolder(target, fresh=True) as other:  # fresh: skips the busy name
             (other.work / "result.json").write_text("{}")
@@ -178,16 +179,20 @@ BAD_INPUT = [
     (RECOGNITION, ["recognition.n_samples=10000000"], ["recognition.n_samples"]),
     (CLEAN, ["strategy.population_size=1"], ["strategy.population_size", "too small"]),
     (CLEAN, ["strategy.population_size=100000000"], ["strategy.population_size"]),
-    (CLEAN, ["strategy.algorithm=NoSuchES"], ["strategy.algorithm", "NoSuchES", "CMA_ES"]),
-    (CLEAN, ['robot.joints=["r_elbow", "no_such_joint"]'], ["robot.joints", "no_such_joint"]),
+    (CLEAN, ["strategy.algorithm=NoSuchES"],
+     ["strategy.algorithm", "NoSuchES", "CMA_ES"]),
+    (CLEAN, ['robot.joints=["r_elbow", "no_such_joint"]'],
+     ["robot.joints", "no_such_joint"]),
     (CLEAN, ["robot.marker_site=no_such_site"], ["robot.marker_site", "no_such_site"]),
     (CLEAN, ["robot.fixed.no_such_joint=3"], ["robot.fixed", "no_such_joint"]),
-    (CLEAN, ["robot.fixed.r_forearm_rotation=nan"], ["robot.fixed.r_forearm_rotation", "finite"]),
+    (CLEAN, ["robot.fixed.r_forearm_rotation=nan"],
+     ["robot.fixed.r_forearm_rotation", "finite"]),
     (CLEAN, ["robot.fixed.r_forearm_rotation=400"],
      ["robot.fixed.r_forearm_rotation", "400 degrees", "range [-90, 90]"]),
     (CLEAN, ["robot.keyframe=no_such_key"], ["robot.keyframe", "no_such_key"]),
     (CLEAN, ["scene.kind=paint"], ["scene.kind", "3 feature(s)"]),
-    (CLEAN, ["robot.mode=dynamic", "robot.timestep=1e-9"], ["robot.timestep", "physics steps"]),
+    (CLEAN, ["robot.mode=dynamic", "robot.timestep=1e-9"],
+     ["robot.timestep", "physics steps"]),
 ]
 
 
@@ -243,7 +248,8 @@ def test_issue_cases_exit_2_in_a_real_process(case, env, tmp_path):
 
 
 # --------------------------------------------------------------------------- runs
-def test_rerun_picks_a_fresh_folder_refuses_a_full_one_and_overwrites_whole(env, tmp_path):
+def test_rerun_picks_a_fresh_folder_refuses_a_full_one_and_overwrites_whole(
+        env, tmp_path):
     (tmp_path / "exp.toml").write_text(CLEAN.read_text())
     first = cgda(env, "run", "exp.toml", *sets(TINY), cwd=tmp_path)
     assert first.returncode in (0, 1), first.stderr
@@ -289,7 +295,8 @@ def _wait_for_progress(proc, timeout=240.0) -> list[str]:
 
 @pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)],
                          ids=["SIGINT", "SIGTERM"])
-def test_interrupted_run_leaves_the_previous_results_untouched(sig, status, env, tmp_path):
+def test_interrupted_run_leaves_the_previous_results_untouched(
+        sig, status, env, tmp_path):
     out = tmp_path / "out"
     before = previous_run(out)
     proc = subprocess.Popen(
@@ -389,7 +396,8 @@ def test_demo_follows_the_same_folder_rules(monkeypatch, capsys, tmp_path):
     monkeypatch.chdir(tmp_path)
     assert main(["demo", "--quiet"]) in (0, 1)
     assert main(["demo"]) in (0, 1)
-    assert "results/demo is taken: results go to results/demo-2" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "results/demo is taken: results go to results/demo-2" in err
     demo = tmp_path / "results" / "demo"
     assert sorted(snapshot(demo)) == [
         "a/arrays.npz", "a/config.toml", "a/report.md", "a/result.json",
@@ -406,7 +414,8 @@ def test_demo_follows_the_same_folder_rules(monkeypatch, capsys, tmp_path):
     assert err == ("cgda: interrupted (SIGINT); nothing written (results/demo left "
                    "as it was)\n")
     assert snapshot(demo) == before
-    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["demo", "demo-2"]
+    folders = sorted(p.name for p in (tmp_path / "results").iterdir())
+    assert folders == ["demo", "demo-2"]  # no temporary folder, no lock left
 
 
 def test_run_experiment_api_follows_the_same_rules(tmp_path):

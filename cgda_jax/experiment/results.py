@@ -1,4 +1,4 @@
-"""A run's results folder: chosen, locked, written aside, moved into place when complete.
+"""A run's results folder: chosen, locked, written aside, moved into place at the end.
 
 A run never writes into its results folder directly. It writes into a temporary folder
 beside it (``.<name>.tmp-XXXX``) and, once everything is written, moves that folder into

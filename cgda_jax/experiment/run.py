@@ -1,7 +1,8 @@
 """Running an experiment (recognition or execution, see the package docstring) into
 a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``,
 ``report.md``; dynamic runs also replay their result on finer physics. The folder
-itself (temporary folder, lock, move into place) belongs to `cgda_jax.experiment.results`.
+itself (temporary folder, lock, move into place) belongs to
+`cgda_jax.experiment.results`.
 """
 
 from __future__ import annotations

@@ -113,7 +113,8 @@ def _check_static(cfg: ExperimentConfig) -> None:
     _at_most(r.substeps, MAX_SUBSTEPS, "robot.substeps")
     for name, value in r.fixed.items():
         if not math.isfinite(value):
-            raise ConfigError(f"key 'robot.fixed.{name}': {value} is not a finite number")
+            raise ConfigError(
+                f"key 'robot.fixed.{name}': {value} is not a finite number")
 
 
 def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
@@ -207,7 +208,8 @@ def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
     s = cfg.strategy
     if s.algorithm not in ALGORITHMS:
         raise ConfigError(
-            f"key 'strategy.algorithm': {s.algorithm!r} is not one of {sorted(ALGORITHMS)}"
+            f"key 'strategy.algorithm': {s.algorithm!r} is not one of "
+            f"{sorted(ALGORITHMS)}"
         )
     kwargs = s.options.get("algorithm_kwargs") or {}
     params = s.options.get("algorithm_params") or {}
@@ -256,7 +258,8 @@ def _check_execution(cfg: ExperimentConfig) -> dict[str, Any]:
             f"{sim.n_features} {list(sim.feature_names)}"
         )
     try:
-        check_config(sim, goal, tolerance=s.tolerance, max_generations=s.max_generations)
+        check_config(sim, goal, tolerance=s.tolerance,
+                     max_generations=s.max_generations)
     except ValueError as err:
         raise ConfigError(f"key 'data': {err}") from None
     n_genes = n_points * sim.n_dof if s.name == "fte" else sim.n_dof
