@@ -11,27 +11,53 @@ import json
 import logging
 import os
 import pathlib
+import signal
 import sys
+import tempfile
+import threading
 import time
+import traceback
 
+#: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
 
-#: Exit status when a simulation diverged (`cgda_jax.SimulationDiverged`); the
-#: others: 0 goal met, 1 goal not met, 2 bad input (config, files), 130 interrupted.
-EXIT_DIVERGED = 3
+#: Exit statuses: goal met, goal not met, usage or config error (bad key, value or
+#: file; results folder not empty, in use or not writable), any other failure (a
+#: diverged simulation, or an unexpected error whose traceback goes to a log file).
+EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
+#: A simulation diverged (`cgda_jax.SimulationDiverged`): one of the failures.
+EXIT_DIVERGED = EXIT_FAILURE
+#: Interrupted by a signal: 128 + its number.
+EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 
 def _cache_dir() -> pathlib.Path:
     env = os.environ.get("CGDA_JAX_CACHE")
-    return pathlib.Path(env) if env else pathlib.Path.home() / ".cache" / "cgda_jax" / "jax"
+    return pathlib.Path(env).expanduser() if env else (
+        pathlib.Path.home() / ".cache" / "cgda_jax" / "jax")
 
 
 def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
-    """Turn on JAX's persistent compilation cache, small programs included."""
+    """Turn on JAX's persistent compilation cache, small programs included.
+
+    Raises:
+        FolderError: the folder cannot be created or written (names it and
+            $CGDA_JAX_CACHE).
+    """
     import jax
 
+    from cgda_jax.experiment.results import FolderError, check_writable
+
     path = path or _cache_dir()
-    path.mkdir(parents=True, exist_ok=True)
+    what = f"compilation cache folder {path} ($CGDA_JAX_CACHE)"
+    try:
+        check_writable(path, what)
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FolderError(f"{what} cannot be created: {err.strerror or err}") from None
+    except FolderError as err:
+        raise FolderError(f"{err}; point CGDA_JAX_CACHE at a writable folder or "
+                          "pass --no-cache") from None
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
@@ -40,25 +66,31 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
 
 RUN_EXAMPLES = """\
 examples:
-  cgda run experiments/clean_ie.toml                 # results in results/clean_ie/
+  cgda run experiments/clean_ie.toml       # results/clean_ie/ (then -2, -3, ...)
   cgda run experiments/paint_iet.toml --out /tmp/paint
+  cgda run experiments/paint_iet.toml --out /tmp/paint --overwrite   # replace it
   cgda run experiments/clean_ie.toml --set strategy.population_size=64 \\
       --set strategy.seed=3 --set output.render=false
   cgda run experiments/clean_ie.toml --dry-run       # check + print the resolved config
 
 The results folder gets report.md (start there), result.json, arrays.npz,
 config.toml (the resolved config; re-run it with `cgda run <folder>/config.toml`)
-and plots/ (PNGs; execution runs also plots/execution.gif of the robot).
+and plots/ (PNGs; execution runs also plots/execution.gif of the robot). It is
+written aside and moved into place when complete: a failed or interrupted run
+leaves the folder as it was. A non-empty --out is refused unless --overwrite; a
+lock refuses a second run into a folder in use.
 Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
-tables printed by --dry-run. Exit status: 0 goal met, 1 goal not met, 2 bad input,
-3 the simulation diverged (every candidate gave non-finite features).
+tables printed by --dry-run. Exit status: 0 goal met, 1 goal not met, 2 bad input
+(config, files, results folder not empty, in use or not writable), 3 any other
+failure (a diverged simulation; otherwise the traceback is saved to a log file
+whose path is printed), 130 / 143 interrupted (SIGINT / SIGTERM).
 Rendering needs offscreen OpenGL: MUJOCO_GL=egl or osmesa (picked automatically on
 a headless Linux machine when unset).
 """
 
 DEMO_EXAMPLES = """\
 examples:
-  cgda demo                      # everything, results in results/demo/
+  cgda demo                      # everything, results in results/demo/ (then -2, ...)
   cgda demo --small --out /tmp/d # a quicker check
 
 Runs the paper's recognition tables (all features, spatial, arm points) and two
@@ -87,20 +119,28 @@ def _parser() -> argparse.ArgumentParser:
                      help="override a config value (repeatable), e.g. "
                      "--set strategy.population_size=64")
     run.add_argument("--out", metavar="DIR",
-                     help="results folder (default: <output.dir>/<name>, "
-                     "i.e. results/<config file name>)")
+                     help="results folder, missing or empty unless --overwrite "
+                     "(default: the first free one of <output.dir>/<name>, "
+                     "<output.dir>/<name>-2, ...; output.dir is results)")
     run.add_argument("--dry-run", action="store_true",
-                     help="validate the config and print it resolved; run nothing")
+                     help="check everything the run would check (config, files, "
+                     "robot, scene, algorithm, sizes, results folder) and print the "
+                     "resolved config; compiles no simulation, runs nothing")
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",
         description="The paper's main results in one go.",
         epilog=DEMO_EXAMPLES, formatter_class=fmt,
     )
-    demo.add_argument("--out", default="results/demo", metavar="DIR",
-                      help="results folder (default: results/demo)")
+    demo.add_argument("--out", metavar="DIR",
+                      help="results folder, missing or empty unless --overwrite "
+                      "(default: the first free one of results/demo, results/demo-2, "
+                      "...)")
     demo.add_argument("--small", action="store_true",
                       help="fewer generations and samples (a quick check)")
     for s in (run, demo):
+        s.add_argument("--overwrite", action="store_true",
+                       help="replace the results folder whole if it holds an earlier "
+                       "run (only once the new run is complete)")
         s.add_argument("--quiet", action="store_true",
                        help="no progress on stderr (warnings and errors still shown)")
         s.add_argument("--no-cache", action="store_true",
@@ -114,8 +154,9 @@ def _say(args, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
 
-def _run_one(cfg, out, args) -> dict:
-    from cgda_jax.experiment import run_experiment
+def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
+    """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``)."""
+    from cgda_jax.experiment import write_run
     from cgda_jax.progress import ProgressLine
 
     bar = ProgressLine(cfg.name, quiet=args.quiet)
@@ -123,30 +164,58 @@ def _run_one(cfg, out, args) -> dict:
     what = (f"{cfg.strategy.name.upper()} execution" if cfg.kind == "execution"
             else "recognition")
     _say(args, f"[{cfg.name}] {what} ...")
+    work.mkdir(exist_ok=True)
     try:
-        result = run_experiment(cfg, out, progress_fn=bar)
+        result = write_run(cfg, work, progress_fn=bar)
     finally:
         bar.close()
     verdict = "ok" if result.get("success") else "NOT met"
     extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
              else f"max point error {result['max_point_error']:.4g}")
-    _say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) -> {out}")
+    _say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
+               f"-> {shown}")
     return result
 
 
+def _facts(facts: dict) -> str:
+    if "goal_points" in facts:
+        n = facts["features"]
+        return (f"goal {facts['goal_points']} points x {n} feature{'s' * (n != 1)}, "
+                f"{facts['genes']} genes per candidate")
+    return f"{facts.get('actions', '?')} actions"
+
+
+def _say_chosen(args, label: str, rf) -> None:
+    if rf.path != rf.target:
+        _say(args, f"[{label}] {rf.target} is taken: results go to {rf.path}")
+
+
 def cmd_run(args) -> int:
-    from cgda_jax.experiment import dump_config, load_config, validate_config
+    from cgda_jax.experiment import (
+        RunFolder,
+        check_experiment,
+        default_folder,
+        dump_config,
+        load_config,
+        plan_folder,
+    )
 
     cfg = load_config(args.config, args.overrides)
-    validate_config(cfg)
+    facts = check_experiment(cfg)
+    target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
+    fresh = args.out is None
     if args.dry_run:
-        print(f"# {args.config}: valid\n" + dump_config(cfg), end="")
-        return 0
-    out = pathlib.Path(args.out) if args.out else pathlib.Path(cfg.output.dir) / cfg.name
-    result = _run_one(cfg, out, args)
+        folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
+        print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
+              f"{folder}\n" + dump_config(cfg), end="")
+        return EXIT_MET
+    with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
+        args.run_folder = rf
+        _say_chosen(args, cfg.name, rf)
+        result = _run_one(cfg, rf.path, rf.work, args)
     if not args.quiet:
-        print(out / "report.md")
-    return 0 if result.get("success") else 1
+        print(rf.path / "report.md")
+    return EXIT_MET if result.get("success") else EXIT_NOT_MET
 
 
 def summary_table(results: dict[str, dict]) -> list[str]:
@@ -167,37 +236,44 @@ def summary_table(results: dict[str, dict]) -> list[str]:
 
 
 def cmd_demo(args) -> int:
-    from cgda_jax.experiment import demo_configs
+    from cgda_jax.experiment import RunFolder, check_experiment, demo_configs
 
-    out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    configs = demo_configs(small=args.small)
+    for cfg in configs:
+        check_experiment(cfg)
     t0 = time.perf_counter()
     results = {}
-    for cfg in demo_configs(small=args.small):
-        results[cfg.name] = _run_one(cfg, out / cfg.name, args)
-    wall = time.perf_counter() - t0
-    success = all(r.get("success") for r in results.values())
-    keys = ("success", "accuracy", "strategy", "points", "max_point_error",
-            "final_fitness", "evaluations", "generations", "wall_time_s",
-            "compile_time_s", "total_time_s", "render", "plots")
-    summary = {
-        "success": success,
-        "small": args.small,
-        "wall_time_s": wall,
-        "experiments": {n: {k: r[k] for k in keys if k in r} for n, r in results.items()},
-    }
-    (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
-    report = [f"# cgda demo{' (small)' if args.small else ''}", "",
-              f"Overall: {'success' if success else 'NOT all goals met'}; "
-              f"{wall:.1f} s in total.", "", *summary_table(results), ""]
-    for name in results:
-        text = (out / name / "report.md").read_text()
-        text = text.replace("](plots/", f"]({name}/plots/")
-        report.append(text.replace("# ", "## ", 1))
-    (out / "report.md").write_text("\n".join(report))
+    target = pathlib.Path(args.out or "results/demo").expanduser()
+    with RunFolder(target, overwrite=args.overwrite, fresh=args.out is None) as rf:
+        args.run_folder = rf
+        _say_chosen(args, "demo", rf)
+        out = rf.work
+        for cfg in configs:
+            results[cfg.name] = _run_one(cfg, rf.path / cfg.name, out / cfg.name, args)
+        wall = time.perf_counter() - t0
+        success = all(r.get("success") for r in results.values())
+        keys = ("success", "accuracy", "strategy", "points", "max_point_error",
+                "final_fitness", "evaluations", "generations", "wall_time_s",
+                "compile_time_s", "total_time_s", "render", "plots")
+        summary = {
+            "success": success,
+            "small": args.small,
+            "wall_time_s": wall,
+            "experiments": {n: {k: r[k] for k in keys if k in r}
+                            for n, r in results.items()},
+        }
+        (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+        report = [f"# cgda demo{' (small)' if args.small else ''}", "",
+                  f"Overall: {'success' if success else 'NOT all goals met'}; "
+                  f"{wall:.1f} s in total.", "", *summary_table(results), ""]
+        for name in results:
+            text = (out / name / "report.md").read_text()
+            text = text.replace("](plots/", f"]({name}/plots/")
+            report.append(text.replace("# ", "## ", 1))
+        (out / "report.md").write_text("\n".join(report))
     _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
-               f"in {wall:.1f} s -> {out / 'report.md'}")
-    return 0 if success else 1
+               f"in {wall:.1f} s -> {rf.path / 'report.md'}")
+    return EXIT_MET if success else EXIT_NOT_MET
 
 
 def _diverged(err: BaseException) -> bool:
@@ -216,28 +292,122 @@ def _log_warnings() -> None:
         logger.propagate = False
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``cgda`` console script; returns the exit status."""
-    args = _parser().parse_args(argv)
-    _log_warnings()
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM received while ``cgda`` was working."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class _Signals:
+    """While active, SIGINT and SIGTERM raise `Interrupted` in the main thread (so
+    the results folder is cleaned up); afterwards they are only remembered."""
+
+    def __init__(self):
+        self.received: int | None = None
+        self.active = False
+        self.old: dict[int, object] = {}
+
+    def _handle(self, signum, frame):
+        self.received = signum
+        if self.active:
+            raise Interrupted(signum)
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            for sig in EXIT_SIGNAL:
+                self.old[sig] = signal.signal(sig, self._handle)
+        self.active = True
+        return self
+
+    def __exit__(self, *exc):
+        self.active = False
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+
+
+def _save_traceback() -> str:
+    """The current exception's traceback in a temporary log file; its path (or why
+    it could not be written)."""
+    try:
+        fd, path = tempfile.mkstemp(prefix="cgda-error-", suffix=".log")
+        with os.fdopen(fd, "w") as f:
+            f.write(f"cgda {' '.join(sys.argv[1:])}\n\n{traceback.format_exc()}")
+        return f"traceback in {path}"
+    except OSError as err:
+        return f"traceback not saved: {err.strerror or err}"
+
+
+def _first_line(err: BaseException) -> str:
+    text = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
+    return text.strip().splitlines()[0] if text.strip() else type(err).__name__
+
+
+def _interrupted(args, signum: int) -> int:
+    name = signal.Signals(signum).name
+    rf = getattr(args, "run_folder", None)
+    if rf is None:
+        where = ""
+    elif rf.committed:
+        where = f" after the results were written to {rf.path}"
+    else:
+        where = f"; nothing written ({rf.path} left as it was)"
+    print(f"cgda: interrupted ({name}){where}", file=sys.stderr)
+    return EXIT_SIGNAL.get(signum, 128 + signum)
+
+
+def _user_error(args, err: Exception) -> bool:
+    """Bad input (status 2): before the run starts, any of `USER_ERRORS`; once it
+    runs (everything was checked), only config and file errors, the rest is a
+    failure (status 3, with its traceback)."""
+    from cgda_jax.experiment.config import ConfigError
+
+    rf = getattr(args, "run_folder", None)
+    if rf is None or rf.committed:
+        return isinstance(err, USER_ERRORS)
+    return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError))
+
+
+def _dispatch(args, signals: _Signals) -> int:
     try:
         if not args.no_cache:
             enable_compilation_cache()
         if args.command == "run":
             return cmd_run(args)
         return cmd_demo(args)
-    except USER_ERRORS as e:
-        msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)
-        print(f"cgda: error: {msg}", file=sys.stderr)
-        return 2
-    except RuntimeError as e:
-        if not _diverged(e):
-            raise
-        print(f"cgda: error: {e}", file=sys.stderr)
-        return EXIT_DIVERGED
-    except KeyboardInterrupt:
-        print("cgda: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        return _interrupted(args, getattr(e, "signum", signal.SIGINT))
+    except Exception as e:  # noqa: BLE001 - every failure: one line
+        if signals.received is not None:  # an interrupt wrapped by a library
+            return _interrupted(args, signals.received)
+        if _user_error(args, e):
+            print(f"cgda: error: {_first_line(e)}", file=sys.stderr)
+            return EXIT_USAGE
+        if _diverged(e):
+            print(f"cgda: error: {_first_line(e)}", file=sys.stderr)
+            return EXIT_DIVERGED
+        where = _save_traceback()
+        print(f"cgda: error: {type(e).__name__}: {_first_line(e)} ({where})",
+              file=sys.stderr)
+        return EXIT_FAILURE
+    finally:
+        signals.active = False  # a signal from here on only ends the process
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``cgda`` console script; returns the exit status.
+
+    0 goal met, 1 goal not met, 2 usage or config error, 3 any other failure,
+    130 / 143 interrupted by SIGINT / SIGTERM; every error is one line on stderr.
+    """
+    with _Signals() as signals:
+        try:
+            args = _parser().parse_args(argv)
+        except KeyboardInterrupt as e:
+            return _interrupted(None, getattr(e, "signum", signal.SIGINT))
+        _log_warnings()
+        return _dispatch(args, signals)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -34,11 +34,13 @@ def test_demo_small_succeeds_and_writes_results(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("path", sorted(EXPERIMENTS.glob("*.toml")), ids=lambda p: p.stem)
-def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, tmp_path):
-    monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(tmp_path))
+def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, request):
+    if "xgnitive" in path.stem:  # the dry run loads the demonstrations
+        xgnitive = request.getfixturevalue("xgnitive_dir")
+        monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(xgnitive))
     assert main(["run", str(path), "--dry-run", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "valid" in out and "[strategy]" in out
+    assert "valid" in out and "[strategy]" in out and "results would go to" in out
 
 
 @pytest.mark.parametrize(

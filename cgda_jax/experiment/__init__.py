@@ -20,7 +20,11 @@ Modules, one job each:
   validation.
 - :mod:`~cgda_jax.experiment.build`: the goal, the simulator and the strategy
   function from a config.
-- :mod:`~cgda_jax.experiment.run`: recognition and execution runs, the results folder.
+- :mod:`~cgda_jax.experiment.validate`: every check that needs no compiled program
+  (``--dry-run`` and the start of every run).
+- :mod:`~cgda_jax.experiment.run`: recognition and execution runs.
+- :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved into
+  place when complete, locked, never mixing two runs).
 - :mod:`~cgda_jax.experiment.report`: JSON, plots, rendered frames, ``report.md``.
 - :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo``.
 
@@ -75,22 +79,38 @@ from cgda_jax.experiment.report import (
     log as log,
     render_execution as render_execution,
 )
+from cgda_jax.experiment.results import (
+    FolderBusy as FolderBusy,
+    FolderError as FolderError,
+    RunFolder as RunFolder,
+    plan_folder as plan_folder,
+)
 from cgda_jax.experiment.run import (
     _synthetic as _synthetic,
+    default_folder as default_folder,
     run_execution as run_execution,
     run_experiment as run_experiment,
     run_recognition as run_recognition,
+    write_run as write_run,
+)
+from cgda_jax.experiment.validate import (
+    MAX_SEED as MAX_SEED,
+    check_experiment as check_experiment,
 )
 
 __all__ = [
     "ConfigError",
     "DataConfig",
     "ExperimentConfig",
+    "FolderBusy",
+    "FolderError",
     "OutputConfig",
     "RecognitionConfig",
     "RobotConfig",
+    "RunFolder",
     "SceneConfig",
     "StrategyConfig",
+    "check_experiment",
     "dump_config",
     "load_config",
     "run_experiment",

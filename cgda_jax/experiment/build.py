@@ -36,6 +36,9 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
         from cgda_jax.data import load_xgnitive
 
         demos = load_xgnitive(resolve_data_dir(cfg), d.action, d.stream, d.columns)
+    from cgda_jax.experiment.validate import check_interval_count
+
+    check_interval_count(demos, d.interval_s, d.method)  # before generalize allocates
     gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
     return np.asarray(gen.knots, float) * d.scale, demos, gen
 

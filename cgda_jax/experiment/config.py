@@ -280,6 +280,9 @@ def load_config(
             table = tomllib.loads(path.read_text())
         except tomllib.TOMLDecodeError as e:
             raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        if not table:
+            raise ConfigError(f"{path}: the file sets nothing (an empty config); "
+                              f"start from one of the repository's experiments/*.toml")
         try:
             _merge(cfg, table)
         except ConfigError as e:

@@ -1,6 +1,8 @@
 """Running an experiment (recognition or execution, see the package docstring) into
 a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``,
-``report.md``; dynamic runs also replay their result on finer physics.
+``report.md``; dynamic runs also replay their result on finer physics. The folder
+itself (temporary folder, lock, move into place) belongs to
+`cgda_jax.experiment.results`.
 """
 
 from __future__ import annotations
@@ -23,7 +25,6 @@ from cgda_jax.experiment.config import (
     ConfigError,
     ExperimentConfig,
     dump_config,
-    validate_config,
 )
 from cgda_jax.experiment.report import (
     _close_all,
@@ -32,6 +33,8 @@ from cgda_jax.experiment.report import (
     _write_json,
     render_execution,
 )
+from cgda_jax.experiment.results import RunFolder, expand
+from cgda_jax.experiment.validate import check_experiment
 
 
 def _synthetic(cfg: ExperimentConfig) -> dict:
@@ -158,22 +161,15 @@ def run_execution(
     return summary
 
 
-def run_experiment(
+def write_run(
     cfg: ExperimentConfig,
-    out: str | os.PathLike | None = None,
+    folder: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
 ) -> dict:
-    """Validate and run ``cfg``; write the results folder; return the result dict.
-
-    Args:
-        cfg: the experiment.
-        out: results folder (default ``<output.dir>/<name>``); created if needed.
-        progress_fn: called with the strategies' progress dicts (execution).
-    """
-    validate_config(cfg)
+    """Run ``cfg`` (already checked) and write its results into the existing, empty
+    ``folder``; return the result dict. `run_experiment` and ``cgda`` call it inside
+    a `~cgda_jax.experiment.results.RunFolder`."""
     t0 = time.perf_counter()
-    folder = pathlib.Path(out) if out is not None else pathlib.Path(cfg.output.dir) / cfg.name
-    folder.mkdir(parents=True, exist_ok=True)
     (folder / "config.toml").write_text(dump_config(cfg))
     if cfg.kind == "recognition":
         result = run_recognition(cfg, folder)
@@ -185,4 +181,46 @@ def run_experiment(
     result["total_time_s"] = time.perf_counter() - t0
     _write_json(folder / "result.json", result)
     (folder / "report.md").write_text(_report(cfg, result))
+    return result
+
+
+def default_folder(cfg: ExperimentConfig) -> pathlib.Path:
+    """``<output.dir>/<name>`` (``~`` expanded)."""
+    return expand(cfg.output.dir) / cfg.name
+
+
+def run_experiment(
+    cfg: ExperimentConfig,
+    out: str | os.PathLike | None = None,
+    progress_fn: Callable[[dict], None] | None = None,
+    *,
+    overwrite: bool = False,
+) -> dict:
+    """Check and run ``cfg``; write its results folder; return the result dict.
+
+    The folder is written aside and moved into place when complete
+    (`~cgda_jax.experiment.results.RunFolder`): a failed or interrupted run leaves
+    it as it was.
+
+    Args:
+        cfg: the experiment.
+        out: results folder; it must be missing or empty unless ``overwrite``.
+            Default: the first free one of ``<output.dir>/<name>``,
+            ``<output.dir>/<name>-2``, ...
+        progress_fn: called with the strategies' progress dicts (execution).
+        overwrite: replace an existing results folder ``out`` whole.
+
+    Returns:
+        The result (as in ``result.json``), plus ``folder``: where it was written.
+
+    Raises:
+        ConfigError, FileNotFoundError: a bad config (see `check_experiment`).
+        FolderError: ``out`` is not empty, in use by another run (`FolderBusy`),
+            or not writable.
+    """
+    check_experiment(cfg)
+    target = expand(out) if out is not None else default_folder(cfg)
+    with RunFolder(target, overwrite=overwrite, fresh=out is None) as rf:
+        result = write_run(cfg, rf.work, progress_fn)
+    result["folder"] = str(rf.path)
     return result

@@ -1,0 +1,286 @@
+"""Every check of an experiment that needs no compiled program: what
+``cgda run --dry-run`` reports and what every run refuses before it starts, the same
+way (`check_experiment`).
+
+On top of `validate_config` (keys, types, choices, files and folders named):
+
+- seeds in 0 .. 2**32 - 1 (`MAX_SEED`);
+- sizes a machine can hold: interval count of the generalization, goal points,
+  population, population x goal points, simulated steps per generation,
+  repetitions, recognition samples (the ``MAX_*`` constants);
+- the goal, built (demonstrations generalized in NumPy; no JAX program runs): finite,
+  as many features as the scene gives;
+- the robot and the scene, built as the run builds them (not compiled): joints,
+  marker site and keyframe exist, fixed values are finite and inside their joints'
+  ranges, scene parameters are accepted;
+- the algorithm: its name (`cgda_jax.strategies.base.ALGORITHMS`) and its population
+  limits, by building it (`make_algorithm`: evosax's default parameters, one small
+  program compiled once, about 0.5 s for CMA_ES, then in the compilation cache).
+
+Every error is a `ConfigError` whose message names the config key.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from cgda_jax.experiment.config import ConfigError, ExperimentConfig, validate_config
+
+#: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
+MAX_SEED = 2**32 - 1
+#: Intervals of one generalization (mean demonstration duration / ``interval_s``).
+MAX_INTERVALS = 10_000
+#: Goal points (paint ramp length, generalized knots).
+MAX_GOAL_POINTS = 10_000
+#: Candidates per generation.
+MAX_POPULATION = 1_000_000
+#: Candidates x goal points evaluated in one generation.
+MAX_CANDIDATE_POINTS = 10_000_000
+#: Candidates x goal points x simulated steps per waypoint in one generation.
+MAX_SIM_STEPS = 1_000_000_000
+#: Repetitions of a synthetic action / clean-circle demonstrations.
+MAX_REPETITIONS = 1_000
+#: Samples per trajectory compared in recognition (DTW is quadratic in it).
+MAX_SAMPLES = 10_000
+#: Kinematic sub-steps per waypoint.
+MAX_SUBSTEPS = 10_000
+#: Physics steps per waypoint (dynamic mode: waypoint time / timestep).
+MAX_PHYSICS_STEPS = 1_000_000
+#: Generations per compiled chunk.
+MAX_CHUNK = 100_000
+
+
+def _at_most(value: int, limit: int, key: str, what: str = "") -> None:
+    if value > limit:
+        raise ConfigError(
+            f"key '{key}': {value:,}{what} is more than this machine-sane limit of "
+            f"{limit:,}"
+        )
+
+
+def check_seed(value: int, key: str) -> None:
+    """``value`` is a seed in 0 .. 2**32 - 1."""
+    if not 0 <= value <= MAX_SEED:
+        raise ConfigError(f"key '{key}': seed {value} is not in 0 .. {MAX_SEED}")
+
+
+def check_interval_count(demos: Sequence, interval_s: float, method: str = "paper",
+                         key: str = "data.interval_s") -> None:
+    """The generalization of ``demos`` at ``interval_s`` has at most `MAX_INTERVALS`
+    intervals (checked before `cgda_jax.generalize` allocates them)."""
+    if not demos or not math.isfinite(interval_s) or not interval_s > 0:
+        return  # generalize names these itself
+    durations = np.asarray([float(d.duration) for d in demos])
+    if method == "xgnitive":
+        durations = np.ceil(durations)
+    mean = float(np.mean(durations))
+    n = mean / interval_s
+    if not n <= MAX_INTERVALS:
+        raise ConfigError(
+            f"key '{key}': {interval_s:g} s cuts the {mean:.3g} s demonstrations into "
+            f"{n:.3g} intervals, more than {MAX_INTERVALS:,}; use a larger interval_s"
+        )
+
+
+def _check_static(cfg: ExperimentConfig) -> None:
+    """Seeds and sizes known before anything is built."""
+    d, s, r = cfg.data, cfg.strategy, cfg.robot
+    check_seed(d.seed, "data.seed")
+    _at_most(d.n_repetitions, MAX_REPETITIONS, "data.n_repetitions")
+    if cfg.kind == "recognition":
+        _at_most(cfg.recognition.n_samples, MAX_SAMPLES, "recognition.n_samples")
+        if cfg.recognition.n_samples < 2:
+            raise ConfigError("key 'recognition.n_samples' must be >= 2")
+        return
+    check_seed(s.seed, "strategy.seed")
+    _at_most(d.n_demos, MAX_REPETITIONS, "data.n_demos")
+    if d.source == "clean_circle" and d.n_demos < 1:
+        raise ConfigError("key 'data.n_demos' must be >= 1")
+    if d.source == "paint_ramp":
+        if d.goal_points < 2:
+            raise ConfigError("key 'data.goal_points' must be >= 2")
+        _at_most(d.goal_points, MAX_GOAL_POINTS, "data.goal_points")
+    if not math.isfinite(d.scale):
+        raise ConfigError(f"key 'data.scale': {d.scale} is not a finite number")
+    _at_most(s.population_size, MAX_POPULATION, "strategy.population_size")
+    _at_most(s.chunk_size, MAX_CHUNK, "strategy.chunk_size")
+    if not 1 <= r.substeps:
+        raise ConfigError("key 'robot.substeps' must be >= 1")
+    _at_most(r.substeps, MAX_SUBSTEPS, "robot.substeps")
+    for name, value in r.fixed.items():
+        if not math.isfinite(value):
+            raise ConfigError(
+                f"key 'robot.fixed.{name}': {value} is not a finite number")
+
+
+def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
+    from cgda_jax.experiment.run import _synthetic
+
+    d = cfg.data
+    demos = _synthetic(cfg)
+    for reps in demos.values():
+        check_interval_count(reps[: d.n_train], d.interval_s, d.method)
+        for t in reps[d.n_train:]:
+            check_interval_count([t], d.interval_s, d.method)
+    return {"actions": len(demos)}
+
+
+#: Which config key a robot-building message is about (first matching prefix).
+_ROBOT_KEYS = (("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
+               ("site", "robot.marker_site"), ("keyframe", "robot.keyframe"))
+
+
+def _robot_key(message: str) -> str:
+    text = message.strip("'\"")
+    for prefix, key in _ROBOT_KEYS:
+        if text.startswith(prefix):
+            return key
+    return "robot"
+
+
+def _check_fixed(cfg: ExperimentConfig, mj_model) -> None:
+    """Fixed values inside their joints' ranges (the config holds degrees)."""
+    import mujoco
+
+    for name, value in cfg.robot.fixed.items():
+        jid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if jid < 0 or not mj_model.jnt_limited[jid]:
+            continue
+        lo, hi = (float(v) for v in mj_model.jnt_range[jid])
+        rad = math.radians(value)
+        if not lo - 1e-9 <= rad <= hi + 1e-9:
+            raise ConfigError(
+                f"key 'robot.fixed.{name}': {value:g} degrees is outside the joint's "
+                f"range [{math.degrees(lo):.4g}, {math.degrees(hi):.4g}] degrees"
+            )
+
+
+def _check_physics_steps(cfg: ExperimentConfig, waypoint_s: float) -> None:
+    """Dynamic mode: waypoint time / timestep within `MAX_PHYSICS_STEPS` (checked
+    before the simulator allocates its per-step profile)."""
+    import mujoco
+
+    from cgda_jax.experiment.config import resolve_model
+
+    rc = cfg.robot
+    timestep = rc.timestep
+    if not timestep:
+        try:
+            timestep = mujoco.MjModel.from_xml_path(
+                str(resolve_model(rc.model))).opt.timestep
+        except ValueError as err:
+            raise ConfigError(f"key 'robot.model': cannot load it: {err}") from None
+    waypoint = rc.waypoint_s or waypoint_s
+    steps = waypoint / timestep if timestep > 0 else math.inf
+    if not steps <= MAX_PHYSICS_STEPS:
+        raise ConfigError(
+            f"keys 'robot.waypoint_s' / 'robot.timestep': {waypoint:g} s per waypoint "
+            f"at a {timestep:g} s timestep is {steps:.3g} physics steps per waypoint, "
+            f"more than {MAX_PHYSICS_STEPS:,}"
+        )
+
+
+def _build_simulator(cfg: ExperimentConfig, demos: list, n_points: int):
+    from cgda_jax.experiment.build import build_simulator, default_waypoint_s
+
+    if cfg.robot.mode == "dynamic":
+        _check_physics_steps(cfg, default_waypoint_s(demos, n_points))
+    try:
+        return build_simulator(cfg, default_waypoint_s(demos, n_points))
+    except ConfigError:
+        raise
+    except KeyError as err:
+        msg = str(err.args[0]) if err.args else str(err)
+        raise ConfigError(f"key '{_robot_key(msg)}': {msg}") from None
+    except TypeError as err:  # the scene's constructor refused a parameter
+        raise ConfigError(f"key 'scene.params': {err}") from None
+    except ValueError as err:
+        raise ConfigError(f"key '{_robot_key(str(err))}': {err}") from None
+
+
+def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
+    from cgda_jax.strategies.base import ALGORITHMS, _default_kwargs, make_algorithm
+
+    s = cfg.strategy
+    if s.algorithm not in ALGORITHMS:
+        raise ConfigError(
+            f"key 'strategy.algorithm': {s.algorithm!r} is not one of "
+            f"{sorted(ALGORITHMS)}"
+        )
+    kwargs = s.options.get("algorithm_kwargs") or {}
+    params = s.options.get("algorithm_params") or {}
+    for key, value in (("algorithm_kwargs", kwargs), ("algorithm_params", params)):
+        if not isinstance(value, dict):
+            raise ConfigError(f"key 'strategy.options.{key}' must be a table")
+    try:
+        make_algorithm(s.algorithm, s.population_size, n_genes,
+                       algorithm_kwargs={**_default_kwargs(s.algorithm), **kwargs},
+                       algorithm_params=params)
+    except (ValueError, TypeError) as err:
+        text = str(err)
+        key = ("strategy.population_size" if text.startswith("population_size")
+               else "strategy.options.algorithm_params" if "algorithm_params" in text
+               else "strategy.options.algorithm_kwargs" if "algorithm_kwargs" in text
+               else "strategy.algorithm")
+        raise ConfigError(f"key '{key}': {text}") from None
+
+
+def _check_execution(cfg: ExperimentConfig) -> dict[str, Any]:
+    from cgda_jax.experiment.build import build_goal
+    from cgda_jax.strategies.base import check_config
+
+    s = cfg.strategy
+    try:
+        goal, demos, _ = build_goal(cfg)
+    except ConfigError:
+        raise
+    except ValueError as err:  # demonstrations or their generalization
+        raise ConfigError(f"key 'data': {err}") from None
+    n_points = int(goal.shape[0])
+    _at_most(n_points, MAX_GOAL_POINTS, "data", " goal points")
+    _at_most(s.population_size * n_points, MAX_CANDIDATE_POINTS,
+             "strategy.population_size", f" x {n_points} goal points")
+    sim = _build_simulator(cfg, demos, n_points)
+    _check_fixed(cfg, sim.robot.mj_model)
+    steps = sim.physics_steps if sim.mode == "dynamic" else sim.substeps
+    _at_most(s.population_size * n_points * steps, MAX_SIM_STEPS,
+             "robot.timestep" if sim.mode == "dynamic" else "robot.substeps",
+             f" simulated steps per generation (population x {n_points} points x "
+             f"{steps} steps per waypoint)")
+    if goal.shape[1] != sim.n_features:
+        raise ConfigError(
+            f"key 'scene.kind': the goal has {goal.shape[1]} feature(s) "
+            f"{cfg.data.columns} but the '{cfg.scene.kind}' scene gives "
+            f"{sim.n_features} {list(sim.feature_names)}"
+        )
+    try:
+        check_config(sim, goal, tolerance=s.tolerance,
+                     max_generations=s.max_generations)
+    except ValueError as err:
+        raise ConfigError(f"key 'data': {err}") from None
+    n_genes = n_points * sim.n_dof if s.name == "fte" else sim.n_dof
+    _check_algorithm(cfg, n_genes)
+    return {"goal_points": n_points, "features": int(goal.shape[1]),
+            "genes": int(n_genes)}
+
+
+def check_experiment(cfg: ExperimentConfig) -> dict[str, Any]:
+    """Everything a run of ``cfg`` would check, without compiling it (see the
+    module docstring).
+
+    Returns:
+        A few facts found on the way: recognition ``actions``; execution
+        ``goal_points``, ``features`` and ``genes`` (per candidate).
+
+    Raises:
+        ConfigError / FileNotFoundError: naming the config key or the file.
+    """
+    validate_config(cfg)
+    _check_static(cfg)
+    if cfg.kind == "recognition":
+        return _check_recognition(cfg)
+    return _check_execution(cfg)
