@@ -140,7 +140,7 @@ def _check_arguments(fn: Callable, where: str, args: tuple, kwargs: dict) -> Non
     for name, value in named:
         leaves = jax.tree_util.tree_leaves_with_path(value)
         for path, leaf in leaves:
-            if isinstance(leaf, (jax.Array, np.ndarray, float)):
+            if isinstance(leaf, (jax.Array, np.ndarray, np.generic, float)):
                 label = name + jax.tree_util.keystr(path)
                 require_finite(leaf, label, where)
 
@@ -183,7 +183,7 @@ def checked(
         fn: a JAX function (see `checkified`).
         name: the function's name in the message (default ``fn.__name__``).
         static_argnames: arguments of ``fn`` that are static to ``jit`` (e.g.
-            ``("n_samples",)`` for `cgda_jax.euclidean`).
+            ``("n_samples",)`` for `cgda_jax.euclidean`); pass them by keyword.
 
     Returns:
         A function with ``fn``'s arguments and result.
