@@ -92,13 +92,14 @@ _LAZY.update({
 })
 
 
-_SUBMODULES = ("datasets",)
+_SUBMODULES = ("checks", "datasets")
 
 __all__: list[str] = ["__version__", *_LAZY, *_SUBMODULES]
 
 
 def __getattr__(name: str):
-    """Import a public name (or the ``datasets`` subpackage) on first access."""
+    """Import a public name (or the ``checks`` / ``datasets`` module) on first
+    access."""
     if name in _SUBMODULES:
         module = _importlib.import_module(f"cgda_jax.{name}")
     elif name in _LAZY:
@@ -136,7 +137,7 @@ _sys.modules[__name__].__class__ = _Package
 
 
 if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
-    from cgda_jax import datasets as datasets  # noqa: F401
+    from cgda_jax import checks as checks, datasets as datasets  # noqa: F401
     from cgda_jax.data import (  # noqa: F401
         Demonstration, load_csv, load_npz, load_xgnitive, save_csv, save_npz,
         validate_demonstrations,

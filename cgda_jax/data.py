@@ -4,6 +4,10 @@ A :class:`Demonstration` is one repetition of an action: sample times in seconds
 the object-feature trajectory measured at those times. Arrays live on the host as
 float64 NumPy arrays; generalization turns them into JAX arrays.
 
+Values: features must be finite and within float32's range (``|x| <= 3.4e38``): the
+library computes in float32, and a larger value would become ``inf`` there.  Text
+files must be UTF-8 (a byte-order mark is accepted); paths may start with ``~``.
+
 File layouts:
     * CSV: a header row ``time,<feature names...>`` then one row per sample.
     * NPZ: arrays ``times`` (T,), ``features`` (T, F), ``feature_names`` (F,) and a
@@ -34,9 +38,25 @@ __all__ = [
 
 PathLike = str | pathlib.Path
 
+#: Largest float32: feature values beyond it would become inf in the float32 kernels.
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
-def _find_problem(times: np.ndarray, features: np.ndarray) -> tuple[int, str] | None:
+
+def _path(path: PathLike) -> pathlib.Path:
+    """A user path with ``~`` expanded."""
+    return pathlib.Path(path).expanduser()
+
+
+def _find_problem(
+    times: np.ndarray, features: np.ndarray, names: Sequence[str] = ()
+) -> tuple[int, str] | None:
     """First bad sample of a trajectory as (row index, message), or None."""
+
+    def column(col: int) -> str:
+        return f"feature {col} ({names[col]!r})" if col < len(names) else (
+            f"feature {col}"
+        )
+
     bad_t = ~np.isfinite(times)
     if bad_t.any():
         row = int(np.argmax(bad_t))
@@ -44,7 +64,14 @@ def _find_problem(times: np.ndarray, features: np.ndarray) -> tuple[int, str] | 
     bad_f = ~np.isfinite(features)
     if bad_f.any():
         row, col = (int(v) for v in np.argwhere(bad_f)[0])
-        return row, f"feature {col} is {features[row, col]} (not finite)"
+        return row, f"{column(col)} is {features[row, col]} (not finite)"
+    big = np.abs(features) > _FLOAT32_MAX
+    if big.any():
+        row, col = (int(v) for v in np.argwhere(big)[0])
+        return row, (
+            f"{column(col)} is {features[row, col]:g}, beyond float32's range "
+            f"(+/-{_FLOAT32_MAX:.4g}); rescale it (e.g. other units)"
+        )
     steps = np.diff(times)
     if (steps <= 0).any():
         row = int(np.argmax(steps <= 0)) + 1
@@ -104,7 +131,7 @@ class Demonstration:
             )
         if len(set(names)) != len(names):
             raise ValueError(f"{where}: duplicate feature names {names}")
-        problem = _find_problem(times, features)
+        problem = _find_problem(times, features, names)
         if problem is not None:
             row, msg = problem
             raise ValueError(f"{where}, sample {row}: {msg}")
@@ -191,7 +218,7 @@ def _from_table(
     """Build a Demonstration, reporting bad rows by their line in ``path``."""
     if times.shape[0] < 2:
         raise ValueError(f"{path}: needs at least 2 samples, got {times.shape[0]}")
-    problem = _find_problem(times, features)
+    problem = _find_problem(times, features, names)
     if problem is not None:
         row, msg = problem
         raise ValueError(f"{path}, line {first_line + row * every}: {msg}")
@@ -201,7 +228,16 @@ def _from_table(
 def _read_rows(path: pathlib.Path, delimiter: str | None) -> list[list[str]]:
     if not path.is_file():
         raise FileNotFoundError(f"no such file: {path}")
-    lines = path.read_text().splitlines()
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")  # a leading byte-order mark is dropped
+    except UnicodeDecodeError as err:
+        line = raw[: err.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}, line {line}: not UTF-8 text (byte {raw[err.start]:#04x} at "
+            f"offset {err.start}); save the file as UTF-8"
+        ) from None
+    lines = text.splitlines()
     rows = [(ln.split(delimiter) if delimiter else ln.split()) for ln in lines]
     if not any(any(c.strip() for c in r) for r in rows):
         raise ValueError(f"{path}: file is empty")
@@ -239,10 +275,11 @@ def load_csv(
         The Demonstration.
 
     Raises:
-        FileNotFoundError: missing file. ValueError: empty file, bad header, bad
-        values (names the line). KeyError: unknown column.
+        FileNotFoundError: missing file. ValueError: empty file, not UTF-8, bad
+        header, bad values (non-numbers, NaN/inf, beyond float32's range; names the
+        line and column). KeyError: unknown column.
     """
-    path = pathlib.Path(path)
+    path = _path(path)
     rows = [r for r in _read_rows(path, ",") if any(c.strip() for c in r)]
     header = [c.strip() for c in rows[0]]
     if len(header) < 2 or header[0] != "time":
@@ -261,14 +298,18 @@ def load_csv(
 
 def save_csv(demo: Demonstration, path: PathLike) -> None:
     """Write a demonstration in the CSV layout read by :func:`load_csv`."""
+    path = _path(path)
     table = np.column_stack([demo.times, demo.features])
     header = ",".join(("time", *demo.feature_names))
-    np.savetxt(path, table, delimiter=",", header=header, comments="", fmt="%.17g")
+    np.savetxt(
+        path, table, delimiter=",", header=header, comments="", fmt="%.17g",
+        encoding="utf-8",
+    )
 
 
 def load_npz(path: PathLike) -> Demonstration:
     """Load a demonstration saved by :func:`save_npz`."""
-    path = pathlib.Path(path)
+    path = _path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such file: {path}")
     if path.stat().st_size == 0:
@@ -291,6 +332,7 @@ def load_npz(path: PathLike) -> Demonstration:
 
 def save_npz(demo: Demonstration, path: PathLike) -> None:
     """Write a demonstration as NPZ (times, features, feature_names, name)."""
+    path = _path(path)
     np.savez(
         path,
         times=demo.times,
@@ -358,7 +400,7 @@ def load_xgnitive(
     all_cols = XGNITIVE_COLUMNS[stream]
     columns = list(all_cols[2:] if columns is None else columns)
     idx = [_column_index(all_cols, c, f"xgnitive stream {stream!r}") for c in columns]
-    folder = _xgnitive_dir(pathlib.Path(root), action, stream)
+    folder = _xgnitive_dir(_path(root), action, stream)
     pattern = re.compile(r"reduced-data-(\d+)\.csv" if reduced else r"data-(\d+)\.log")
     found = {
         int(m.group(1)): p

@@ -10,6 +10,12 @@ local costs of a diagonal are computed inside the step from ``x`` and a reversed
 padded copy of ``y`` (a contiguous ``dynamic_slice``), so the ``N x M`` cost matrix is
 never materialised.
 
+Non-finite inputs: an eager call with a NaN or an infinity in ``x`` or ``y`` raises
+``ValueError`` naming the input and the index of the bad value; a traced call (under
+``jit``, ``vmap``, ``scan``) returns NaN instead, without a host sync.  Wrap a jitted
+distance with `cgda_jax.checks.checked` (or `cgda_jax.checks.checkified`) to learn
+which input was bad.
+
 References:
     Morante et al., "Humanoid Robot Imitation through Continuous Goal-Directed
     Actions: An Evolutionary Approach", Advanced Robotics 2015, section 2.2.
@@ -23,6 +29,8 @@ from collections.abc import Callable
 
 import jax
 import jax.numpy as jnp
+
+from cgda_jax.checks import check_finite
 
 __all__ = ["dtw", "dtw_multi", "euclidean", "resample"]
 
@@ -43,7 +51,11 @@ def _as_2d(x: jax.Array, name: str) -> jax.Array:
     return x
 
 
-def _pair(x: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+def _pair(
+    x: jax.Array, y: jax.Array, where: str
+) -> tuple[jax.Array, jax.Array]:
+    check_finite(x, "x", where=where)  # eager calls only: a no-op on tracers
+    check_finite(y, "y", where=where)
     x, y = _as_2d(x, "x"), _as_2d(y, "y")
     if x.shape[1] != y.shape[1]:
         raise ValueError(
@@ -51,6 +63,13 @@ def _pair(x: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
         )
     dtype = jnp.result_type(x, y)
     return x.astype(dtype), y.astype(dtype)
+
+
+def _nan_unless_finite(value: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
+    """``value``, or NaN where ``x`` or ``y`` holds a NaN or an infinity (traced
+    calls; eager ones were refused by `_pair`)."""
+    ok = jnp.all(jnp.isfinite(x)) & jnp.all(jnp.isfinite(y))
+    return jnp.where(ok, value, jnp.asarray(jnp.nan, value.dtype))
 
 
 def _accumulated_cost(
@@ -120,16 +139,21 @@ def dtw(x: jax.Array, y: jax.Array) -> jax.Array:
         y: (M, F) or (M,) second trajectory (same F, any M).
 
     Returns:
-        Scalar score (0 for identical trajectories).
+        Scalar score (0 for identical trajectories); NaN under ``jit`` / ``vmap`` if
+        ``x`` or ``y`` holds a NaN or an infinity.
+
+    Raises:
+        ValueError: bad shapes, or (eager calls) a NaN or an infinity in ``x`` or
+            ``y`` (the message names the input and the index).
 
     Examples:
         >>> import jax.numpy as jnp
         >>> float(dtw(jnp.array([0.0, 1.0, 2.0]), jnp.array([0.0, 1.0, 1.0, 2.0])))
         0.0
     """
-    x, y = _pair(x, y)
+    x, y = _pair(x, y, "dtw")
     per_dim = _accumulated_cost(x, y, _abs_cost)
-    return jnp.sum(per_dim) / (x.shape[0] + y.shape[0])
+    return _nan_unless_finite(jnp.sum(per_dim) / (x.shape[0] + y.shape[0]), x, y)
 
 
 def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:
@@ -143,10 +167,13 @@ def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:
         y: (M, F) or (M,) second trajectory.
 
     Returns:
-        Scalar accumulated cost.
+        Scalar accumulated cost; NaN under ``jit`` / ``vmap`` for non-finite input.
+
+    Raises:
+        ValueError: as `dtw`.
     """
-    x, y = _pair(x, y)
-    return _accumulated_cost(x, y, _euclid_cost)
+    x, y = _pair(x, y, "dtw_multi")
+    return _nan_unless_finite(_accumulated_cost(x, y, _euclid_cost), x, y)
 
 
 def resample(x: jax.Array, n: int) -> jax.Array:
@@ -193,9 +220,12 @@ def euclidean(x: jax.Array, y: jax.Array, n_samples: int | None = None) -> jax.A
         n_samples: common number of samples; default ``max(N, M)``.
 
     Returns:
-        Scalar distance.
+        Scalar distance; NaN under ``jit`` / ``vmap`` for non-finite input.
+
+    Raises:
+        ValueError: as `dtw`.
     """
-    x, y = _pair(x, y)
+    x, y = _pair(x, y, "euclidean")
     n = max(x.shape[0], y.shape[0]) if n_samples is None else int(n_samples)
     diff = resample(x, n) - resample(y, n)
-    return jnp.sqrt(jnp.sum(diff**2))
+    return _nan_unless_finite(jnp.sqrt(jnp.sum(diff**2)), x, y)

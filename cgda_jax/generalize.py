@@ -8,6 +8,13 @@ weights solve the N x N system ``f(t_j) = knot_j``.
 The binning runs on the host in float64 NumPy (it is data preparation, done once);
 the resulting :class:`GeneralizedAction` is a JAX pytree evaluated with jit-able JAX.
 
+Knot times: the linear RBF through distinct knots does not depend on their order, so
+unsorted knot times are sorted (together with their knots) before evaluation; two
+equal knot times make the interpolant ambiguous (a singular system) and are refused
+with ``ValueError`` in eager calls, and give NaN under ``jit`` / ``vmap``.  Eager calls
+also refuse a NaN or an infinity in ``knot_times``, ``knots`` or ``t`` (see
+`cgda_jax.checks`).
+
 References:
     Morante et al., "Humanoid Robot Imitation through Continuous Goal-Directed
     Actions: An Evolutionary Approach", Advanced Robotics 2015, section 2.1.
@@ -23,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cgda_jax.checks import FLOAT32_MAX, check_finite, is_traced
 from cgda_jax.data import Demonstration, validate_demonstrations
 
 __all__ = ["GeneralizedAction", "generalize", "rbf_interpolate", "rbf_weights"]
@@ -45,19 +53,49 @@ def _check_knots(knot_times: jax.Array, knots: jax.Array) -> jax.Array:
     return knots
 
 
+def _check_knot_times(knot_times: jax.Array, dtype, where: str) -> None:
+    """Eager calls: refuse non-finite or repeated knot times (naming both indices);
+    a no-op on tracers."""
+    if is_traced(knot_times):
+        return
+    check_finite(knot_times, "knot_times", where=where)
+    kt = np.asarray(jnp.asarray(knot_times, dtype))  # the values actually used
+    order = np.argsort(kt, kind="stable")
+    same = np.flatnonzero(np.diff(kt[order]) == 0)
+    if same.size:
+        i, j = sorted(int(k) for k in order[same[0] : same[0] + 2])
+        raise ValueError(
+            f"{where}: knot_times[{i}] and knot_times[{j}] are both {kt[i]:g} "
+            f"(in {jnp.dtype(dtype).name}); knot times must be distinct"
+        )
+
+
+def _repeated(sorted_times: jax.Array) -> jax.Array:
+    """Scalar bool: two equal neighbours in sorted knot times."""
+    return jnp.any(jnp.diff(sorted_times) == 0)
+
+
 def rbf_weights(knot_times: jax.Array, knots: jax.Array) -> jax.Array:
     """Weights of the linear RBF through the knots (paper eq. 2).
 
     Args:
-        knot_times: (N,) distinct knot times.
+        knot_times: (N,) distinct knot times, in any order.
         knots: (N, F) knot values.
 
     Returns:
-        (N, F) weights ``w`` solving ``|t_j - t_i| w = knots``.
+        (N, F) weights ``w`` solving ``|t_j - t_i| w = knots`` (in the order given);
+        NaN under ``jit`` if two knot times are equal.
+
+    Raises:
+        ValueError: bad shapes; in eager calls also repeated or non-finite knot
+            times, or non-finite knots (the message names the input).
     """
     knots = _check_knots(knot_times, knots)
+    _check_knot_times(knot_times, knots.dtype, "rbf_weights")
+    check_finite(knots, "knots", where="rbf_weights")
     t = jnp.asarray(knot_times, knots.dtype)
-    return jnp.linalg.solve(jnp.abs(t[:, None] - t[None, :]), knots)
+    w = jnp.linalg.solve(jnp.abs(t[:, None] - t[None, :]), knots)
+    return jnp.where(_repeated(jnp.sort(t)), jnp.nan, w)
 
 
 def _evaluate(
@@ -69,10 +107,13 @@ def _evaluate(
     linear interpolant between them, extended beyond the outer knots with slopes
     ``-sum(w)`` (left) and ``+sum(w)`` (right). This form is what is evaluated: it
     is mathematically identical to the weighted sum but does not lose float32
-    precision to large alternating weights.
+    precision to large alternating weights.  Knots are sorted by time first (the RBF
+    does not depend on their order); repeated knot times give NaN.
     """
     t = jnp.asarray(t, knots.dtype)
     kt = jnp.asarray(knot_times, knots.dtype)
+    order = jnp.argsort(kt)
+    kt, knots = kt[order], knots[order]
     n = kt.shape[0]
     seg = jnp.clip(jnp.searchsorted(kt, t, side="right") - 1, 0, n - 2)
     t0, t1 = kt[seg], kt[seg + 1]
@@ -80,23 +121,41 @@ def _evaluate(
     inner = knots[seg] * (1 - frac) + knots[seg + 1] * frac
     left = knots[0] + (kt[0] - t)[:, None] * weight_sum
     right = knots[-1] + (t - kt[-1])[:, None] * weight_sum
-    return jnp.where(
+    out = jnp.where(
         (t < kt[0])[:, None], left, jnp.where((t > kt[-1])[:, None], right, inner)
     )
+    return jnp.where(_repeated(kt), jnp.nan, out)
 
 
 def rbf_interpolate(knot_times: jax.Array, knots: jax.Array, t: jax.Array) -> jax.Array:
     """Linear RBF interpolant (``phi(r) = r``, no polynomial) through the knots.
 
     Args:
-        knot_times: (N,) strictly increasing knot times.
+        knot_times: (N,) distinct knot times, in any order (they are sorted together
+            with their knots: the interpolant does not depend on the order).
         knots: (N, F) knot values.
         t: (T,) query times.
 
     Returns:
-        (T, F) interpolated values; exactly ``knots`` at ``knot_times``.
+        (T, F) interpolated values; exactly ``knots`` at ``knot_times``.  Under
+        ``jit`` / ``vmap``: NaN if two knot times are equal, and non-finite values
+        where an input is not finite.
+
+    Raises:
+        ValueError: bad shapes; in eager calls also two equal knot times (the message
+            names both indices), or a NaN or an infinity in ``knot_times``, ``knots``
+            or ``t`` (named, with its index).
+
+    Examples:
+        >>> import jax.numpy as jnp
+        >>> rbf_interpolate(jnp.array([1.0, 0.0]), jnp.array([2.0, 0.0]),
+        ...                 jnp.array([0.25])).tolist()
+        [[0.5]]
     """
     knots = _check_knots(knot_times, knots)
+    _check_knot_times(knot_times, knots.dtype, "rbf_interpolate")
+    check_finite(knots, "knots", where="rbf_interpolate")
+    check_finite(t, "t", where="rbf_interpolate")
     w = rbf_weights(knot_times, knots)
     return _evaluate(knot_times, knots, jnp.sum(w, axis=0), t)
 
@@ -182,6 +241,20 @@ def _bin_means(
     return sums / counts[:, None]
 
 
+def _check_float32_result(
+    values: np.ndarray, what: str, names: Sequence[str]
+) -> None:
+    """Refuse (N, F) float64 results that become inf in float32, naming the feature."""
+    bad = ~(np.abs(values) <= FLOAT32_MAX)
+    if bad.any():
+        k, f = (int(v) for v in np.argwhere(bad)[0])
+        raise ValueError(
+            f"generalize: {what} {k} of feature {f} ({names[f]!r}) is "
+            f"{values[k, f]:g}, beyond float32's range (+/-{FLOAT32_MAX:.4g}); "
+            f"rescale that feature (e.g. other units)"
+        )
+
+
 def generalize(
     demos: Sequence[Demonstration],
     interval_s: float = 1.0,
@@ -206,7 +279,8 @@ def generalize(
 
     Raises:
         ValueError: bad demonstrations, fewer than 2 intervals, an empty interval,
-            or an unknown method.
+            an unknown method, or knots or weights beyond float32's range (the
+            message names the feature).
 
     Examples:
         >>> import numpy as np
@@ -239,6 +313,8 @@ def generalize(
     else:
         knot_times = (np.arange(n_bins) + 0.5) / n_bins
     weights = np.linalg.solve(np.abs(knot_times[:, None] - knot_times[None, :]), means)
+    _check_float32_result(means, "knot (interval mean)", demos[0].feature_names)
+    _check_float32_result(weights, "RBF weight", demos[0].feature_names)
     return GeneralizedAction(
         knot_times=jnp.asarray(knot_times, jnp.float32),
         knots=jnp.asarray(means, jnp.float32),

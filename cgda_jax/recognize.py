@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cgda_jax.checks import check_float32
 from cgda_jax.data import Demonstration
 from cgda_jax.distance import dtw, dtw_multi, euclidean, resample
 from cgda_jax.generalize import GeneralizedAction, generalize
@@ -130,6 +131,8 @@ def _query_array(
         tq = q.normalized_times
         cols = [np.interp(t, tq, q.features[:, f]) for f in range(q.n_features)]
         return jnp.asarray(np.stack(cols, axis=1), jnp.float32)
+    # NaN, inf or beyond float32 (inf once cast), named with its index
+    check_float32(q, f"query {k}", where="cost_matrix")
     arr = jnp.asarray(q, jnp.float32)
     if arr.ndim == 1:
         arr = arr[:, None]
@@ -143,8 +146,6 @@ def _query_array(
             f"query {k} has {arr.shape[1]} features but the library has "
             f"{len(feature_names)} {feature_names}"
         )
-    if not bool(jnp.all(jnp.isfinite(arr))):
-        raise ValueError(f"query {k} contains NaN or inf")
     return resample(arr, n)
 
 

@@ -33,7 +33,10 @@ def test_demonstration_basics():
     "times,feats,names,match",
     [
         ([0.0, 1.0, np.nan], [[0], [1], [2]], ("a",), r"'bad', sample 2: time is nan"),
-        ([0.0, 1.0, 2.0], [[0], [np.inf], [2]], ("a",), r"sample 1: feature 0 is inf"),
+        (
+            [0.0, 1.0, 2.0], [[0], [np.inf], [2]], ("a",),
+            r"sample 1: feature 0 \('a'\) is inf",
+        ),
         ([0.0, 1.0, 1.0], [[0], [1], [2]], ("a",), r"sample 2: time does not increase"),
         ([0.0, 2.0, 1.0], [[0], [1], [2]], ("a",), "time does not increase"),
         ([0.0], [[0]], ("a",), "'bad': needs at least 2 samples"),
@@ -84,7 +87,7 @@ def test_csv_errors_name_file_and_line(tmp_path):
     with pytest.raises(ValueError, match=r"bad\.csv, line 4: time does not increase"):
         load_csv(p)
     p.write_text("time,a\n0,1\n1,nan\n")
-    with pytest.raises(ValueError, match=r"bad\.csv, line 3: feature 0 is nan"):
+    with pytest.raises(ValueError, match=r"bad\.csv, line 3: feature 0 \('a'\) is nan"):
         load_csv(p)
     p.write_text("time,a\n0,1\n1,x\n")
     with pytest.raises(ValueError, match=r"line 3: not a number"):
@@ -150,3 +153,63 @@ def test_load_xgnitive_errors(tmp_path, xgnitive_dir):
     (folder / "reduced-data-1.csv").write_text(rows)
     with pytest.raises(ValueError, match=r"reduced-data-1\.csv, line 2: time does not"):
         load_xgnitive(tmp_path, "iron", "jr3")
+
+
+# --- numeric and file guards (issue 12) ------------------------------------------
+
+
+def test_values_beyond_float32_are_refused_naming_demo_sample_and_column(tmp_path):
+    t = np.linspace(0.0, 1.0, 4)
+    feats = np.zeros((4, 2))
+    feats[2, 1] = -1e39  # finite in float64, -inf in float32
+    with pytest.raises(ValueError, match=(
+        r"demonstration 'big', sample 2: feature 1 \('y'\) is -1e\+39, beyond "
+        r"float32's range"
+    )):
+        Demonstration(t, feats, ("x", "y"), "big")
+    feats[2, 1] = 3.0e38  # the largest float32 is 3.4e38: kept
+    assert Demonstration(t, feats, ("x", "y")).features[2, 1] == 3.0e38
+    p = tmp_path / "big.csv"
+    p.write_text("time,x,y\n0,1,2\n1,1e39,2\n")
+    with pytest.raises(ValueError, match=(
+        r"big\.csv, line 3: feature 0 \('x'\) is 1e\+39, beyond float32"
+    )):
+        load_csv(p)
+
+
+def test_non_utf8_file_names_the_file_and_a_bom_is_accepted(tmp_path):
+    p = tmp_path / "latin1.csv"
+    p.write_bytes("time,caf\u00e9\n0,1\n1,2\n".encode("latin-1"))
+    with pytest.raises(ValueError, match=r"latin1\.csv, line 1: not UTF-8 text"):
+        load_csv(p)
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes("time,caf\u00e9\n0,1\n1,2\n".encode("utf-8-sig"))
+    d = load_csv(bom)
+    assert d.feature_names == ("caf\u00e9",)
+    np.testing.assert_array_equal(d.features[:, 0], [1.0, 2.0])
+    # save_csv writes UTF-8 whatever the locale, so non-ASCII names round-trip
+    save_csv(d, tmp_path / "back.csv")
+    assert load_csv(tmp_path / "back.csv").feature_names == ("caf\u00e9",)
+    # the xgnitive reader shares the decoding
+    folder = tmp_path / "iron" / "jr3"
+    folder.mkdir(parents=True)
+    (folder / "reduced-data-1.csv").write_bytes(
+        b"1 0.0 0 0 0 0 0 0\n2 1.0 \xff 0 0 0 0 0"
+    )
+    with pytest.raises(ValueError, match=r"reduced-data-1\.csv, line 2: not UTF-8"):
+        load_xgnitive(tmp_path, "iron", "jr3")
+
+
+def test_tilde_paths_are_expanded(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    d = _demo("home")
+    save_csv(d, "~/d.csv")
+    save_npz(d, "~/d.npz")
+    assert (tmp_path / "d.csv").is_file() and (tmp_path / "d.npz").is_file()
+    np.testing.assert_array_equal(load_csv("~/d.csv").features, d.features)
+    assert load_npz("~/d.npz").name == "home"
+    folder = tmp_path / "xg" / "iron" / "jr3"
+    folder.mkdir(parents=True)
+    (folder / "reduced-data-1.csv").write_text("1 0.0 0 0 1 0 0 0\n2 1.0 0 0 2 0 0 0\n")
+    (force,) = load_xgnitive("~/xg", "iron", "jr3", ["Fz"])
+    np.testing.assert_array_equal(force.features[:, 0], [1.0, 2.0])

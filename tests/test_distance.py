@@ -164,3 +164,61 @@ def test_distance_errors():
         dtw(x, np.zeros((0, 3), np.float32))
     with pytest.raises(ValueError, match="cannot resample"):
         euclidean(x[:1], x)
+
+
+# --- non-finite inputs (issue 12): eager error, NaN under jit, checked helper -----
+
+DISTANCES = [dtw, dtw_multi, euclidean]
+
+
+@pytest.mark.parametrize("fn", DISTANCES, ids=lambda f: f.__name__)
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_eager_error_names_input_and_index(fn, bad):
+    x, y = _pair(6, 5, 2, seed=3)
+    xb = x.copy()
+    xb[4, 1] = bad
+    with pytest.raises(ValueError, match=rf"{fn.__name__}: input 'x' has a "
+                       rf"non-finite value -?{bad} at index \[4, 1\]"):
+        fn(xb, y)
+    y1 = y[:, 0].copy()
+    y1[2] = bad  # a 1-D input: the index is in the caller's shape
+    with pytest.raises(ValueError, match=r"input 'y' .* at index \[2\]"):
+        fn(x[:, 0], y1)
+
+
+@pytest.mark.parametrize("fn", DISTANCES, ids=lambda f: f.__name__)
+def test_non_finite_input_under_jit_and_vmap_is_nan(fn):
+    x, y = _pair(6, 5, 2, seed=4)
+    good = float(fn(x, y))
+    jfn = jax.jit(fn)
+    for bad in (np.nan, np.inf, -np.inf):
+        xb, yb = x.copy(), y.copy()
+        xb[0, 0], yb[3, 1] = bad, bad
+        assert np.isnan(float(jfn(xb, y))) and np.isnan(float(jfn(x, yb)))
+    batch = np.stack([x, xb, x])
+    got = np.asarray(jax.jit(jax.vmap(fn, in_axes=(0, None)))(batch, y))
+    assert np.isnan(got[1])
+    np.testing.assert_allclose(got[[0, 2]], good, rtol=1e-6)
+    # the jitted kernel holds no host callback: the hot path never syncs
+    assert "callback" not in str(jax.make_jaxpr(fn)(x, y))
+
+
+def test_checked_distance_names_the_input_and_the_batch_index():
+    from cgda_jax.checks import checked
+
+    x, y = _pair(6, 5, 2, seed=5)
+    xb = np.stack([x, x, x])
+    xb[2, 3, 0] = np.nan
+    batched = checked(jax.vmap(dtw, in_axes=(0, None)))
+    with pytest.raises(ValueError, match=r"dtw: input 'x' has a non-finite value nan "
+                       r"at index \[2, 3, 0\]"):
+        batched(xb, y)
+    np.testing.assert_allclose(np.asarray(batched(np.stack([x, x, x]), y)),
+                               float(dtw(x, y)), rtol=1e-6)
+    eucl = checked(euclidean, static_argnames=("n_samples",))
+    y_inf = y.copy()
+    y_inf[1, 1] = np.inf
+    with pytest.raises(ValueError, match=r"euclidean: input 'y' .* at index \[1, 1\]"):
+        eucl(x, y_inf, n_samples=8)
+    np.testing.assert_allclose(float(eucl(x, y, n_samples=8)),
+                               float(euclidean(x, y, 8)), rtol=1e-6)

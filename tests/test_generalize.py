@@ -152,3 +152,66 @@ def test_xgnitive_method_reproduces_authors_results(
     # The paper method bins differently, so it must NOT reproduce them exactly.
     gp = generalize(demos, interval_s=interval)
     assert not np.allclose(np.asarray(gp.knots)[: len(want)], want, atol=1e-5)
+
+
+# --- knot-time and float32 guards (issue 12) --------------------------------------
+
+
+def test_rbf_unsorted_knot_times_are_sorted_with_their_knots():
+    from cgda_jax.generalize import rbf_weights
+
+    rng = np.random.default_rng(3)
+    kt = np.sort(rng.uniform(0, 1, 6)).astype(np.float32)
+    knots = rng.normal(size=(6, 2)).astype(np.float32)
+    t = np.linspace(-0.2, 1.2, 15, dtype=np.float32)
+    want = np.asarray(rbf_interpolate(kt, knots, t))
+    perm = np.array([3, 0, 5, 1, 4, 2])
+    np.testing.assert_allclose(
+        np.asarray(rbf_interpolate(kt[perm], knots[perm], t)), want, atol=1e-5
+    )
+    np.testing.assert_allclose(
+        np.asarray(jax.jit(rbf_interpolate)(kt[perm], knots[perm], t)), want, atol=1e-5
+    )
+    # the weights are the same system, row-permuted
+    np.testing.assert_allclose(np.asarray(rbf_weights(kt[perm], knots[perm])),
+                               np.asarray(rbf_weights(kt, knots))[perm], rtol=1e-4)
+
+
+def test_rbf_repeated_or_non_finite_knot_times_are_refused():
+    from cgda_jax.generalize import rbf_weights
+
+    kt = np.array([0.0, 0.7, 0.3, 0.7], np.float32)
+    knots = np.arange(8.0, dtype=np.float32).reshape(4, 2)
+    t = np.linspace(0, 1, 5, dtype=np.float32)
+    msg = r"knot_times\[1\] and knot_times\[3\] are both 0\.7 .*must be distinct"
+    with pytest.raises(ValueError, match="rbf_interpolate: " + msg):
+        rbf_interpolate(kt, knots, t)
+    with pytest.raises(ValueError, match="rbf_weights: " + msg):
+        rbf_weights(kt, knots)
+    # equal only once cast to the knots' float32
+    with pytest.raises(ValueError, match=r"knot_times\[0\] and knot_times\[1\]"):
+        rbf_interpolate(np.array([0.1, 0.1 + 1e-12, 0.5]), knots[:3], t)
+    assert np.isnan(np.asarray(jax.jit(rbf_interpolate)(kt, knots, t))).all()
+    assert np.isnan(np.asarray(jax.jit(rbf_weights)(kt, knots))).all()
+    with pytest.raises(ValueError, match=r"input 'knot_times' has a non-finite value "
+                       r"nan at index \[2\]"):
+        rbf_interpolate(np.array([0.0, 1.0, np.nan]), knots[:3], t)
+    inf_knot = knots[:3].copy()
+    inf_knot[1, 0] = np.inf
+    with pytest.raises(ValueError, match=r"input 'knots' .* inf at index \[1, 0\]"):
+        rbf_interpolate(kt[:3], inf_knot, t)
+    with pytest.raises(ValueError, match=r"input 't' .* nan at index \[4\]"):
+        rbf_interpolate(kt[:3], knots[:3], np.append(t[:4], np.nan))
+
+
+def test_generalize_refuses_results_beyond_float32_naming_the_feature():
+    t = np.linspace(0, 4, 41)
+    # +/-3e38 alternating every half second: each value fits float32, but the RBF
+    # weights (slope changes) do not
+    wild = np.where((t * 2).astype(int) % 2 == 0, 3e38, -3e38)
+    d = Demonstration(t, np.stack([np.sin(t), wild], 1), ("calm", "wild"))
+    with pytest.raises(ValueError, match=r"generalize: RBF weight \d+ of feature 1 "
+                       r"\('wild'\) is -?[\d.]+e\+39, beyond float32's range"):
+        generalize([d], interval_s=0.5)
+    g = generalize([d.select(["calm"])], interval_s=0.5)
+    assert np.isfinite(np.asarray(g.knots)).all()

@@ -83,8 +83,14 @@ def test_library_and_recognition_errors(library):
     wrong = Demonstration(t, np.zeros((5, 3)), ("a", "b", "c"), "wrong")
     with pytest.raises(ValueError, match=r"query 0 \('wrong'\) has features"):
         cost_matrix([wrong], library)
-    with pytest.raises(ValueError, match="query 1 contains NaN"):
+    with pytest.raises(ValueError, match=r"cost_matrix: input 'query 1' has a "
+                       r"non-finite value nan at index \[0, 0\]"):
         cost_matrix([np.zeros((5, 3)), np.full((5, 3), np.nan)], library)
+    big = np.zeros((5, 3))
+    big[3, 2] = 1e39  # inf once cast to float32
+    with pytest.raises(ValueError, match=r"input 'query 0' has a value 1e\+39 beyond "
+                       r".* \(float32 overflows\) at index \[3, 2\]"):
+        cost_matrix([big], library)
     with pytest.raises(ValueError, match="no queries"):
         cost_matrix([], library)
     with pytest.raises(ValueError, match="library is empty"):

@@ -198,3 +198,177 @@ def test_bad_inputs_name_the_problem(tmp_path):
     robot = Robot.from_mjcf(teo, ["r_elbow", "r_wrist"], "marker")
     with pytest.raises(ValueError, match=r"expected \(2,\)"):
         robot.marker_position(jnp.zeros(3))
+
+
+# --- ball and free joints anywhere in the model (issue 12) ------------------------
+
+# The marker's chain crosses a ball joint (off-centre anchor, tilted body) that is
+# not evolved: it is held at its start quaternion.
+BALL_IN_CHAIN = """<mujoco><compiler angle="radian"/><worldbody>
+  <body name="base" pos="0.1 0 0.4" quat="0.9 0.1 0.2 -0.1"><geom size="0.05"/>
+    <joint name="h1" axis="0 0 1" range="-2 2"/>
+    <body name="cup" pos="0.3 0 0" euler="0.2 -0.3 0.5"><geom size="0.05"/>
+      <joint name="ball" type="ball" pos="0.02 0 0.01"/>
+      <body name="fore" pos="0.25 0.03 0"><geom size="0.05"/>
+        <joint name="h2" axis="0 1 0" range="-2 2"/>
+        <joint name="s1" type="slide" axis="1 0 0" range="-0.1 0.1"/>
+        <site name="tip" pos="0.15 0 0.02"/>
+      </body></body></body></worldbody>
+  <keyframe><key name="bent" qpos="0.3  2 0.4 -0.6 1  -0.2 0.05"/></keyframe>
+</mujoco>"""
+
+# A free-floating base (placed and tilted by its body pose) carrying the arm, a ball
+# joint on the way to the marker.
+FREE_BASE = """<mujoco><compiler angle="radian"/><worldbody>
+  <body name="torso" pos="0.2 -0.3 1.0" quat="0.8 0.3 -0.2 0.4"><geom size="0.1"/>
+    <freejoint name="root"/>
+    <body name="arm" pos="0 0.2 0"><geom size="0.05"/>
+      <joint name="h1" axis="1 0 0" range="-2 2"/>
+      <body name="wrist" pos="0 0 -0.3"><geom size="0.05"/>
+        <joint name="ball" type="ball"/>
+        <body name="hand" pos="0 0 -0.2"><geom size="0.05"/>
+          <joint name="h2" axis="0 1 0" range="-2 2"/>
+          <site name="tip" pos="0.1 0 -0.05"/>
+        </body></body></body></body></worldbody>
+  <keyframe><key name="bent"
+    qpos="1 2 3  0 1 1 0  0.4  0.5 0.5 -0.5 0.5  -0.3"/></keyframe>
+</mujoco>"""
+
+# Free and ball objects elsewhere in the tree, before the arm: they shift the arm's
+# qpos addresses and must keep valid quaternions in the posture.
+FREE_OBJECT = """<mujoco><compiler angle="radian"/><worldbody>
+  <body name="box" pos="1 1 0.2" euler="0 0 0.8"><freejoint/>
+    <geom type="box" size="0.05 0.05 0.05"/></body>
+  <body name="pendulum" pos="-1 0 1"><joint name="swing" type="ball"/>
+    <geom size="0.05" pos="0 0 -0.2"/></body>
+  <body name="arm" pos="0 0 0.5"><geom size="0.05"/>
+    <joint name="h1" axis="0 0 1" range="-2 2"/>
+    <body name="fore" pos="0.3 0 0"><geom size="0.05"/>
+      <joint name="h2" axis="0 1 0" range="-2 2"/>
+      <site name="tip" pos="0.2 0 0"/></body></body></worldbody>
+  <keyframe><key name="bent"
+    qpos="0 0 0.5  3 0 0 4  0 0 1 1  0.1 0.2"/></keyframe>
+</mujoco>"""
+
+BALL_FREE_CASES = {
+    "ball_in_chain": (BALL_IN_CHAIN, ["h1", "h2", "s1"]),
+    "free_base": (FREE_BASE, ["h2", "h1"]),
+    "free_object": (FREE_OBJECT, ["h1", "h2"]),
+}
+
+
+BALL, FREE = int(mujoco.mjtJoint.mjJNT_BALL), int(mujoco.mjtJoint.mjJNT_FREE)
+
+
+def _scale_key_quaternions(m, factor):
+    """Scale the keyframe's ball/free quaternions in place (MuJoCo's compiler
+    normalizes them, so a non-unit or zero one can only come from an edited model)."""
+    for j in range(m.njnt):
+        kind = int(m.jnt_type[j])
+        if kind in (BALL, FREE):
+            end = m.jnt_qposadr[j] + (7 if kind == FREE else 4)
+            m.key_qpos[0, end - 4 : end] *= factor
+
+
+def _mj_site(m, qpos_start, robot, genes):
+    """MuJoCo C's site position from the model's own start posture (not the robot's
+    qpos0: mj_kinematics normalizes quaternions itself)."""
+    data = mujoco.MjData(m)
+    data.qpos[:] = qpos_start
+    data.qpos[robot.qpos_adr] = genes
+    mujoco.mj_kinematics(m, data)
+    return data.site_xpos[robot.site_id].copy()
+
+
+# Every case on the chain back-end; "mjx" (a compile each, seconds) from qpos0 on
+# every model and from the keyframe on the one with the most quaternions.
+BALL_FREE_RUNS = [(c, "chain", k) for c in BALL_FREE_CASES for k in (None, "bent")] + [
+    (c, "mjx", None) for c in BALL_FREE_CASES
+] + [("free_base", "mjx", "bent")]
+
+
+@pytest.mark.parametrize("case,kinematics,keyframe", BALL_FREE_RUNS)
+def test_ball_and_free_joints_match_mj_kinematics(case, kinematics, keyframe):
+    xml, joints = BALL_FREE_CASES[case]
+    m = mujoco.MjModel.from_xml_string(xml)
+    _scale_key_quaternions(m, 2.5)  # non-unit start quaternions
+    robot = Robot(m, joints, "tip", kinematics=kinematics, keyframe=keyframe)
+    start = m.qpos0 if keyframe is None else m.key_qpos[0]
+    qpos0 = np.asarray(robot.qpos0, np.float64)
+    # every ball/free quaternion of the posture is a unit one
+    n_quats = 0
+    for j in range(m.njnt):
+        kind = int(m.jnt_type[j])
+        if kind in (BALL, FREE):
+            end = m.jnt_qposadr[j] + (7 if kind == FREE else 4)
+            assert np.linalg.norm(qpos0[end - 4 : end]) == pytest.approx(1, abs=1e-6)
+            n_quats += 1
+    assert n_quats == {"ball_in_chain": 1, "free_base": 2, "free_object": 2}[case]
+    rng = np.random.default_rng(1)
+    lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
+    genes = rng.uniform(lo, hi, size=(8, robot.n_dof)).astype(np.float32)
+    got = np.asarray(jax.jit(jax.vmap(robot.marker_position))(jnp.asarray(genes)))
+    want = np.stack([_mj_site(m, start, robot, g) for g in genes])
+    np.testing.assert_allclose(got, want, atol=2e-5)
+    assert np.ptp(want, axis=0).max() > 0.05  # the genes really move the marker
+    assert np.abs(want).max(axis=1).min() > 0.1  # and it is not at the origin
+
+
+@pytest.mark.parametrize("kinematics", ["chain", "mjx"])
+def test_a_zero_quaternion_start_is_an_error_naming_the_joint(kinematics):
+    m = mujoco.MjModel.from_xml_string(BALL_IN_CHAIN)
+    _scale_key_quaternions(m, 0.0)  # e.g. a posture built from zeros
+    with pytest.raises(ValueError, match=r"ball joint 'ball' in the model: its "
+                       r"quaternion \[[-0., ]+\] in keyframe 'bent' is zero"):
+        Robot(m, ["h1", "h2"], "tip", kinematics=kinematics, keyframe="bent")
+    from cgda_jax.sim.chain import chain_ops
+
+    with pytest.raises(ValueError, match="ball joint 'ball' in qpos0: quaternion"):
+        chain_ops(m, m.key_qpos[0], ["h1"], "tip")
+
+
+# --- fixed joint values and paths (issue 12) --------------------------------------
+
+
+def test_fixed_values_must_be_finite_and_within_range(tmp_path):
+    teo = model_path("teo.xml")
+    arm = ["r_shoulder_flexion", "r_elbow"]
+    for bad in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match=rf"fixed joint 'r_wrist' in .*teo\.xml: "
+                           rf"value {bad} is not finite"):
+            Robot.from_mjcf(teo, arm, "marker", fixed={"r_wrist": bad})
+    # r_forearm_rotation's range is [-90, 90] deg: 45 (degrees meant) is refused
+    with pytest.raises(ValueError, match=(
+        r"fixed joint 'r_forearm_rotation' .*: value 45 rad \(2578\.31 deg\) is "
+        r"outside the joint's range \[-1\.5708, 1\.5708\] rad \(\[-90, 90\] deg\)$"
+    )):
+        Robot.from_mjcf(teo, arm, "marker", fixed={"r_forearm_rotation": 45})
+    with pytest.raises(ValueError, match=r"'r_wrist' .*: value 'x' is not a number"):
+        Robot.from_mjcf(teo, arm, "marker", fixed={"r_wrist": "x"})
+    # a rounding excursion is clipped onto the limit
+    hi = np.deg2rad(90.0)
+    robot = Robot.from_mjcf(teo, arm, "marker",
+                            fixed={"r_forearm_rotation": hi + 5e-7})
+    adr = robot.mj_model.jnt_qposadr[
+        mujoco.mj_name2id(robot.mj_model, mujoco.mjtObj.mjOBJ_JOINT,
+                          "r_forearm_rotation")]
+    assert robot._qpos0_np[adr] == pytest.approx(hi, abs=1e-12)
+    # a slide's range is in metres; an unlimited hinge takes any finite angle
+    xml = """<mujoco><worldbody><body><geom size="0.1"/>
+      <joint name="s" type="slide" axis="1 0 0" range="-0.1 0.1"/>
+      <joint name="free_turn" axis="0 0 1"/><joint name="h" axis="0 1 0"/>
+      <site name="tip" pos="0.2 0 0"/></body></worldbody></mujoco>"""
+    m = mujoco.MjModel.from_xml_string(xml)
+    with pytest.raises(ValueError, match=r"'s' .*: value 0\.5 m is outside the "
+                       r"joint's range \[-0\.1, 0\.1\] m$"):
+        Robot(m, ["h"], "tip", fixed={"s": 0.5})
+    Robot(m, ["h"], "tip", fixed={"free_turn": 12.0})
+
+
+def test_tilde_model_paths_are_expanded(tmp_path, monkeypatch):
+    monkeypatch.setenv("HOME", str(tmp_path))
+    (tmp_path / "arm.xml").write_text(model_path("tiny_arm.xml").read_text())
+    robot = Robot.from_mjcf("~/arm.xml", ["yaw", "shoulder", "elbow"], "marker")
+    assert robot.source == str(tmp_path / "arm.xml")
+    world = Robot.from_world("~/arm.xml", [], ["yaw"], "marker")
+    assert world.mj_model.nq == robot.mj_model.nq

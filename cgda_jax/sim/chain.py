@@ -62,11 +62,13 @@ class ChainOp(NamedTuple):
     offset: float
 
 
-def _quat_to_mat(q: np.ndarray) -> np.ndarray:
+def _quat_to_mat(q: np.ndarray, what: str = "the model") -> np.ndarray:
     q = np.asarray(q, dtype=np.float64)
     norm = np.linalg.norm(q)
-    if norm == 0.0:
-        raise ValueError(f"zero quaternion {q.tolist()} in the model")
+    if not np.isfinite(norm) or norm == 0.0:
+        raise ValueError(
+            f"{what}: quaternion {q.tolist()} is not a rotation (zero or not finite)"
+        )
     w, x, y, z = q / norm
     return np.array(
         [
@@ -86,6 +88,11 @@ def _axis_angle_mat(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def _const(rot: np.ndarray, vec: np.ndarray) -> ChainOp:
     return ChainOp("const", np.asarray(rot, float), np.asarray(vec, float), -1, 0.0)
+
+
+def _name(mj_model: mujoco.MjModel, jid: int) -> str:
+    name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, jid)
+    return repr(name) if name else f"#{jid}"
 
 
 def _resolve(mj_model: mujoco.MjModel, kind: mujoco.mjtObj, ref: int | str, what: str):
@@ -121,7 +128,8 @@ def chain_ops(
 
     Raises:
         ValueError: unknown joint/site, repeated joint, an evolved joint that is not a
-            hinge or slide, or a ``qpos0`` of the wrong size.
+            hinge or slide, a ``qpos0`` of the wrong size, or a zero or non-finite
+            quaternion of a ball/free joint on the chain in ``qpos0`` (named).
     """
     qpos0 = np.asarray(qpos0, dtype=np.float64)
     if qpos0.shape != (mj_model.nq,):
@@ -156,7 +164,8 @@ def chain_ops(
         if num == 1 and int(mj_model.jnt_type[adr]) == _FREE:
             # A free joint replaces the body's pose by qpos (world-frame, top level).
             q = qpos0[mj_model.jnt_qposadr[adr] :][:7]
-            ops = [_const(_quat_to_mat(q[3:7]), q[:3])]
+            what = f"free joint {_name(mj_model, adr)} in qpos0"
+            ops = [_const(_quat_to_mat(q[3:7], what), q[:3])]
             continue
         ops.append(_const(_quat_to_mat(mj_model.body_quat[b]), mj_model.body_pos[b]))
         for j in jnts:
@@ -179,8 +188,11 @@ def chain_ops(
             else:
                 if jtype == _HINGE:
                     rot = _axis_angle_mat(axis, qpos0[qadr] - ref)
-                else:  # ball
-                    rot = _quat_to_mat(qpos0[qadr : qadr + 4])
+                else:  # ball: held at its qpos0 quaternion, a constant rotation
+                    rot = _quat_to_mat(
+                        qpos0[qadr : qadr + 4],
+                        f"ball joint {_name(mj_model, j)} in qpos0",
+                    )
                 ops.append(_const(np.eye(3), anchor))
                 ops.append(_const(rot, np.zeros(3)))
                 ops.append(_const(np.eye(3), -anchor))

@@ -191,7 +191,7 @@ def render_trajectory(
     waypoints = np.asarray(waypoints, dtype=np.float64)
     sim._check_waypoints(waypoints)
     frames_per_waypoint = int(frames_per_waypoint or sim.substeps)
-    out_path = pathlib.Path(out_path)
+    out_path = pathlib.Path(out_path).expanduser()
     model = _model(sim)
     data = mujoco.MjData(model)
     cam = _camera(sim, lookat, distance, azimuth, elevation)

@@ -31,11 +31,17 @@ from jax import Array
 
 from cgda_jax.sim._mujoco_env import mjx_module
 
-__all__ = ["KINEMATICS", "Robot", "model_path"]
+__all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
 
 _MODELS = pathlib.Path(__file__).resolve().parents[2] / "models"
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
+_BALL = int(mujoco.mjtJoint.mjJNT_BALL)
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+
+#: A fixed value this far (radians / metres) beyond a limited joint's range is clipped
+#: into it (rounding, e.g. degrees converted to radians); farther is an error.
+FIXED_RANGE_TOL = 1e-6
 
 #: Forward-kinematics back-ends: "chain" folds the marker's kinematic chain into a few
 #: constant transforms (`cgda_jax.sim.chain`); "mjx" runs ``mjx.kinematics`` on the
@@ -74,6 +80,66 @@ def _id(
     return idx
 
 
+def _joint_label(mj_model: mujoco.MjModel, jid: int) -> str:
+    name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, jid)
+    return repr(name) if name else f"#{jid} (unnamed)"
+
+
+def _fixed_value(
+    mj_model: mujoco.MjModel, jid: int, name: str, value, source: str
+) -> float:
+    """A fixed joint's value, checked: a finite number within the joint's range
+    (clipped into it when within `FIXED_RANGE_TOL`)."""
+    where = f"fixed joint {name!r} in {source}"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: value {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{where}: value {v} is not finite")
+    if not mj_model.jnt_limited[jid]:
+        return v
+    lo, hi = (float(x) for x in mj_model.jnt_range[jid])
+    if lo - FIXED_RANGE_TOL <= v <= hi + FIXED_RANGE_TOL:
+        return min(max(v, lo), hi)
+    if int(mj_model.jnt_type[jid]) == _HINGE:  # radians, with degrees beside them
+        value = f"{v:g} rad ({math.degrees(v):g} deg)"
+        deg = f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
+        span = f"[{lo:g}, {hi:g}] rad ({deg})"
+    else:
+        value, span = f"{v:g} m", f"[{lo:g}, {hi:g}] m"
+    raise ValueError(f"{where}: value {value} is outside the joint's range {span}")
+
+
+def _valid_quaternions(
+    mj_model: mujoco.MjModel, qpos0: np.ndarray, origin: str, source: str
+) -> np.ndarray:
+    """``qpos0`` with every ball/free joint's quaternion normalized, as
+    ``mj_kinematics`` uses it; a non-finite start value or a zero quaternion (which
+    MuJoCo silently reads as the identity) is an error naming the joint."""
+    qpos0 = np.array(qpos0, dtype=np.float64)
+    for jid in range(mj_model.njnt):
+        jtype, adr = int(mj_model.jnt_type[jid]), int(mj_model.jnt_qposadr[jid])
+        size = {_FREE: 7, _BALL: 4}.get(jtype, 1)
+        values = qpos0[adr : adr + size]
+        kind = mujoco.mjtJoint(jtype).name.removeprefix("mjJNT_").lower()
+        label = f"{kind} joint {_joint_label(mj_model, jid)} in {source}"
+        if not np.all(np.isfinite(values)):
+            raise ValueError(
+                f"{label}: its start value {values.tolist()} in {origin} is not finite"
+            )
+        if jtype in (_BALL, _FREE):
+            q = values[-4:]
+            norm = float(np.linalg.norm(q))
+            if norm < 1e-9:
+                raise ValueError(
+                    f"{label}: its quaternion {q.tolist()} in {origin} is zero, not a "
+                    "rotation; give a unit quaternion [w, x, y, z] such as [1, 0, 0, 0]"
+                )
+            qpos0[adr + size - 4 : adr + size] = q / norm
+    return qpos0
+
+
 class Robot:
     """A MuJoCo model with a chosen set of evolved joints and a marker site.
 
@@ -87,7 +153,7 @@ class Robot:
         mjx_model: the same model on the device (``mjx.put_model``, JAX impl).
         qpos0: (nq,) start posture: the model's own ``qpos0`` (or the keyframe's
             ``qpos``) with the fixed values applied; free and ball joints keep their
-            valid quaternions from there.
+            quaternions from there, normalized (they are never evolved).
         qpos_adr: (DoF,) qpos addresses of the evolved joints.
         joint_ids: (DoF,) joint ids of the evolved joints.
         site_id: id of the marker site.
@@ -154,6 +220,7 @@ class Robot:
 
         if keyframe is None:
             qpos0 = np.array(mj_model.qpos0, dtype=np.float64)
+            origin = "the model's qpos0"
         else:
             kid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_KEY, keyframe)
             if kid < 0:
@@ -162,13 +229,17 @@ class Robot:
                 raise KeyError(f"keyframe {keyframe!r} not found in {source}; it has "
                                f"{keys}")
             qpos0 = np.array(mj_model.key_qpos[kid], dtype=np.float64)
+            origin = f"keyframe {keyframe!r}"
+        qpos0 = _valid_quaternions(mj_model, qpos0, origin, source)
         for name, value in fixed.items():
             jid = _id(mj_model, jt, name, "fixed joint", source)
             if int(mj_model.jnt_type[jid]) not in (_HINGE, _SLIDE):
                 raise ValueError(
                     f"fixed joint {name!r} in {source} is not a hinge/slide"
                 )
-            qpos0[mj_model.jnt_qposadr[jid]] = float(value)
+            qpos0[mj_model.jnt_qposadr[jid]] = _fixed_value(
+                mj_model, jid, name, value, source
+            )
         self.fixed = fixed
         self.keyframe = keyframe
         self.source = source
@@ -197,19 +268,24 @@ class Robot:
             path: the MJCF file.
             joints: (DoF,) names of the evolved joints, in gene order.
             marker_site: name of the site whose position the scenes read.
-            fixed: joint name -> value (RADIANS / metres) held during execution;
-                joints neither evolved nor fixed stay at the model's ``qpos0`` (the
-                joints' ``ref``; free joints at their body's pose) or the keyframe's.
-            keyframe: name of a ``<key>`` whose ``qpos`` is the start posture.
+            fixed: joint name -> value (RADIANS / metres) held during execution,
+                finite and within the joint's range if it has one (a value within
+                `FIXED_RANGE_TOL` of the range is clipped into it); joints neither
+                evolved nor fixed stay at the model's ``qpos0`` (the joints' ``ref``;
+                free and ball joints at their body's pose) or the keyframe's.
+            keyframe: name of a ``<key>`` whose ``qpos`` is the start posture (its
+                ball/free quaternions are normalized; a zero one is an error).
             kinematics: forward-kinematics back-end, "chain" (default, faster) or
                 "mjx"; both match ``mujoco.mj_kinematics``.
 
         Raises:
-            FileNotFoundError: the file does not exist.
+            FileNotFoundError: the file does not exist (``~`` is expanded).
             KeyError: a joint or site name is not in the model (the message names it).
-            ValueError: bad joint types, repeats, or an unknown ``kinematics``.
+            ValueError: bad joint types, repeats, an unknown ``kinematics``, a fixed
+                value that is not finite or outside the joint's range, or a zero or
+                non-finite start value (each message names the joint and value).
         """
-        path = pathlib.Path(path)
+        path = pathlib.Path(path).expanduser()
         if not path.is_file():
             raise FileNotFoundError(f"MJCF file not found: {path}")
         try:
@@ -252,7 +328,7 @@ class Robot:
         """
         from cgda_jax.sim.world import compose_world
 
-        path = pathlib.Path(path)
+        path = pathlib.Path(path).expanduser()
         objects = [dict(o) for o in objects]
         contact_geoms = tuple(contact_geoms)
 

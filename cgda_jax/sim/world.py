@@ -183,7 +183,7 @@ def _piece_file(piece) -> tuple[pathlib.Path, str | None]:
     text = os.fspath(piece)
     if text in list_pieces():
         return OBJECTS_DIR / f"{text}.xml", text
-    path = pathlib.Path(text)
+    path = pathlib.Path(text).expanduser()
     if path.suffix.lower() == ".xml" or os.sep in text or "/" in text:
         if not path.is_file():
             raise FileNotFoundError(f"object piece file {text!r} not found")
@@ -293,7 +293,7 @@ def compose_world(
         FileNotFoundError: the robot file or a piece file does not exist.
         KeyError: an unknown contact geom (the message lists the robot's geoms).
     """
-    robot_path = pathlib.Path(robot_mjcf)
+    robot_path = pathlib.Path(robot_mjcf).expanduser()
     if not robot_path.is_file():
         raise FileNotFoundError(f"robot MJCF {os.fspath(robot_mjcf)!r} not found")
     if isinstance(contact_geoms, str):
