@@ -195,7 +195,12 @@ def check_config(
 
     The checks run in NumPy on the host (eager JAX ops would each compile once).
     """
-    g = np.asarray(goal, dtype=np.float32)
+    from cgda_jax.checks import check_float32
+
+    g64 = np.asarray(goal, dtype=np.float64)
+    if np.all(np.isfinite(g64)):  # NaN/inf: the per-point message below
+        check_float32(g64, "goal")
+    g = g64.astype(np.float32)
     if g.ndim == 1 and sim.n_features == 1:
         g = g[:, None]
     if g.ndim != 2:
@@ -208,6 +213,7 @@ def check_config(
         )
     if g.shape[0] < min_points:
         raise ValueError(f"goal needs at least {min_points} point(s); got {g.shape[0]}")
+
     if not np.all(np.isfinite(g)):
         bad = int(np.argmax(~np.all(np.isfinite(g), axis=1)))
         raise ValueError(f"goal has a non-finite value at point {bad}")
