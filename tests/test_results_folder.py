@@ -25,7 +25,7 @@ QUIET = ["output.plots=false", "output.render=false"]
 TINY = ["strategy.population_size=4", "strategy.max_generations=5", *QUIET]
 # a run that goes on for minutes unless interrupted
 LONG = ["strategy.population_size=4", "strategy.max_generations=1000000",
-        "strategy.tolerance=1e-9", *QUIET]
+        "strategy.tolerance=1e-9", "strategy.options.stagnation=1000000", *QUIET]
 
 
 def sets(settings):
@@ -188,7 +188,7 @@ BAD_INPUT = [
     (CLEAN, ["robot.fixed.r_forearm_rotation=nan"],
      ["robot.fixed.r_forearm_rotation", "finite"]),
     (CLEAN, ["robot.fixed.r_forearm_rotation=400"],
-     ["robot.fixed.r_forearm_rotation", "400 degrees", "range [-90, 90]"]),
+     ["robot.fixed.r_forearm_rotation", "400 deg", "[-90, 90] deg"]),
     (CLEAN, ["robot.keyframe=no_such_key"], ["robot.keyframe", "no_such_key"]),
     (CLEAN, ["scene.kind=paint"], ["scene.kind", "3 feature(s)"]),
     (CLEAN, ["robot.mode=dynamic", "robot.timestep=1e-9"],
