@@ -24,12 +24,11 @@ from cgda_jax.strategies import (
     run_iet,
     run_oet,
 )
-from cgda_jax.strategies.base import (
+from cgda_jax.strategies.algorithms import default_kwargs, make_algorithm
+from cgda_jax.strategies.evolution import (
     Evolution,
-    _default_kwargs,
     evolution_init,
     evolution_step,
-    make_algorithm,
     screen,
 )
 
@@ -230,7 +229,7 @@ def _nonfinite_leaves(tree):
 def test_algorithm_state_stays_finite_with_invalid_generations(name):
     # (every other evosax algorithm was checked the same way once, by hand: all keep
     # a finite state; GuidedES holds a NaN `grad` by design: "no surrogate gradient")
-    algo, params = make_algorithm(name, 8, 3, algorithm_kwargs=_default_kwargs(name))
+    algo, params = make_algorithm(name, 8, 3, algorithm_kwargs=default_kwargs(name))
 
     def stop(evo):
         return jnp.asarray(False)

@@ -190,7 +190,7 @@ def _build_simulator(cfg: ExperimentConfig, demos: list, n_points: int):
 
 
 def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
-    from cgda_jax.strategies.base import ALGORITHMS, _default_kwargs, make_algorithm
+    from cgda_jax.strategies.algorithms import ALGORITHMS, default_kwargs, make_algorithm
 
     s = cfg.strategy
     if s.algorithm not in ALGORITHMS:
@@ -205,7 +205,7 @@ def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
             raise ConfigError(f"key 'strategy.options.{key}' must be a table")
     try:
         make_algorithm(s.algorithm, s.population_size, n_genes,
-                       algorithm_kwargs={**_default_kwargs(s.algorithm), **kwargs},
+                       algorithm_kwargs={**default_kwargs(s.algorithm), **kwargs},
                        algorithm_params=params)
     except (ValueError, TypeError) as err:
         text = str(err)

@@ -15,7 +15,10 @@ from cgda_jax.strategies.result import (
     ExecutionResult as ExecutionResult,
     SimulationDiverged as SimulationDiverged,
 )
-from cgda_jax.strategies.trials import STRATEGIES as STRATEGIES, run_trials as run_trials
+from cgda_jax.strategies.trials import (
+    STRATEGIES as STRATEGIES,
+    run_trials as run_trials,
+)
 
 __all__ = [
     "ALGORITHMS",

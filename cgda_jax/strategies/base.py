@@ -1,10 +1,11 @@
-"""Shared machinery of the execution strategies: algorithms, gene bounds, one evolution.
+"""Shared machinery of the execution strategies: gene bounds, goal checks, the plan base.
 
 Every strategy (FTE, IE, IET, OET) runs one or more evolutions of the same kind: an
-`evosax` algorithm asks for a population of gene vectors, the whole population is
-executed in ONE batched simulator call, its fitness against the goal is computed and
-told back. This module holds that generation step (`evolution_step`), the start of an
-evolution (`evolution_init`), the name -> algorithm registry and the gene bounds.
+`evosax` algorithm (`cgda_jax.strategies.algorithms`) asks for a population of gene
+vectors, the whole population is executed in ONE batched simulator call, its fitness
+against the goal is computed and told back (`cgda_jax.strategies.evolution`). This
+module holds what the plans share: the gene bounds, the goal checks and `PlanBase`.
+The names of those two modules are re-exported here.
 
 Gene bounds. Algorithms search an unbounded, normalized space ``u`` (D,); joint angles
 are ``q = mid + half * sin(pi / 2 * u)`` with ``mid, half`` the centre and half-width of
@@ -14,13 +15,7 @@ clipping, no infeasible postures). ``u = 0`` is the middle of every joint range,
 start mean of distribution-based algorithms, and a step size of about 0.3 moves a joint
 by a few tenths of its range.
 
-Divergence. A candidate whose fitness is not finite (a simulation that blew up: NaN or
-inf features) is *invalid*: it is told to the algorithm with the finite fitness
-`INVALID_PENALTY` (ranked after every valid candidate, so no algorithm state turns
-NaN), it is never kept as the best, and it is counted (`Evolution.invalid`, the
-``invalid`` metric of every generation). The best of an evolution is always a
-candidate that was evaluated and finite; until there is one, ``best_fitness`` is inf
-and `Evolution.found` is False.
+Divergence: see `cgda_jax.strategies.evolution`.
 
 References:
     Lange, "evosax: JAX-based Evolution Strategies", GECCO 2023 companion.
@@ -34,126 +29,25 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
-from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
-from flax import struct
 from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.sharding import shard_population
+from cgda_jax.strategies.algorithms import (
+    ALGORITHMS as ALGORITHMS,
+    algorithm_name as algorithm_name,
+    default_kwargs,
+    make_algorithm as make_algorithm,
+)
+from cgda_jax.strategies.evolution import (
+    INVALID_PENALTY as INVALID_PENALTY,
+    Evolution as Evolution,
+    FitnessFn as FitnessFn,
+    evolution_init as evolution_init,
+    evolution_step as evolution_step,
+    freeze as freeze,
+    screen as screen,
+)
 from cgda_jax.strategies.result import ExecutionResult
-
-#: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
-ALGORITHMS: dict[str, type] = dict(_EVOSAX_ALGORITHMS)
-
-#: Fitness told to the algorithm for an invalid (non-finite) candidate. A constant,
-#: not a figure relative to the generation: population-based algorithms (DE, GA, PSO)
-#: compare fitness across generations, and an invalid candidate must lose against
-#: every valid one ever seen. Valid fitness is capped at it (ties, never inversions).
-#: Float32 keeps its square (1e20) finite, so algorithms that standardize fitness stay
-#: finite too.
-INVALID_PENALTY = 1e10
-
-FitnessFn = Callable[[jax.Array], jax.Array]
-"""Maps joint genes (P, D) -> fitness (P,), minimized; the one batched sim call."""
-
-
-# --------------------------------------------------------------------------- algorithms
-def algorithm_name(algorithm: Any) -> str:
-    """The name of an algorithm given by name, evosax class or configured instance."""
-    if isinstance(algorithm, str):
-        return algorithm
-    cls = algorithm if isinstance(algorithm, type) else type(algorithm)
-    return cls.__name__
-
-
-def make_algorithm(
-    algorithm: Any,
-    population_size: int,
-    n_genes: int,
-    *,
-    algorithm_kwargs: dict[str, Any] | None = None,
-    algorithm_params: dict[str, Any] | None = None,
-) -> tuple[Any, Any]:
-    """Builds an evosax algorithm and its parameters.
-
-    Args:
-        algorithm: as users of evosax pass it: a name (a key of `ALGORITHMS`, e.g.
-            "CMA_ES", "SimpleGA", "DifferentialEvolution"), an algorithm class
-            (e.g. ``evosax.algorithms.CMA_ES``, built here), or a configured instance
-            (``CMA_ES(population_size=32, solution=jnp.zeros(3), ...)``, used as it
-            is: its population size and solution size must match).
-        population_size: individuals per generation.
-        n_genes: genes per individual (D).
-        algorithm_kwargs: extra constructor arguments (e.g. ``std_schedule`` of SimpleGA).
-        algorithm_params: fields of the algorithm's ``default_params`` to override
-            (e.g. ``{"std_init": 0.3}`` for CMA_ES).
-
-    Returns:
-        ``(algorithm, params)``.
-
-    Raises:
-        ValueError: unknown name, unknown parameter, or a population too small for the
-            algorithm (its constructor refuses it or its default parameters are not
-            finite).
-    """
-    name = algorithm_name(algorithm)
-    if isinstance(algorithm, str) and name not in ALGORITHMS:
-        raise ValueError(
-            f"unknown algorithm {name!r}; choose one of {sorted(ALGORITHMS)}"
-        )
-    if int(population_size) < 2:
-        raise ValueError(
-            f"population_size={population_size} is too small for {name}: need >= 2"
-        )
-    cls = ALGORITHMS[name] if isinstance(algorithm, str) else algorithm
-    if isinstance(cls, type) and not hasattr(cls, "ask"):
-        raise ValueError(f"algorithm {name!r} is not an evosax algorithm class")
-    try:
-        if isinstance(cls, type):
-            algo = cls(
-                population_size=int(population_size),
-                solution=jnp.zeros((n_genes,)),
-                **(algorithm_kwargs or {}),
-            )
-        else:  # a configured instance
-            algo = cls
-            if not (hasattr(algo, "ask") and hasattr(algo, "default_params")):
-                raise ValueError(f"{algo!r} is not an evosax algorithm (no ask / "
-                                 "default_params)")
-            if algorithm_kwargs:
-                raise ValueError(f"algorithm_kwargs {sorted(algorithm_kwargs)} given "
-                                 f"with an already built {name}; configure it instead")
-            size, dims = int(algo.population_size), int(getattr(algo, "num_dims", -1))
-            if size != int(population_size) or dims != int(n_genes):
-                raise ValueError(
-                    f"the {name} instance has population_size={size} and "
-                    f"{dims} genes; this run needs population_size="
-                    f"{population_size} and {n_genes} genes (one per evolved joint"
-                    " and waypoint)")
-    except AssertionError as err:
-        raise ValueError(
-            f"population_size={population_size} is not allowed for {name}: {err}"
-        ) from None
-    except TypeError as err:
-        raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
-    # evosax computes its default parameters with many small eager ops (each one a
-    # compile on first use); tracing them as ONE program costs one compile instead.
-    params = jax.jit(lambda: algo.default_params)()
-    overrides = dict(algorithm_params or {})
-    unknown = sorted(set(overrides) - set(params.__dataclass_fields__))
-    if unknown:
-        raise ValueError(
-            f"unknown algorithm_params {unknown} for {name}; it has "
-            f"{sorted(params.__dataclass_fields__)}"
-        )
-    params = params.replace(**{k: jnp.asarray(v) for k, v in overrides.items()})
-    finite = [np.all(np.isfinite(np.asarray(x, float))) for x in jax.tree.leaves(params)]
-    if not all(finite):
-        raise ValueError(
-            f"population_size={population_size} is too small for {name} with "
-            f"{n_genes} genes: its default parameters are not finite"
-        )
-    return algo, params
 
 
 # --------------------------------------------------------------------------- gene bounds
@@ -224,168 +118,7 @@ def check_config(
     return jnp.asarray(g)
 
 
-# --------------------------------------------------------------------------- one evolution
-@struct.dataclass
-class Evolution:
-    """State of one evolution (one point of IE/IET/OET, or the whole FTE trajectory).
-
-    Attributes:
-        algo: the evosax algorithm state.
-        key: this evolution's key; generation g uses ``fold_in(key, g)``.
-        best_u: best normalized genes so far (D,).
-        best_fitness: its fitness (scalar).
-        stall: generations since the best fitness last improved.
-        generation: generations run.
-        evaluations: fitness evaluations spent.
-        invalid: how many of them were invalid (non-finite fitness).
-        done: True once a stop condition held; the state is then frozen.
-    """
-
-    algo: Any
-    key: jax.Array
-    best_u: jax.Array
-    best_fitness: jax.Array
-    stall: jax.Array
-    generation: jax.Array
-    evaluations: jax.Array
-    invalid: jax.Array
-    done: jax.Array
-
-    @property
-    def found(self) -> jax.Array:
-        """True once a valid candidate was evaluated (`best_u` is one); bool array."""
-        return jnp.isfinite(self.best_fitness)
-
-
-def screen(fitness: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """Splits a population's raw fitness (P,) into what is told and what is ranked.
-
-    Returns:
-        ``(told, ranked, n_invalid)``: `told` (P,) is finite (invalid candidates get
-        `INVALID_PENALTY`, valid ones are capped at it), for the algorithm; `ranked`
-        (P,) is the fitness with inf for invalid candidates, for the best; `n_invalid`
-        is the int32 count of invalid candidates (traced, no host sync).
-    """
-    valid = jnp.isfinite(fitness)
-    told = jnp.where(valid, jnp.minimum(fitness, INVALID_PENALTY), INVALID_PENALTY)
-    ranked = jnp.where(valid, fitness, jnp.inf)
-    return told, ranked, jnp.sum(~valid).astype(jnp.int32)
-
-
-def evolution_init(
-    algo: Any,
-    params: Any,
-    key: jax.Array,
-    fitness_u: FitnessFn,
-    n_genes: int,
-    mean: jax.Array | None = None,
-) -> Evolution:
-    """Starts an evolution (jittable, vmappable over `key` and `fitness_u`'s context).
-
-    Distribution-based algorithms start at `mean` (normalized genes (D,); default 0 =
-    mid joint ranges), which is not evaluated: the evolution has no best yet
-    (``best_fitness`` inf, `Evolution.found` False). Population-based ones get a
-    uniform initial population in ``[-1, 1]^D`` that is evaluated here (its best valid
-    candidate, if any, is the first best).
-    """
-    key, k_init, k_pop = jax.random.split(key, 3)
-    if isinstance(algo, PopulationBasedAlgorithm):
-        pop = jax.random.uniform(
-            k_pop, (algo.population_size, n_genes), minval=-1.0, maxval=1.0
-        )
-        told, ranked, invalid = screen(fitness_u(pop))
-        state = algo.init(k_init, pop, told, params)
-        i = jnp.argmin(ranked)
-        best_u, best_f, evals = pop[i], ranked[i], algo.population_size
-    else:
-        mean = jnp.zeros((n_genes,)) if mean is None else mean
-        state = algo.init(k_init, mean, params)
-        best_u, best_f, evals = mean, jnp.asarray(jnp.inf), 0
-        invalid = jnp.zeros((), jnp.int32)
-    return Evolution(
-        algo=state,
-        key=key,
-        best_u=best_u,
-        best_fitness=jnp.asarray(best_f, jnp.float32),
-        stall=jnp.asarray(0, jnp.int32),
-        generation=jnp.asarray(0, jnp.int32),
-        evaluations=jnp.asarray(evals, jnp.int32),
-        invalid=invalid,
-        done=jnp.asarray(False),
-    )
-
-
-def freeze(done: jax.Array, old: Any, new: Any) -> Any:
-    """Keeps `old` where `done` (a scalar bool) holds, else `new` (pytree-wise)."""
-    return jax.tree.map(lambda o, n: jnp.where(done, o, n), old, new)
-
-
-def evolution_step(
-    algo: Any,
-    params: Any,
-    evo: Evolution,
-    fitness_u: FitnessFn,
-    stop: Callable[[Evolution], jax.Array],
-) -> tuple[Evolution, dict[str, jax.Array]]:
-    """One generation: ask -> one batched evaluation -> tell -> bookkeeping -> stop test.
-
-    A done evolution is returned unchanged (its computation still runs, masked, so that
-    batched evolutions stay in lock-step).
-
-    Args:
-        algo, params: from `make_algorithm`.
-        evo: the evolution state.
-        fitness_u: normalized genes (P, D) -> fitness (P,).
-        stop: Evolution -> bool, evaluated after the update.
-
-    Returns:
-        ``(evo, metrics)`` with metrics ``best_fitness`` (best so far),
-        ``generation_best`` (this generation's best valid fitness; inf when frozen or
-        when none was valid) and ``invalid`` (invalid candidates of this generation;
-        0 when frozen). Invalid candidates are told `INVALID_PENALTY` (see `screen`).
-    """
-    k = jax.random.fold_in(evo.key, evo.generation)
-    k_ask, k_tell = jax.random.split(k)
-    pop, algo_state = algo.ask(k_ask, evo.algo, params)
-    told, ranked, invalid = screen(fitness_u(pop))
-    algo_state, _ = algo.tell(k_tell, pop, told, algo_state, params)
-    i = jnp.argmin(ranked)
-    better = ranked[i] < evo.best_fitness
-    new = evo.replace(
-        algo=algo_state,
-        best_u=jnp.where(better, pop[i], evo.best_u),
-        best_fitness=jnp.where(better, ranked[i], evo.best_fitness),
-        stall=jnp.where(better, 0, evo.stall + 1),
-        generation=evo.generation + 1,
-        evaluations=evo.evaluations + algo.population_size,
-        invalid=evo.invalid + invalid,
-    )
-    new = new.replace(done=stop(new))
-    out = freeze(evo.done, evo, new)
-    metrics = {
-        "best_fitness": out.best_fitness,
-        "generation_best": jnp.where(evo.done, jnp.inf, ranked[i]),
-        "invalid": jnp.where(evo.done, 0, invalid),
-    }
-    return out, metrics
-
-
 # --------------------------------------------------------------------------- plans
-def _default_kwargs(name: str) -> dict[str, Any]:
-    """Defaults that fit the normalized gene space (see the module docstring)."""
-    if name == "SimpleGA":
-        import optax
-
-        # evosax's SimpleGA mutates with std 1.0 forever: in normalized genes that spans
-        # the whole joint range and never refines; decay it instead.
-        return {
-            "std_schedule": optax.exponential_decay(
-                0.3, transition_steps=1, decay_rate=0.95, end_value=0.003
-            )
-        }
-    return {}
-
-
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
     """Stacks 1-D rows of different lengths into (len(rows), longest or 1), NaN-padded."""
     out = np.full((len(rows), max([len(r) for r in rows] + [1])), np.nan)
@@ -436,7 +169,7 @@ class PlanBase:
         self.max_generations_total = self.max_generations
         kwargs = dict(algorithm_kwargs or {})
         if isinstance(algorithm, str):
-            kwargs = {**_default_kwargs(algorithm), **kwargs}
+            kwargs = {**default_kwargs(algorithm), **kwargs}
         self.algo, self.params = make_algorithm(
             algorithm,
             population_size,

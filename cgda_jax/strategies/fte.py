@@ -19,7 +19,6 @@ from cgda_jax.strategies.base import PlanBase
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
-
 #: Fitness names accepted by ``distance=``.
 DISTANCES = ("dtw", "dtw_multi", "euclidean")
 

@@ -37,7 +37,6 @@ from cgda_jax.strategies.refine import REFINE, polish, reachability
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
-
 #: Default restarts of a point and generations without improvement that stop a try.
 RESTARTS = 2
 STAGNATION = 40

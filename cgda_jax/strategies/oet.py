@@ -22,7 +22,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from cgda_jax.strategies.base import Evolution, PlanBase, freeze, from_joints, ragged_rows
+from cgda_jax.strategies.base import (
+    Evolution,
+    PlanBase,
+    freeze,
+    from_joints,
+    ragged_rows,
+)
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies import ie, iet
+from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
 from cgda_jax.strategies.iet import IETPlan
 from cgda_jax.strategies.oet import OETPlan

@@ -1,0 +1,131 @@
+"""The evolutionary algorithms: evosax's registry, built by name, class or instance.
+
+References:
+    Lange, "evosax: JAX-based Evolution Strategies", GECCO 2023 companion.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
+
+__all__ = ["ALGORITHMS", "algorithm_name", "default_kwargs", "make_algorithm"]
+
+#: Names accepted by ``algorithm=`` (every algorithm shipped with evosax).
+ALGORITHMS: dict[str, type] = dict(_EVOSAX_ALGORITHMS)
+
+def algorithm_name(algorithm: Any) -> str:
+    """The name of an algorithm given by name, evosax class or configured instance."""
+    if isinstance(algorithm, str):
+        return algorithm
+    cls = algorithm if isinstance(algorithm, type) else type(algorithm)
+    return cls.__name__
+
+
+def make_algorithm(
+    algorithm: Any,
+    population_size: int,
+    n_genes: int,
+    *,
+    algorithm_kwargs: dict[str, Any] | None = None,
+    algorithm_params: dict[str, Any] | None = None,
+) -> tuple[Any, Any]:
+    """Builds an evosax algorithm and its parameters.
+
+    Args:
+        algorithm: as users of evosax pass it: a name (a key of `ALGORITHMS`, e.g.
+            "CMA_ES", "SimpleGA", "DifferentialEvolution"), an algorithm class
+            (e.g. ``evosax.algorithms.CMA_ES``, built here), or a configured instance
+            (``CMA_ES(population_size=32, solution=jnp.zeros(3), ...)``, used as it
+            is: its population size and solution size must match).
+        population_size: individuals per generation.
+        n_genes: genes per individual (D).
+        algorithm_kwargs: extra constructor arguments (e.g. ``std_schedule`` of SimpleGA).
+        algorithm_params: fields of the algorithm's ``default_params`` to override
+            (e.g. ``{"std_init": 0.3}`` for CMA_ES).
+
+    Returns:
+        ``(algorithm, params)``.
+
+    Raises:
+        ValueError: unknown name, unknown parameter, or a population too small for the
+            algorithm (its constructor refuses it or its default parameters are not
+            finite).
+    """
+    name = algorithm_name(algorithm)
+    if isinstance(algorithm, str) and name not in ALGORITHMS:
+        raise ValueError(
+            f"unknown algorithm {name!r}; choose one of {sorted(ALGORITHMS)}"
+        )
+    if int(population_size) < 2:
+        raise ValueError(
+            f"population_size={population_size} is too small for {name}: need >= 2"
+        )
+    cls = ALGORITHMS[name] if isinstance(algorithm, str) else algorithm
+    if isinstance(cls, type) and not hasattr(cls, "ask"):
+        raise ValueError(f"algorithm {name!r} is not an evosax algorithm class")
+    try:
+        if isinstance(cls, type):
+            algo = cls(
+                population_size=int(population_size),
+                solution=jnp.zeros((n_genes,)),
+                **(algorithm_kwargs or {}),
+            )
+        else:  # a configured instance
+            algo = cls
+            if not (hasattr(algo, "ask") and hasattr(algo, "default_params")):
+                raise ValueError(f"{algo!r} is not an evosax algorithm (no ask / "
+                                 "default_params)")
+            if algorithm_kwargs:
+                raise ValueError(f"algorithm_kwargs {sorted(algorithm_kwargs)} given "
+                                 f"with an already built {name}; configure it instead")
+            size, dims = int(algo.population_size), int(getattr(algo, "num_dims", -1))
+            if size != int(population_size) or dims != int(n_genes):
+                raise ValueError(
+                    f"the {name} instance has population_size={size} and "
+                    f"{dims} genes; this run needs population_size="
+                    f"{population_size} and {n_genes} genes (one per evolved joint"
+                    " and waypoint)")
+    except AssertionError as err:
+        raise ValueError(
+            f"population_size={population_size} is not allowed for {name}: {err}"
+        ) from None
+    except TypeError as err:
+        raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
+    # evosax computes its default parameters with many small eager ops (each one a
+    # compile on first use); tracing them as ONE program costs one compile instead.
+    params = jax.jit(lambda: algo.default_params)()
+    overrides = dict(algorithm_params or {})
+    unknown = sorted(set(overrides) - set(params.__dataclass_fields__))
+    if unknown:
+        raise ValueError(
+            f"unknown algorithm_params {unknown} for {name}; it has "
+            f"{sorted(params.__dataclass_fields__)}"
+        )
+    params = params.replace(**{k: jnp.asarray(v) for k, v in overrides.items()})
+    finite = [np.all(np.isfinite(np.asarray(x, float))) for x in jax.tree.leaves(params)]
+    if not all(finite):
+        raise ValueError(
+            f"population_size={population_size} is too small for {name} with "
+            f"{n_genes} genes: its default parameters are not finite"
+        )
+    return algo, params
+
+
+def default_kwargs(name: str) -> dict[str, Any]:
+    """Defaults that fit the normalized gene space (see the module docstring)."""
+    if name == "SimpleGA":
+        import optax
+
+        # evosax's SimpleGA mutates with std 1.0 forever: in normalized genes that spans
+        # the whole joint range and never refines; decay it instead.
+        return {
+            "std_schedule": optax.exponential_decay(
+                0.3, transition_steps=1, decay_rate=0.95, end_value=0.003
+            )
+        }
+    return {}
