@@ -38,7 +38,7 @@ from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
 #: Default restarts of a point and generations without improvement that stop a try.
-RESTARTS = 2
+RESTARTS = 3
 STAGNATION = 40
 
 
@@ -83,7 +83,8 @@ class IEPlan(PlanBase):
             posture brings within tolerance (`refine.reachability`).
             Both need independent points (kinematic mode, stateless scene).
         restarts: tries of a point that stopped above tolerance are restarted (fresh
-            key, random start mean), up to this many times; the best is kept.
+            key; from a solved neighbour's posture, then a random mean, alternately),
+            up to this many times; the best is kept.
         stagnation: a try also stops after this many generations without
             improvement (None: only at `max_generations`).
     """
@@ -152,15 +153,32 @@ class IEPlan(PlanBase):
             stop = stop | (evo.stall >= self.stagnation)
         return stop
 
-    def _try(self, key, goal_point, state, t):
-        """Try ``t`` of a point: try 0 from the mid-range mean, restarts from a
-        random mean with key ``fold_in(key, t)``."""
+    def _try(self, key, goal_point, state, t, neighbour_u=None):
+        """Try ``t`` of a point: try 0 from the mid-range mean; restarts with key
+        ``fold_in(key, t)`` alternate between a solved neighbour's best genes (odd
+        tries: the goal curve is continuous, so a neighbour's posture is usually in
+        the right basin) and a random mean (even tries, or no neighbour)."""
         k_mean, k_evo = jax.random.split(jax.random.fold_in(key, t))
-        mean = jnp.where(
-            t > 0, jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0),
-            0.0)
+        random_mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
+        if neighbour_u is not None:
+            use = (t % 2 == 1) & jnp.all(jnp.isfinite(neighbour_u))
+            random_mean = jnp.where(use, jnp.nan_to_num(neighbour_u), random_mean)
+        mean = jnp.where(t > 0, random_mean, 0.0)
         return self.start(jnp.where(t > 0, k_evo, key),
                           self.point_fitness(state, goal_point), mean=mean)
+
+    def _neighbours(self, best_u, best_fitness):
+        """(N, D) the best genes of each point's better-solved neighbour (i-1 or
+        i+1, the one with the lower error); NaN where neither has a valid one."""
+        inf = jnp.full((1,), jnp.inf)
+        nan = jnp.full((1, self.n_dof), jnp.nan)
+        prev_f = jnp.concatenate([inf, best_fitness[:-1]])
+        next_f = jnp.concatenate([best_fitness[1:], inf])
+        prev_u = jnp.concatenate([nan, best_u[:-1]])
+        next_u = jnp.concatenate([best_u[1:], nan])
+        u = jnp.where((prev_f <= next_f)[:, None], prev_u, next_u)
+        ok = jnp.isfinite(jnp.minimum(prev_f, next_f))
+        return jnp.where(ok[:, None], u, jnp.nan)
 
     def init(self, key):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
@@ -196,9 +214,11 @@ class IEPlan(PlanBase):
         met = best_f < self.tolerance
         # a try that stopped short of the tolerance restarts while tries are left
         again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
+        neighbours = self._neighbours(best_u, best_f)
         fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
             jnp.any(again), lambda: jax.vmap(self._try)(s.keys, self.goal, states,
-                                                        s.tries), lambda: evo)
+                                                        s.tries, neighbours),
+            lambda: evo)
         s = s.replace(
             generations=s.generations + jnp.where(again, evo.generation, 0),
             evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
@@ -300,9 +320,10 @@ def run_ie(
             ``info["unreachable_points"]`` with their nearest approach.
             `refine` and `reach_check` need kinematic mode and a stateless scene.
         restarts: a point whose try stopped above `tolerance` (budget spent or
-            stalled) is tried again with a fresh key from a random start mean, up to
-            this many times (inside the compiled step); the best over its tries is
-            kept and ``info["point_tries"]`` says how many it took.
+            stalled) is tried again with a fresh key, up to this many times (inside
+            the compiled step), starting alternately from its better-solved
+            neighbour's best posture and from a random mean; the best over its tries
+            is kept and ``info["point_tries"]`` says how many it took.
         stagnation: a try stops after this many generations without improvement
             (None: only at `max_generations`), so a stuck point restarts early.
         progress_fn: called with a dict after each chunk.
