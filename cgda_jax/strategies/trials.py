@@ -16,7 +16,8 @@ from cgda_jax.strategies.runner import run
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
     "ie": (IEPlan, {}),
-    "iet": (IETPlan, {"restarts": RESTARTS, "backtracks": BACKTRACKS}),
+    "iet": (IETPlan, {"restarts": RESTARTS, "backtracks": BACKTRACKS,
+                       "warm_start": False}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
 }
 
@@ -57,7 +58,7 @@ def run_trials(
             copies are dropped; choose R a multiple of K to waste nothing). Each
             trial gives the same result as unsharded. Multi-host: see
             `cgda_jax.sharding`.
-        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IET: restarts, backtracks;
+        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IET: restarts, backtracks, warm_start;
             OET: max_steps, lookahead).
 
     Returns:
