@@ -102,10 +102,11 @@ def _execution_plots(cfg, plots: pathlib.Path, res, sim, demos, gen) -> None:
         hist, labels=None if hist.ndim == 1 else [f"point {i}" for i in range(len(hist))],
         title=f"{cfg.name}: best fitness per generation", path=plots / "fitness.png",
     )
-    if demos and len(names) == 3:
+    if demos:  # 3 features: in 3-D (paper Fig. 7); else one panel per feature
         plotting.plot_demonstrations(
             demos, gen, res.features, title=f"{cfg.name}: demos, goal, executed",
-            path=plots / "trajectory_3d.png",
+            path=plots / ("trajectory_3d.png" if len(names) == 3
+                          else "demonstrations.png"),
         )
     per_point = res.info.get("point_generations") if isinstance(res.info, dict) else None
     if per_point is not None and hist.ndim == 2:
