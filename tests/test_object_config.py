@@ -151,3 +151,32 @@ def test_object_experiments_build(name):
         assert np.linalg.norm(goal[-1] - goal[0]) >= 0.20
     else:
         assert span[0] >= np.radians(90)
+
+
+def test_start_posture_of_evolved_joints(tmp_path):
+    from cgda_jax import MarkerScene, Robot, Simulator, model_path, run_iet
+
+    path = model_path("tiny_arm.xml")
+    robot = Robot.from_mjcf(path, ["yaw", "shoulder", "elbow"], "marker",
+                            start={"elbow": 0.5})
+    np.testing.assert_allclose(robot.start_genes, [0, 0, 0.5])
+    for mode in ("kinematic", "dynamic"):
+        sim = Simulator(robot, MarkerScene(), mode=mode, physics="mujoco")
+        state = sim.init_state()
+        np.testing.assert_allclose(state.genes, [0, 0, 0.5])
+        if mode == "dynamic":
+            np.testing.assert_allclose(state.data[sim.physics.gene_qadr], [0, 0, 0.5])
+    with pytest.raises(ValueError, match="start value for 'wrist'.*not an evolved"):
+        Robot.from_mjcf(path, ["yaw"], "marker", start={"wrist": 0.1})
+    with pytest.raises(ValueError, match="outside its range"):
+        Robot.from_mjcf(path, ["yaw"], "marker", start={"yaw": 3.0})
+    cfg = _cfg(tmp_path, overrides=["robot.start={elbow = 30.0}"])
+    sim = build_simulator(cfg, goal=build_goal(cfg)[0])
+    np.testing.assert_allclose(sim.robot.start_genes, [0, 0, np.radians(30)], atol=1e-6)
+    # IET's warm start: each point's first evolution from the previous posture
+    kin = Simulator(robot, MarkerScene(), substeps=2)
+    goal = np.stack([np.asarray(robot.marker_position(np.float32([0.1 * i, 0.2, 0.5])))
+                     for i in range(3)])
+    res = run_iet(kin, goal, population_size=8, max_generations=40, tolerance=0.02,
+                  warm_start=True, algorithm_params={"std_init": 0.1})
+    assert res.success and res.info["warm_start"] is True

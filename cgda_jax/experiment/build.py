@@ -163,6 +163,7 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
 
     rc = cfg.robot
     fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
+    start = {k: math.radians(v) for k, v in rc.start.items()}
     if cfg.world.objects or cfg.world.contact_geoms:
         from cgda_jax.experiment.config import _validate_world
 
@@ -170,12 +171,12 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
         robot = Robot.from_world(
             resolve_model(rc.model), cfg.world.objects, list(rc.joints),
             rc.marker_site, fixed, contact_geoms=cfg.world.contact_geoms,
-            keyframe=rc.keyframe or None,
+            keyframe=rc.keyframe or None, start=start,
         )
     else:
         robot = Robot.from_mjcf(
             resolve_model(rc.model), list(rc.joints), rc.marker_site, fixed,
-            keyframe=rc.keyframe or None,
+            keyframe=rc.keyframe or None, start=start,
         )
     if cfg.scene.kind == "objects":
         path = None

@@ -110,6 +110,8 @@ class RobotConfig:
     """The robot: MJCF model (built-in name or path), evolved joints, marker site.
 
     ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    ``start``: start values of evolved joints in DEGREES (every execution starts
+    there; default the model's ``qpos0`` or the keyframe's).
     ``keyframe``: a ``<key>`` of the model whose qpos is the start posture ("" = the
     model's qpos0).  Dynamic mode (``mode = "dynamic"``): ``physics`` "auto" | "mjx"
     | "mujoco"; ``waypoint_s`` seconds per waypoint (0 = the demonstrations' timing,
@@ -126,6 +128,7 @@ class RobotConfig:
     fixed: dict[str, float] = dataclasses.field(
         default_factory=lambda: {"r_forearm_rotation": 45.0}
     )
+    start: dict[str, float] = dataclasses.field(default_factory=dict)
     mode: str = "kinematic"
     substeps: int = 8
     keyframe: str = ""
