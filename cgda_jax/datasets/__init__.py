@@ -1,5 +1,17 @@
-"""Synthetic demonstration generators (the paper's MOVE, ROTATE, CLEAN, PAINT)."""
+"""Synthetic demonstration generators (the paper's MOVE, ROTATE, CLEAN, PAINT; object
+effects: a pushed box, a turned valve)."""
 
+from cgda_jax.datasets.objects import (
+    MOVE_BOX_END as MOVE_BOX_END,
+    MOVE_BOX_START as MOVE_BOX_START,
+    OBJECT_ACTIONS as OBJECT_ACTIONS,
+    OBJECT_FEATURES as OBJECT_FEATURES,
+    VALVE_END as VALVE_END,
+    VALVE_START as VALVE_START,
+    move_box_demos as move_box_demos,
+    object_actions as object_actions,
+    rotate_valve_demos as rotate_valve_demos,
+)
 from cgda_jax.datasets.synthetic import (
     ACTIONS as ACTIONS,
     ARM_FEATURES as ARM_FEATURES,
@@ -18,8 +30,17 @@ __all__ = [
     "ARM_FEATURES",
     "CLEAN_CENTRE_M",
     "MARKER_FEATURES",
+    "MOVE_BOX_END",
+    "MOVE_BOX_START",
+    "OBJECT_ACTIONS",
+    "OBJECT_FEATURES",
     "SPATIAL_FEATURES",
+    "VALVE_END",
+    "VALVE_START",
     "clean_circle_demos",
+    "move_box_demos",
+    "object_actions",
+    "rotate_valve_demos",
     "paint_ramp",
     "select_features",
     "synthetic_actions",

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from cgda_jax.experiment.config import (
+    OBJECT_SOURCES,
     ConfigError,
     ExperimentConfig,
     StrategyConfig,
@@ -24,6 +25,10 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     from cgda_jax.generalize import generalize
 
     d = cfg.data
+    if d.source in OBJECT_SOURCES:
+        demos = object_demos(cfg)
+        gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
+        return np.asarray(gen.knots, float) * d.scale, demos, gen
     if d.source == "paint_ramp":
         from cgda_jax.datasets import paint_ramp
 
@@ -43,6 +48,100 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     return np.asarray(gen.knots, float) * d.scale, demos, gen
 
 
+def scene_feature_names(cfg: ExperimentConfig) -> list[str]:
+    """The feature names (with units) the ``objects`` scene of `cfg` reads."""
+    from cgda_jax.sim.features import FeatureSpec
+
+    names = []
+    for entry in cfg.scene.features:
+        spec = FeatureSpec.from_dict(entry)
+        names += [f"{c} [{spec.unit}]" for c in spec.columns()]
+    return names
+
+
+def object_demos(cfg: ExperimentConfig) -> list:
+    """The demonstrations of an object source (``move_box`` / ``rotate_valve``),
+    restricted to the columns the scene reads, in the scene's order.
+
+    Raises:
+        ConfigError: a scene feature that the demonstrations do not have (e.g. a
+            different object name; both lists named).
+    """
+    from cgda_jax.datasets import move_box_demos, rotate_valve_demos, select_features
+
+    d = cfg.data
+    kw: dict[str, Any] = {"n": d.n_demos, "seed": d.seed}
+    if d.start:
+        kw["start"] = d.start if d.source == "move_box" else d.start[0]
+    if d.end:
+        kw["end"] = d.end if d.source == "move_box" else d.end[0]
+    if d.object:
+        kw["name"] = d.object
+    if d.duration_s:
+        kw["duration_s"] = d.duration_s
+    try:
+        if d.source == "move_box":
+            demos = move_box_demos(curve=d.curve, **kw)
+        else:
+            demos = rotate_valve_demos(**kw)
+    except ValueError as err:
+        raise ConfigError(f"[data] ({d.source}): {err}") from None
+    have = list(demos[0].feature_names)
+    want = scene_feature_names(cfg)
+    missing = [n for n in want if n not in have]
+    if missing:
+        raise ConfigError(
+            f"key 'scene.features': the {d.source} demonstrations have {have}, not "
+            f"{missing} (name the object with data.object or the scene's features)"
+        )
+    return select_features(demos, want)
+
+
+def goal_path_points(cfg: ExperimentConfig, model, qpos0, goal) -> np.ndarray | None:
+    """The goal drawn in renders (K, 3) (``scene.goal_path``), or None.
+
+    A body's x and y columns give points at the height ``scene.goal_path_z``; else a
+    hinge joint's angle column gives the site ``scene.goal_path_site`` with the joint
+    turned to each goal angle (forward kinematics of `model` from `qpos0`).
+    """
+    import mujoco
+
+    from cgda_jax.sim.features import FeatureSpec
+
+    sc = cfg.scene
+    if not sc.goal_path or sc.kind != "objects":
+        return None
+    goal = np.asarray(goal, float)
+    col, cols = 0, {}
+    for entry in sc.features:
+        spec = FeatureSpec.from_dict(entry)
+        for c in spec.columns():
+            cols[c] = (spec, col)
+            col += 1
+    for spec, _ in cols.values():
+        if spec.kind == "body" and f"{spec.name}.x" in cols and f"{spec.name}.y" in cols:
+            x, y = cols[f"{spec.name}.x"][1], cols[f"{spec.name}.y"][1]
+            return np.column_stack([goal[:, x], goal[:, y],
+                                    np.full(len(goal), sc.goal_path_z)])
+    for spec, k in cols.values():
+        if spec.kind == "joint" and spec.quantity == "angle":
+            if not sc.goal_path_site:
+                raise ConfigError("key 'scene.goal_path_site': name the site to draw "
+                                  f"the goal of joint {spec.name!r} at (e.g. a rim)")
+            data = mujoco.MjData(model)
+            site = model.site(sc.goal_path_site).id
+            adr = int(model.joint(spec.name).qposadr[0])
+            out = []
+            for angle in goal[:, k]:
+                data.qpos[:] = qpos0
+                data.qpos[adr] = angle
+                mujoco.mj_kinematics(model, data)
+                out.append(data.site_xpos[site].copy())
+            return np.asarray(out)
+    raise ConfigError("key 'scene.goal_path': the scene has neither a body's x and y "
+                      "nor a hinge joint's angle to draw")
+
+
 def default_waypoint_s(demos: list, n_points: int) -> float:
     """Seconds per waypoint from the demonstrations' timing: mean duration / points
     (1 s without demonstrations)."""
@@ -51,25 +150,43 @@ def default_waypoint_s(demos: list, n_points: int) -> float:
     return float(np.mean([d.duration for d in demos])) / n_points
 
 
-def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None):
-    """Robot + scene + Simulator from the config.
+def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
+                    goal=None):
+    """Robot (+ the world's objects) + scene + Simulator from the config.
 
     Args:
         cfg: the experiment.
         waypoint_s: dynamic mode: seconds per waypoint when ``robot.waypoint_s`` is
             0 (default 1 s; `run_execution` passes `default_waypoint_s`).
+        goal: (N, F) the goal, drawn in renders when ``scene.goal_path`` is on.
     """
     from cgda_jax.sim.execute import Simulator
     from cgda_jax.sim.robot import Robot
-    from cgda_jax.sim.scenes import MarkerScene, PaintWall
+    from cgda_jax.sim.scenes import MarkerScene, ObjectScene, PaintWall
 
     rc = cfg.robot
-    robot = Robot.from_mjcf(
-        resolve_model(rc.model), list(rc.joints), rc.marker_site,
-        {k: math.radians(v) for k, v in rc.fixed.items()},
-        keyframe=rc.keyframe or None,
-    )
-    if cfg.scene.kind == "paint":
+    fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
+    start = {k: math.radians(v) for k, v in rc.start.items()}
+    if cfg.world.objects or cfg.world.contact_geoms:
+        from cgda_jax.experiment.config import _validate_world
+
+        _validate_world(cfg)  # one line naming the key for a bad object or feature
+        robot = Robot.from_world(
+            resolve_model(rc.model), cfg.world.objects, list(rc.joints),
+            rc.marker_site, fixed, contact_geoms=cfg.world.contact_geoms,
+            keyframe=rc.keyframe or None, start=start,
+        )
+    else:
+        robot = Robot.from_mjcf(
+            resolve_model(rc.model), list(rc.joints), rc.marker_site, fixed,
+            keyframe=rc.keyframe or None, start=start,
+        )
+    if cfg.scene.kind == "objects":
+        path = None
+        if goal is not None:
+            path = goal_path_points(cfg, robot.mj_model, np.asarray(robot.qpos0), goal)
+        scene = ObjectScene(list(cfg.scene.features), goal_path=path)
+    elif cfg.scene.kind == "paint":
         scene = PaintWall.grid(**cfg.scene.params)
     else:
         if cfg.scene.params:

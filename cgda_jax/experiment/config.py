@@ -17,9 +17,12 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 KINDS = ("recognition", "execution")
-SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive")
+SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive", "move_box",
+           "rotate_valve")
 STRATEGIES = ("fte", "ie", "iet", "oet")
-SCENES = ("marker", "paint")
+SCENES = ("marker", "paint", "objects")
+#: Sources whose demonstrations are object features (goal columns = the scene's).
+OBJECT_SOURCES = ("move_box", "rotate_valve")
 XGNITIVE_ENV = "CGDA_XGNITIVE_DIR"
 
 
@@ -37,7 +40,10 @@ class DataConfig:
     Attributes:
         source: "synthetic" (MOVE/ROTATE/CLEAN/PAINT, recognition), "clean_circle"
             (circle demos -> clean goal), "paint_ramp" (0 -> 100 % in
-            ``goal_points`` steps) or "xgnitive" (real TEO demonstrations).
+            ``goal_points`` steps), "xgnitive" (real TEO demonstrations),
+            "move_box" (a box pushed along a table: x, y, yaw) or "rotate_valve"
+            (a valve's angle); for the last two the goal keeps the demonstration
+            columns the ``objects`` scene reads (`cgda_jax.datasets.objects`).
         features: synthetic: "marker" (8 object features), "spatial" (X, Y, Z) or
             "arm" (12 arm-point coordinates).
         n_repetitions, n_train: synthetic: repetitions per action; the first
@@ -51,6 +57,15 @@ class DataConfig:
         action, stream, columns: xgnitive action ("paint" | "iron"), stream and
             feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``).
         scale: factor applied to the goal's features (e.g. unit changes).
+        start, end: move_box: the box's (x, y) before and after the push [m];
+            rotate_valve: the valve angle before and after [rad] (one value);
+            empty = the dataset's defaults.
+        curve: move_box: sideways bulge of the path at its middle [m].
+        object: move_box / rotate_valve: the object's name in the feature names
+            ("" = "box" / "valve").
+        duration_s: move_box / rotate_valve: mean duration of the motion [s]
+            (0 = the dataset's 7.4 s; with the pauses and ``interval_s = 1``,
+            about 9 goal points).
     """
 
     source: str = "synthetic"
@@ -69,6 +84,11 @@ class DataConfig:
     stream: str = "paintSquaresOnScreen"
     columns: list[str] = dataclasses.field(default_factory=lambda: ["percent"])
     scale: float = 1.0
+    start: list[float] = dataclasses.field(default_factory=list)
+    end: list[float] = dataclasses.field(default_factory=list)
+    curve: float = 0.0
+    object: str = ""
+    duration_s: float = 0.0
 
 
 @dataclasses.dataclass
@@ -90,6 +110,8 @@ class RobotConfig:
     """The robot: MJCF model (built-in name or path), evolved joints, marker site.
 
     ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    ``start``: start values of evolved joints in DEGREES (every execution starts
+    there; default the model's ``qpos0`` or the keyframe's).
     ``keyframe``: a ``<key>`` of the model whose qpos is the start posture ("" = the
     model's qpos0).  Dynamic mode (``mode = "dynamic"``): ``physics`` "auto" | "mjx"
     | "mujoco"; ``waypoint_s`` seconds per waypoint (0 = the demonstrations' timing,
@@ -106,6 +128,7 @@ class RobotConfig:
     fixed: dict[str, float] = dataclasses.field(
         default_factory=lambda: {"r_forearm_rotation": 45.0}
     )
+    start: dict[str, float] = dataclasses.field(default_factory=dict)
     mode: str = "kinematic"
     substeps: int = 8
     keyframe: str = ""
@@ -117,15 +140,42 @@ class RobotConfig:
 
 
 @dataclasses.dataclass
+class WorldConfig:
+    """Objects in the robot's world (`cgda_jax.sim.world.compose_world`).
+
+    ``objects``: object dicts (``[[world.objects]]`` tables: ``piece``, ``pos``,
+    optional ``name``, ``euler`` [deg] / ``quat`` and the piece's parameters, e.g.
+    ``size``, ``mass``, ``friction``, ``radius``, ``damping``); with any, the robot is
+    built with `Robot.from_world`.  ``contact_geoms``: robot geoms that touch the
+    objects (e.g. ``["r_hand", "r_tool"]``).
+    """
+
+    objects: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    contact_geoms: list[str] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
 class SceneConfig:
-    """The scene: "marker" (features X, Y, Z) or "paint" (painted %, a 4 x 4 wall).
+    """The scene: "marker" (features X, Y, Z), "paint" (painted %, a 4 x 4 wall) or
+    "objects" (features of the simulated world, `cgda_jax.sim.ObjectScene`).
 
     ``params`` go to the scene: for "paint", keyword arguments of
     ``PaintWall.grid`` (x, ys, zs, root_height, radius, size).
+    ``features`` ("objects"): ``[[scene.features]]`` entries such as
+    ``{body = "box", quantity = "xy"}`` or ``{joint = "valve", quantity = "angle"}``
+    (`cgda_jax.sim.features.FeatureSpec`).
+    ``goal_path`` ("objects"): draw the goal as green spheres in the render: for a
+    body's x/y features at the height ``goal_path_z`` [m] (e.g. a table's surface);
+    for a hinge joint's angle at the site ``goal_path_site`` (e.g. "valve/rim") with
+    the joint turned to each goal angle.
     """
 
     kind: str = "marker"
     params: dict[str, Any] = dataclasses.field(default_factory=dict)
+    features: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+    goal_path: bool = False
+    goal_path_z: float = 0.0
+    goal_path_site: str = ""
 
 
 @dataclasses.dataclass
@@ -171,6 +221,7 @@ class ExperimentConfig:
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
     recognition: RecognitionConfig = dataclasses.field(default_factory=RecognitionConfig)
     robot: RobotConfig = dataclasses.field(default_factory=RobotConfig)
+    world: WorldConfig = dataclasses.field(default_factory=WorldConfig)
     scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)
     strategy: StrategyConfig = dataclasses.field(default_factory=StrategyConfig)
     output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
@@ -359,12 +410,13 @@ def validate_config(cfg: ExperimentConfig) -> None:
         return
     if cfg.data.source == "synthetic":
         raise ConfigError(
-            "key 'data.source': execution needs a goal: 'clean_circle', 'paint_ramp' "
-            "or 'xgnitive'"
+            "key 'data.source': execution needs a goal: 'clean_circle', 'paint_ramp', "
+            "'xgnitive', 'move_box' or 'rotate_valve'"
         )
     if cfg.data.source == "xgnitive":
         resolve_data_dir(cfg)
     _choice(cfg.scene.kind, SCENES, "scene.kind")
+    _validate_objects(cfg)
     _choice(cfg.strategy.name, STRATEGIES, "strategy.name")
     _choice(cfg.robot.mode, ("kinematic", "dynamic"), "robot.mode")
     _choice(cfg.robot.physics, ("auto", "mjx", "mujoco"), "robot.physics")
@@ -384,6 +436,79 @@ def validate_config(cfg: ExperimentConfig) -> None:
     if not cfg.robot.joints:
         raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
     resolve_model(cfg.robot.model)
+    if cfg.world.objects or cfg.scene.kind == "objects":
+        _validate_world(cfg)
+
+
+def _validate_objects(cfg: ExperimentConfig) -> None:
+    """Object sources and the objects scene: keys that need no model."""
+    d, sc = cfg.data, cfg.scene
+    if d.source in OBJECT_SOURCES:
+        n = 2 if d.source == "move_box" else 1
+        unit = "[x, y] in metres" if n == 2 else "[angle] in radians"
+        for key in ("start", "end"):
+            v = getattr(d, key)
+            if v and len(v) != n:
+                raise ConfigError(f"key 'data.{key}': {d.source} takes {unit}, got {v}")
+        if not d.duration_s >= 0:
+            raise ConfigError("key 'data.duration_s' must be >= 0 (0 = default)")
+        if sc.kind != "objects":
+            raise ConfigError(f"key 'scene.kind': data.source = '{d.source}' gives "
+                              "object features; use scene.kind = 'objects'")
+    if sc.kind != "objects":
+        for key in ("features", "goal_path", "goal_path_site"):
+            if getattr(sc, key):
+                raise ConfigError(f"key 'scene.{key}': only for scene.kind = 'objects'")
+        return
+    if sc.params:
+        raise ConfigError("key 'scene.params': the objects scene takes none; declare "
+                          "[[scene.features]] instead")
+    if not sc.features:
+        raise ConfigError("key 'scene.features' is empty: declare what the scene reads, "
+                          "e.g. [[scene.features]] body = \"box\", quantity = \"xy\"")
+    from cgda_jax.sim.features import FeatureSpec
+
+    for i, entry in enumerate(sc.features):
+        try:
+            FeatureSpec.from_dict(entry)
+        except ValueError as err:
+            raise ConfigError(f"key 'scene.features[{i}]': {err}") from None
+
+
+def _validate_world(cfg: ExperimentConfig):
+    """Compose and compile the world (cheap) and resolve the scene's feature names:
+    unknown pieces, keys, geoms, bodies, joints give one line naming the key.
+
+    Returns:
+        The compiled ``mujoco.MjModel`` of robot + objects.
+    """
+    from cgda_jax.sim.world import compile_world
+
+    path = resolve_model(cfg.robot.model)
+    try:
+        model = compile_world(path, cfg.world.objects, cfg.world.contact_geoms)
+    except (ValueError, KeyError, FileNotFoundError) as err:
+        msg = err.args[0] if err.args else str(err)
+        key = ("world.contact_geoms" if isinstance(err, KeyError)
+               else "world.objects")
+        raise ConfigError(f"key '{key}': {msg}") from None
+    if cfg.scene.kind == "objects":
+        from cgda_jax.sim.features import FeatureSet
+
+        try:
+            FeatureSet(model, cfg.scene.features)
+        except (ValueError, KeyError) as err:
+            msg = err.args[0] if err.args else str(err)
+            raise ConfigError(f"key 'scene.features': {msg}") from None
+        site = cfg.scene.goal_path_site
+        if site:
+            import mujoco
+
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site) < 0:
+                sites = [model.site(i).name for i in range(model.nsite)]
+                raise ConfigError(f"key 'scene.goal_path_site': site {site!r} not "
+                                  f"found; the world has sites {sites}")
+    return model
 
 
 

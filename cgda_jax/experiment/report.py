@@ -56,6 +56,16 @@ def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
     # the paint wall is updated per frame: keep every kinematic sub-step there
     fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
     distance = None if paint else 1.6 * float(sim.robot.mj_model.stat.extent)
+    camera: dict[str, Any] = {"distance": distance}
+    path = getattr(sim.scene, "goal_path", None)
+    if path is not None:  # objects: look at them and the hand, from their side
+        hand = np.asarray(sim.robot.marker_position(sim.robot.start_genes), float)
+        points = np.vstack([np.asarray(path, float), hand[None]])
+        centre = (2.0 * points[:-1].mean(axis=0) + hand) / 3.0
+        spread = float(np.linalg.norm(points - centre, axis=1).max())
+        camera = {"lookat": centre, "elevation": -35.0,
+                  "distance": max(0.6, 3.5 * spread),
+                  "azimuth": math.degrees(math.atan2(-centre[1], -centre[0])) + 30.0}
     try:
         from PIL import Image
 
@@ -64,7 +74,7 @@ def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
 
         gif = folder / "execution.gif"
         render_trajectory(sim, joints, gif, frames_per_waypoint=fpw, width=width,
-                          height=height, fps=max(4, 2 * fpw), distance=distance)
+                          height=height, fps=max(4, 2 * fpw), **camera)
         with Image.open(gif) as im:
             n_frames = getattr(im, "n_frames", 1)
             points = np.unique(np.linspace(0, len(joints), min(n_strip, len(joints) + 1))
@@ -102,10 +112,11 @@ def _execution_plots(cfg, plots: pathlib.Path, res, sim, demos, gen) -> None:
         hist, labels=None if hist.ndim == 1 else [f"point {i}" for i in range(len(hist))],
         title=f"{cfg.name}: best fitness per generation", path=plots / "fitness.png",
     )
-    if demos and len(names) == 3:
+    if demos:  # 3 features: in 3-D (paper Fig. 7); else one panel per feature
         plotting.plot_demonstrations(
             demos, gen, res.features, title=f"{cfg.name}: demos, goal, executed",
-            path=plots / "trajectory_3d.png",
+            path=plots / ("trajectory_3d.png" if len(names) == 3
+                          else "demonstrations.png"),
         )
     per_point = res.info.get("point_generations") if isinstance(res.info, dict) else None
     if per_point is not None and hist.ndim == 2:

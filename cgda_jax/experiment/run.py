@@ -131,7 +131,7 @@ def run_execution(
 ) -> dict:
     """Build the goal and the simulator, run the strategy, save and plot."""
     goal, demos, gen = build_goal(cfg)
-    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)))
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
     if goal.shape[1] != sim.n_features:
         raise ConfigError(
             f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "

@@ -195,14 +195,16 @@ class Simulator:
 
     # -- the one-example functions -----------------------------------------------
     def init_state(self, genes0: Array | None = None) -> SimState:
-        """Start state: posture ``genes0`` (default all evolved joints at 0, clipped
-        into the limits), the scene updated with the marker there.
+        """Start state: posture ``genes0`` (default the robot's `start_genes`: the
+        evolved joints' values in its start posture, 0 unless a keyframe or start
+        values say otherwise; clipped into the limits), the scene updated with the
+        marker there.
 
         Args:
             genes0: (DoF,) start values of the evolved joints, or None.
         """
         if genes0 is None:
-            genes0 = jnp.zeros(self.n_dof, jnp.float32)
+            genes0 = jnp.asarray(self.robot.start_genes)
         self.robot.check_genes(genes0, "genes0")
         genes0 = self.robot.clip(jnp.asarray(genes0, jnp.float32))
         data = None

@@ -80,7 +80,7 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
     (K, 3)) per frame."""
     robot = sim.robot
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
-    genes = np.clip(np.zeros(robot.n_dof), lo, hi)
+    genes = np.clip(robot.start_genes, lo, hi)  # where `Simulator.init_state` starts
     if sim.mode == "dynamic":  # MuJoCo C on the simulated model, same reference
         phys = sim.physics
         model, data = phys.model, mujoco.MjData(phys.model)

@@ -152,8 +152,10 @@ class Robot:
         mj_model: the compiled ``mujoco.MjModel``.
         mjx_model: the same model on the device (``mjx.put_model``, JAX impl).
         qpos0: (nq,) start posture: the model's own ``qpos0`` (or the keyframe's
-            ``qpos``) with the fixed values applied; free and ball joints keep their
-            quaternions from there, normalized (they are never evolved).
+            ``qpos``) with the fixed and start values applied; free and ball joints
+            keep their quaternions from there, normalized (they are never evolved).
+        start_genes: (DoF,) the evolved joints' values in `qpos0`, where every
+            execution starts (`Simulator.init_state`).
         qpos_adr: (DoF,) qpos addresses of the evolved joints.
         joint_ids: (DoF,) joint ids of the evolved joints.
         site_id: id of the marker site.
@@ -172,6 +174,7 @@ class Robot:
         source: str = "the model",
         keyframe: str | None = None,
         spec_factory: Callable[[], mujoco.MjSpec] | None = None,
+        start: Mapping[str, float] | None = None,
     ):
         joints = tuple(joints)
         if not joints:
@@ -240,6 +243,18 @@ class Robot:
             qpos0[mj_model.jnt_qposadr[jid]] = _fixed_value(
                 mj_model, jid, name, value, source
             )
+        start = dict(start or {})
+        for name, value in start.items():  # start values of evolved joints
+            if name not in joints:
+                raise ValueError(f"start value for {name!r}: not an evolved joint "
+                                 f"{list(joints)} (hold others with 'fixed')")
+            k = joints.index(name)
+            lo, hi = lower[k], upper[k]
+            if not lo - 1e-9 <= float(value) <= hi + 1e-9:
+                raise ValueError(f"start value {value} of joint {name!r} is outside "
+                                 f"its range [{lo}, {hi}]")
+            qpos0[self.qpos_adr[k]] = float(value)
+        self.start = start
         self.fixed = fixed
         self.keyframe = keyframe
         self.source = source
@@ -261,6 +276,7 @@ class Robot:
         *,
         kinematics: str = "chain",
         keyframe: str | None = None,
+        start: Mapping[str, float] | None = None,
     ) -> Robot:
         """Load an MJCF file and choose the evolved joints and the marker site.
 
@@ -275,6 +291,8 @@ class Robot:
                 free and ball joints at their body's pose) or the keyframe's.
             keyframe: name of a ``<key>`` whose ``qpos`` is the start posture (its
                 ball/free quaternions are normalized; a zero one is an error).
+            start: evolved joint name -> start value (RADIANS / metres), over the
+                model's ``qpos0`` or the keyframe (default: theirs).
             kinematics: forward-kinematics back-end, "chain" (default, faster) or
                 "mjx"; both match ``mujoco.mj_kinematics``.
 
@@ -301,6 +319,7 @@ class Robot:
             source=str(path),
             keyframe=keyframe,
             spec_factory=lambda: mujoco.MjSpec.from_file(str(path)),
+            start=start,
         )
 
     @classmethod
@@ -315,6 +334,7 @@ class Robot:
         contact_geoms: Sequence[str] = (),
         kinematics: str = "chain",
         keyframe: str | None = None,
+        start: Mapping[str, float] | None = None,
     ) -> Robot:
         """The robot's MJCF with object pieces attached (`cgda_jax.sim.world`), as one
         model; otherwise as `from_mjcf`.
@@ -324,7 +344,8 @@ class Robot:
             objects: object dicts (``{"piece": "box", "pos": [x, y, z], ...}``, see
                 `cgda_jax.sim.world.compose_world`).
             contact_geoms: robot geoms that touch the objects (e.g. the hand).
-            joints, marker_site, fixed, kinematics, keyframe: as in `from_mjcf`.
+            joints, marker_site, fixed, kinematics, keyframe, start: as in
+                `from_mjcf`.
         """
         from cgda_jax.sim.world import compose_world
 
@@ -339,7 +360,7 @@ class Robot:
         names = ", ".join(str(o.get("name", o.get("piece"))) for o in objects)
         return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
                    source=f"{path} + objects [{names}]", keyframe=keyframe,
-                   spec_factory=factory)
+                   spec_factory=factory, start=start)
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
         if kinematics == "chain":
@@ -421,7 +442,13 @@ class Robot:
             source=self.source,
             keyframe=self.keyframe,
             spec_factory=self._spec_factory,
+            start=self.start,
         )
+
+    @property
+    def start_genes(self) -> np.ndarray:
+        """(DoF,) the evolved joints' start values (from `qpos0`), float32."""
+        return self._qpos0_np[self.qpos_adr].astype(np.float32)
 
     def spec(self) -> mujoco.MjSpec:
         """A fresh ``mujoco.MjSpec`` of the robot's model (dynamic mode rebuilds the

@@ -24,7 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from cgda_jax.strategies.base import Evolution, PlanBase, freeze, ragged_rows
+from cgda_jax.strategies.base import (
+    Evolution,
+    PlanBase,
+    freeze,
+    from_joints,
+    ragged_rows,
+)
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
@@ -98,6 +104,9 @@ class IETPlan(PlanBase):
             is re-evolved (fresh key) and the point tried again, up to this many times
             per run (escapes prefixes that leave no way to the goal, e.g. every
             remaining square only reachable by sweeping across another one).
+        warm_start: the first evolution of each point starts at the previous
+            point's committed posture (point 0: the start posture) instead of the
+            middle of the joint ranges; restarts still start from random means.
 
     A point whose every evolution (restarts and backtracks included) found no valid
     candidate (every simulation diverged) is not committed: the run stops there
@@ -106,10 +115,12 @@ class IETPlan(PlanBase):
 
     name = "iet"
 
-    def __init__(self, sim, goal, *, restarts=0, backtracks=0, **kwargs):
+    def __init__(self, sim, goal, *, restarts=0, backtracks=0, warm_start=False,
+                 **kwargs):
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
         self.restarts = int(restarts)
         self.backtracks = int(backtracks)
+        self.warm_start = bool(warm_start)
         evolutions = self.n_points * (1 + self.restarts) * (1 + self.backtracks)
         self.max_generations_total = evolutions * self.max_generations
 
@@ -136,10 +147,15 @@ class IETPlan(PlanBase):
         t = s.tries[p]
         key = jax.random.fold_in(jax.random.fold_in(s.key, point), t)
         k_mean, k_evo = jax.random.split(key)
+        first = 0.0
+        if self.warm_start:  # the posture the point starts from
+            before = jnp.where(p > 0, s.joints[jnp.maximum(p - 1, 0)],
+                               s.sim_states.genes[0])
+            first = from_joints(before, self.lower, self.upper)
         mean = jnp.where(
             t > 0,
             jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0),
-            0.0,
+            first,
         )
         prefix_sq = s.prefix_sq[p]
         evo = self.start(
@@ -283,6 +299,7 @@ class IETPlan(PlanBase):
             point_invalid=final["point_invalid"].tolist(),
             points_without_valid=[n_done] if bool(final["stopped"]) else [],
             restarts=self.restarts,
+            warm_start=self.warm_start,
             backtracks=self.backtracks,
             backtracks_used=int(final["backtracks"]),
             point_tries=final["tries"].tolist(),
@@ -315,6 +332,7 @@ def run_iet(
     chunk_size: int = 10,
     restarts: int = RESTARTS,
     backtracks: int = BACKTRACKS,
+    warm_start: bool = False,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -337,6 +355,9 @@ def run_iet(
         backtracks: a point that still missed after its restarts makes the run
             re-evolve the previous point (fresh key) and try again, up to this many
             times per run. 0 and 0 give the paper's plain Algorithm 1.
+        warm_start: start each point's first evolution at the previous point's
+            posture (point 0: the start posture) instead of the middle of the joint
+            ranges; for goals reached by small continuous moves (pushing an object).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
 
@@ -353,7 +374,7 @@ def run_iet(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        restarts=restarts, backtracks=backtracks,
+        restarts=restarts, backtracks=backtracks, warm_start=warm_start,
         progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -18,7 +18,8 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
                     "refine": "none", "reach_check": False}),
-    "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS}),
+    "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
+                      "warm_start": False}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
 }
 
@@ -60,7 +61,7 @@ def run_trials(
             trial gives the same result as unsharded. Multi-host: see
             `cgda_jax.sharding`.
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
-            stagnation, refine, reach_check; IET: restarts, backtracks;
+            stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
             OET: max_steps, lookahead).
 
     Returns:
