@@ -16,8 +16,9 @@ Each run writes to its folder: ``config.toml`` (resolved), ``result.json``,
 
 Modules, one job each:
 
-- :mod:`~cgda_jax.experiment.config`: schema, TOML reading and writing, overrides,
-  validation.
+- :mod:`~cgda_jax.experiment.config`: schema, TOML reading and writing, overrides.
+- :mod:`~cgda_jax.experiment.rules`: the value rules (choices, ranges, files named,
+  world and object-scene tables).
 - :mod:`~cgda_jax.experiment.build`: the goal, the simulator and the strategy
   function from a config.
 - :mod:`~cgda_jax.experiment.validate`: every check that needs no compiled program
@@ -53,7 +54,6 @@ from cgda_jax.experiment.config import (
     SceneConfig as SceneConfig,
     StrategyConfig as StrategyConfig,
     _apply_override as _apply_override,
-    _choice as _choice,
     _coerce as _coerce,
     _merge as _merge,
     _parse_value as _parse_value,
@@ -61,9 +61,6 @@ from cgda_jax.experiment.config import (
     _type_name as _type_name,
     dump_config as dump_config,
     load_config as load_config,
-    resolve_data_dir as resolve_data_dir,
-    resolve_model as resolve_model,
-    validate_config as validate_config,
 )
 from cgda_jax.experiment.demo import (
     _SMALL as _SMALL,
@@ -84,6 +81,12 @@ from cgda_jax.experiment.results import (
     FolderError as FolderError,
     RunFolder as RunFolder,
     plan_folder as plan_folder,
+)
+from cgda_jax.experiment.rules import (
+    _choice as _choice,
+    resolve_data_dir as resolve_data_dir,
+    resolve_model as resolve_model,
+    validate_config as validate_config,
 )
 from cgda_jax.experiment.run import (
     _synthetic as _synthetic,

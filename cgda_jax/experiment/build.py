@@ -15,9 +15,8 @@ from cgda_jax.experiment.config import (
     ConfigError,
     ExperimentConfig,
     StrategyConfig,
-    resolve_data_dir,
-    resolve_model,
 )
+from cgda_jax.experiment.rules import resolve_data_dir, resolve_model
 
 
 def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
@@ -168,7 +167,7 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
     start = {k: math.radians(v) for k, v in rc.start.items()}
     if cfg.world.objects or cfg.world.contact_geoms:
-        from cgda_jax.experiment.config import _validate_world
+        from cgda_jax.experiment.rules import _validate_world
 
         _validate_world(cfg)  # one line naming the key for a bad object or feature
         robot = Robot.from_world(

@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.experiment.config import ConfigError, ExperimentConfig, validate_config
+from cgda_jax.experiment.config import ConfigError, ExperimentConfig
+from cgda_jax.experiment.rules import validate_config
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
@@ -151,7 +152,7 @@ def _check_physics_steps(cfg: ExperimentConfig, waypoint_s: float) -> None:
     before the simulator allocates its per-step profile)."""
     import mujoco
 
-    from cgda_jax.experiment.config import resolve_model
+    from cgda_jax.experiment.rules import resolve_model
 
     rc = cfg.robot
     timestep = rc.timestep
@@ -190,7 +191,11 @@ def _build_simulator(cfg: ExperimentConfig, demos: list, n_points: int):
 
 
 def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
-    from cgda_jax.strategies.algorithms import ALGORITHMS, default_kwargs, make_algorithm
+    from cgda_jax.strategies.algorithms import (
+        ALGORITHMS,
+        default_kwargs,
+        make_algorithm,
+    )
 
     s = cfg.strategy
     if s.algorithm not in ALGORITHMS:

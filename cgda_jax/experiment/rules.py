@@ -1,0 +1,184 @@
+"""The value rules of a config: choices, ranges, the files and folders it names, the
+world and object-scene tables (`validate_config`). Deeper checks that build the goal,
+robot and algorithm are in `cgda_jax.experiment.validate`.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+from collections.abc import Sequence
+
+from cgda_jax.experiment.config import (
+    KINDS,
+    OBJECT_SOURCES,
+    SCENES,
+    SOURCES,
+    STRATEGIES,
+    XGNITIVE_ENV,
+    ConfigError,
+    ExperimentConfig,
+)
+
+
+def _choice(value: str, options: Sequence[str], key: str) -> None:
+    if value not in options:
+        raise ConfigError(f"key '{key}': {value!r} is not one of {list(options)}")
+
+
+def resolve_model(model: str) -> pathlib.Path:
+    """A model file: an existing path, else a built-in name from ``models/``."""
+    p = pathlib.Path(model).expanduser()
+    if p.is_file():
+        return p
+    if p.name == model:  # a bare name: try the built-in models
+        from cgda_jax.sim.robot import model_path
+
+        try:
+            builtin = pathlib.Path(model_path(model))
+        except (FileNotFoundError, KeyError, ValueError):
+            builtin = None
+        if builtin is not None and builtin.is_file():
+            return builtin
+    raise FileNotFoundError(f"robot model file not found: {model} (key 'robot.model')")
+
+
+def resolve_data_dir(cfg: ExperimentConfig) -> pathlib.Path:
+    """The xgnitive data folder from ``data.data_dir`` or $CGDA_XGNITIVE_DIR."""
+    raw = cfg.data.data_dir or os.environ.get(XGNITIVE_ENV, "")
+    if not raw:
+        raise ConfigError(
+            f"key 'data.data_dir' is empty and ${XGNITIVE_ENV} is not set: "
+            f"point one of them at your copy of the xgnitive data"
+        )
+    p = pathlib.Path(raw).expanduser()
+    if not p.is_dir():
+        raise FileNotFoundError(f"data folder not found: {p} (key 'data.data_dir')")
+    return p
+
+
+def validate_config(cfg: ExperimentConfig) -> None:
+    """Check values and that the files and folders named by ``cfg`` exist.
+
+    Raises:
+        ConfigError / FileNotFoundError naming the key or the path.
+    """
+    _choice(cfg.kind, KINDS, "kind")
+    _choice(cfg.data.source, SOURCES, "data.source")
+    _choice(cfg.data.method, ("paper", "xgnitive"), "data.method")
+    if not cfg.data.interval_s > 0:
+        raise ConfigError(f"key 'data.interval_s' must be > 0, got {cfg.data.interval_s}")
+    if cfg.kind == "recognition":
+        if cfg.data.source != "synthetic":
+            raise ConfigError("key 'data.source': recognition runs on 'synthetic' data")
+        _choice(cfg.data.features, ("marker", "spatial", "arm"), "data.features")
+        _choice(cfg.recognition.metric, ("dtw", "dtw_multi", "euclidean"),
+                "recognition.metric")
+        _choice(cfg.recognition.query, ("reduced", "raw"), "recognition.query")
+        if not 1 <= cfg.data.n_train < cfg.data.n_repetitions:
+            raise ConfigError(
+                f"keys 'data.n_train'={cfg.data.n_train} and 'data.n_repetitions'="
+                f"{cfg.data.n_repetitions}: need 1 <= n_train < n_repetitions"
+            )
+        return
+    if cfg.data.source == "synthetic":
+        raise ConfigError(
+            "key 'data.source': execution needs a goal: 'clean_circle', 'paint_ramp', "
+            "'xgnitive', 'move_box' or 'rotate_valve'"
+        )
+    if cfg.data.source == "xgnitive":
+        resolve_data_dir(cfg)
+    _choice(cfg.scene.kind, SCENES, "scene.kind")
+    _validate_objects(cfg)
+    _choice(cfg.strategy.name, STRATEGIES, "strategy.name")
+    _choice(cfg.robot.mode, ("kinematic", "dynamic"), "robot.mode")
+    _choice(cfg.robot.physics, ("auto", "mjx", "mujoco"), "robot.physics")
+    for key in ("waypoint_s", "timestep"):
+        if not getattr(cfg.robot, key) >= 0:
+            raise ConfigError(f"key 'robot.{key}' must be >= 0 (0 = default)")
+    if not 0 < cfg.robot.move_fraction <= 1:
+        raise ConfigError("key 'robot.move_fraction' must be in (0, 1]")
+    for key in ("population_size", "max_generations", "chunk_size"):
+        if getattr(cfg.strategy, key) < 1:
+            raise ConfigError(f"key 'strategy.{key}' must be >= 1")
+    if not cfg.strategy.tolerance > 0:
+        raise ConfigError("key 'strategy.tolerance' must be > 0")
+    from cgda_jax.experiment.build import _check_strategy_options
+
+    _check_strategy_options(cfg.strategy)
+    if not cfg.robot.joints:
+        raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
+    resolve_model(cfg.robot.model)
+    if cfg.world.objects or cfg.scene.kind == "objects":
+        _validate_world(cfg)
+
+
+def _validate_objects(cfg: ExperimentConfig) -> None:
+    """Object sources and the objects scene: keys that need no model."""
+    d, sc = cfg.data, cfg.scene
+    if d.source in OBJECT_SOURCES:
+        n = 2 if d.source == "move_box" else 1
+        unit = "[x, y] in metres" if n == 2 else "[angle] in radians"
+        for key in ("start", "end"):
+            v = getattr(d, key)
+            if v and len(v) != n:
+                raise ConfigError(f"key 'data.{key}': {d.source} takes {unit}, got {v}")
+        if not d.duration_s >= 0:
+            raise ConfigError("key 'data.duration_s' must be >= 0 (0 = default)")
+        if sc.kind != "objects":
+            raise ConfigError(f"key 'scene.kind': data.source = '{d.source}' gives "
+                              "object features; use scene.kind = 'objects'")
+    if sc.kind != "objects":
+        for key in ("features", "goal_path", "goal_path_site"):
+            if getattr(sc, key):
+                raise ConfigError(f"key 'scene.{key}': only for scene.kind = 'objects'")
+        return
+    if sc.params:
+        raise ConfigError("key 'scene.params': the objects scene takes none; declare "
+                          "[[scene.features]] instead")
+    if not sc.features:
+        raise ConfigError("key 'scene.features' is empty: declare what the scene reads, "
+                          "e.g. [[scene.features]] body = \"box\", quantity = \"xy\"")
+    from cgda_jax.sim.features import FeatureSpec
+
+    for i, entry in enumerate(sc.features):
+        try:
+            FeatureSpec.from_dict(entry)
+        except ValueError as err:
+            raise ConfigError(f"key 'scene.features[{i}]': {err}") from None
+
+
+def _validate_world(cfg: ExperimentConfig):
+    """Compose and compile the world (cheap) and resolve the scene's feature names:
+    unknown pieces, keys, geoms, bodies, joints give one line naming the key.
+
+    Returns:
+        The compiled ``mujoco.MjModel`` of robot + objects.
+    """
+    from cgda_jax.sim.world import compile_world
+
+    path = resolve_model(cfg.robot.model)
+    try:
+        model = compile_world(path, cfg.world.objects, cfg.world.contact_geoms)
+    except (ValueError, KeyError, FileNotFoundError) as err:
+        msg = err.args[0] if err.args else str(err)
+        key = ("world.contact_geoms" if isinstance(err, KeyError)
+               else "world.objects")
+        raise ConfigError(f"key '{key}': {msg}") from None
+    if cfg.scene.kind == "objects":
+        from cgda_jax.sim.features import FeatureSet
+
+        try:
+            FeatureSet(model, cfg.scene.features)
+        except (ValueError, KeyError) as err:
+            msg = err.args[0] if err.args else str(err)
+            raise ConfigError(f"key 'scene.features': {msg}") from None
+        site = cfg.scene.goal_path_site
+        if site:
+            import mujoco
+
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, site) < 0:
+                sites = [model.site(i).name for i in range(model.nsite)]
+                raise ConfigError(f"key 'scene.goal_path_site': site {site!r} not "
+                                  f"found; the world has sites {sites}")
+    return model
