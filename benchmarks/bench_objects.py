@@ -21,8 +21,7 @@ import time
 import numpy as np
 from _common import print_table, report_target, write_json
 
-from cgda_jax import experiment as ex
-from cgda_jax import run_trials
+from cgda_jax import experiment as ex, run_trials
 from cgda_jax.experiment.build import default_waypoint_s, strategy_function
 from cgda_jax.experiment.run import replay_check
 

@@ -58,7 +58,7 @@ def test_world_and_object_scene_keys_load_dump_and_build(tmp_path):
     validate_config(cfg)
     again = load_config(_write(tmp_path, dump_config(cfg)))
     assert again == cfg
-    goal, demos, gen = build_goal(cfg)
+    goal, demos, _ = build_goal(cfg)
     assert demos[0].feature_names == ("box.x [m]", "box.y [m]")  # the scene's columns
     assert goal.shape[1] == 2 and np.linalg.norm(goal[-1] - goal[0]) > 0.2
     sim = build_simulator(cfg, goal=goal)
@@ -141,7 +141,7 @@ def test_unknown_feature_name_lists_the_world(tmp_path):
 def test_object_experiments_build(name):
     cfg = load_config(EXPERIMENTS / f"{name}.toml")
     validate_config(cfg)
-    goal, demos, _ = build_goal(cfg)
+    goal, _, _ = build_goal(cfg)
     sim = build_simulator(cfg, 1.5, goal)
     assert goal.shape[1] == sim.n_features and len(goal) >= 5
     assert all("[" in n for n in sim.feature_names)  # units in the names

@@ -57,7 +57,7 @@ OBJECT_FEATURES: tuple[str, ...] = ("object.x [m]", "object.y [m]", "object.yaw 
 def _timing(rng: np.random.Generator, duration_s: float, rate_hz: float):
     """(times (T,), progress (T,) in [0, 1]) of one repetition, pauses included."""
     duration = duration_s * rng.uniform(0.85, 1.15)
-    count = int(round((duration + 1.6) * rate_hz))
+    count = round((duration + 1.6) * rate_hz)
     p, _ = _progress(rng, count, rate_hz, duration)
     return np.arange(count) / rate_hz, p
 
