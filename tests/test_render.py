@@ -93,3 +93,31 @@ def test_host_paint_states_match_the_scene_update_per_frame():
             state = wall.update(state, np.asarray(marker, np.float32))
         np.testing.assert_array_equal(frame, np.asarray(state))
     assert 0 < np.sum(got[-1]) and np.sum(got[0]) < np.sum(got[-1])
+
+
+def test_glfw_without_a_display_is_an_error_not_an_abort(tmp_path):
+    """mujoco imported before MUJOCO_GL was chosen gets GLFW, whose context creation
+    can abort a headless process; rendering refuses it with a clear error instead."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import mujoco\n"  # first: fixes GLFW as mujoco's back-end
+        "import numpy as np\n"
+        "from cgda_jax import MarkerScene, Robot, Simulator, model_path\n"
+        "from cgda_jax.sim.render import render_trajectory\n"
+        "r = Robot.from_mjcf(model_path('tiny_arm.xml'), ['yaw', 'shoulder', 'elbow'], "
+        "'marker')\n"
+        "try:\n"
+        f"    render_trajectory(Simulator(r, MarkerScene()), np.zeros((1, 3)), "
+        f"r'{tmp_path / 'x.gif'}')\n"
+        "except RuntimeError as err:\n"
+        "    print('refused:', err)\n"
+    )
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("MUJOCO_GL", "DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "refused:" in proc.stdout and "MUJOCO_GL=egl" in proc.stdout

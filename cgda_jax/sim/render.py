@@ -30,7 +30,27 @@ __all__ = ["render_trajectory"]
 _GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
 
+def _check_gl_backend() -> None:
+    """Refuse GLFW without a display: ``mujoco`` fixed its GL back-end when it was first
+    imported, and a process that imported it before ``MUJOCO_GL`` was chosen (see
+    `cgda_jax.sim._mujoco_env.choose_gl_backend`) would get GLFW, whose context creation
+    can abort the whole process on a headless machine instead of raising."""
+    import os
+    import sys
+
+    from mujoco import gl_context
+
+    headless = not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    if (sys.platform.startswith("linux") and headless
+            and gl_context.GLContext.__module__.endswith("glfw")):
+        raise RuntimeError(
+            "mujoco was imported with the GLFW back-end, which needs a display; set "
+            "MUJOCO_GL=egl (package libegl1) or MUJOCO_GL=osmesa (package libosmesa6) "
+            "before mujoco is first imported (import cgda_jax first does it for you)")
+
+
 def _renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
+    _check_gl_backend()
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
     try:
