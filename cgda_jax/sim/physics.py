@@ -233,10 +233,6 @@ class Physics:
         """(nu,) actuator targets that hold the posture ``qpos`` (..., nq)."""
         return qpos[..., self.act_qadr]
 
-    def genes_of(self, state: Array) -> Array:
-        """(DoF,) evolved joint values of a (nq + nv,) state."""
-        return state[self.gene_qadr]
-
 
 class MjxBackend:
     """Steps `Physics.model` with ``mujoco.mjx`` (JAX implementation)."""

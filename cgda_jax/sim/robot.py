@@ -400,10 +400,6 @@ class Robot:
         self.check_genes(genes)
         return self.qpos0.at[self.qpos_adr].set(jnp.asarray(genes, jnp.float32))
 
-    def genes_of(self, qpos: Array) -> Array:
-        """The evolved joints' values in a (nq,) posture -> (DoF,)."""
-        return qpos[self.qpos_adr]
-
     @property
     def mjx_model(self):
         """The ``mjx.Model`` (JAX impl), put on the device on first use: the chain

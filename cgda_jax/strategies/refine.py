@@ -19,6 +19,7 @@ Discrete features (a painted percentage) have no useful gradient: both need
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -139,8 +140,6 @@ def reachability(
         normalized genes reaching it, ``unreachable`` (indices with nearest >=
         tolerance) and ``seconds``.
     """
-    import time
-
     t0 = time.perf_counter()
     goal = jnp.asarray(goal, jnp.float32)
     lower = jnp.asarray(sim.lower, jnp.float32)
