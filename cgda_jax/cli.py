@@ -1,4 +1,4 @@
-"""The ``cgda`` command: ``cgda run CONFIG`` and ``cgda demo``.
+"""The ``cgda`` command: ``cgda run CONFIG``, ``cgda demo`` and ``cgda list``.
 
 Argument parsing, the JAX compilation cache, progress and error reporting only; the
 work is done by :mod:`cgda_jax.experiment`.
@@ -29,6 +29,12 @@ EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
 EXIT_DIVERGED = EXIT_FAILURE
 #: Interrupted by a signal: 128 + its number.
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+def _version() -> str:
+    from cgda_jax import __version__
+
+    return __version__
 
 
 def _cache_dir() -> pathlib.Path:
@@ -66,12 +72,13 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
 
 RUN_EXAMPLES = """\
 examples:
-  cgda run experiments/clean_ie.toml       # results/clean_ie/ (then -2, -3, ...)
-  cgda run experiments/paint_iet.toml --out /tmp/paint
-  cgda run experiments/paint_iet.toml --out /tmp/paint --overwrite   # replace it
-  cgda run experiments/clean_ie.toml --set strategy.population_size=64 \\
+  cgda run clean_ie                  # a built-in experiment (`cgda list`): results/clean_ie/
+  cgda run my_experiment.toml        # a config file of your own
+  cgda run paint_iet --out /tmp/paint
+  cgda run paint_iet --out /tmp/paint --overwrite   # replace it
+  cgda run clean_ie --set strategy.population_size=64 \\
       --set strategy.seed=3 --set output.render=false
-  cgda run experiments/clean_ie.toml --dry-run       # check + print the resolved config
+  cgda run clean_ie --dry-run        # check + print the resolved config
 
 The results folder gets report.md (start there), result.json, arrays.npz,
 config.toml (the resolved config; re-run it with `cgda run <folder>/config.toml`)
@@ -105,15 +112,17 @@ def _parser() -> argparse.ArgumentParser:
         prog="cgda",
         description="Continuous Goal-Directed Actions: generalize, recognize and "
         "execute demonstrated actions (JAX + MuJoCo MJX).",
-        epilog="Start with `cgda demo`, then `cgda run experiments/clean_ie.toml`. "
+        epilog="Start with `cgda demo`, then `cgda list` and `cgda run clean_ie`. "
         "`cgda run --help` lists the options.",
     )
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo}")
+    p.add_argument("--version", action="version", version=f"cgda {_version()}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list}")
     fmt = argparse.RawDescriptionHelpFormatter
     run = sub.add_parser("run", help="run one experiment config (TOML)",
                          description="Run one experiment described by a TOML file.",
                          epilog=RUN_EXAMPLES, formatter_class=fmt)
-    run.add_argument("config", help="experiment file, e.g. experiments/clean_ie.toml")
+    run.add_argument("config", help="experiment file (TOML), or the name of a built-in "
+                     "experiment (`cgda list`), e.g. clean_ie")
     run.add_argument("--set", dest="overrides", action="append", default=[],
                      metavar="KEY=VALUE",
                      help="override a config value (repeatable), e.g. "
@@ -137,6 +146,9 @@ def _parser() -> argparse.ArgumentParser:
                       "...)")
     demo.add_argument("--small", action="store_true",
                       help="fewer generations and samples (a quick check)")
+    sub.add_parser("list", help="the built-in experiments, one line each",
+                   description="The built-in experiments: `cgda run NAME` runs one; "
+                   "`cgda run NAME --dry-run` prints its config.")
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -200,7 +212,9 @@ def cmd_run(args) -> int:
         plan_folder,
     )
 
-    cfg = load_config(args.config, args.overrides)
+    from cgda_jax.builtin import resolve_config
+
+    cfg = load_config(resolve_config(args.config), args.overrides)
     facts = check_experiment(cfg)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
@@ -216,6 +230,13 @@ def cmd_run(args) -> int:
     if not args.quiet:
         print(rf.path / "report.md")
     return EXIT_MET if result.get("success") else EXIT_NOT_MET
+
+
+def cmd_list(args) -> int:
+    from cgda_jax.builtin import experiment_lines
+
+    print("\n".join(experiment_lines()))
+    return EXIT_MET
 
 
 def summary_table(results: dict[str, dict]) -> list[str]:
@@ -371,6 +392,8 @@ def _user_error(args, err: Exception) -> bool:
 
 def _dispatch(args, signals: _Signals) -> int:
     try:
+        if args.command == "list":
+            return cmd_list(args)
         if not args.no_cache:
             enable_compilation_cache()
         if args.command == "run":

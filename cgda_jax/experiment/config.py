@@ -333,7 +333,8 @@ def load_config(
             raise ConfigError(f"{path}: not valid TOML: {e}") from None
         if not table:
             raise ConfigError(f"{path}: the file sets nothing (an empty config); "
-                              f"start from one of the repository's experiments/*.toml")
+                              f"start from a built-in one (`cgda list`, "
+                              f"`cgda run NAME --dry-run` prints it)")
         try:
             _merge(cfg, table)
         except ConfigError as e:

@@ -29,11 +29,11 @@ import mujoco
 import numpy as np
 from jax import Array
 
+from cgda_jax.builtin import models_dir
 from cgda_jax.sim._mujoco_env import mjx_module
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
 
-_MODELS = pathlib.Path(__file__).resolve().parents[2] / "models"
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _BALL = int(mujoco.mjtJoint.mjJNT_BALL)
@@ -50,7 +50,8 @@ KINEMATICS = ("chain", "mjx")
 
 
 def model_path(name: str) -> pathlib.Path:
-    """Path of a built-in model in the repository's ``models/`` folder.
+    """Path of a built-in model (the repository's ``models/``, installed with the
+    package as ``cgda_jax._models``).
 
     Args:
         name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
@@ -58,10 +59,11 @@ def model_path(name: str) -> pathlib.Path:
     Raises:
         FileNotFoundError: no such built-in model (the message lists the ones there).
     """
-    path = _MODELS / name
+    folder = models_dir()
+    path = folder / name
     if not path.is_file():
-        have = sorted(p.name for p in _MODELS.glob("*.xml")) if _MODELS.is_dir() else []
-        raise FileNotFoundError(f"no built-in model {name!r} in {_MODELS}; have {have}")
+        have = sorted(p.name for p in folder.glob("*.xml"))
+        raise FileNotFoundError(f"no built-in model {name!r} in {folder}; have {have}")
     return path
 
 

@@ -57,10 +57,12 @@ from collections.abc import Callable, Mapping, Sequence
 import mujoco
 import numpy as np
 
+from cgda_jax.builtin import models_dir
+
 __all__ = ["OBJECTS_DIR", "compile_world", "compose_world", "list_pieces"]
 
 #: Folder of the built-in object pieces.
-OBJECTS_DIR = pathlib.Path(__file__).resolve().parents[2] / "models" / "objects"
+OBJECTS_DIR = models_dir() / "objects"
 #: Name of the elements of a piece file that take the object's own name.
 MAIN = "object"
 #: contype / conaffinity of the robot geoms named in ``contact_geoms``.
