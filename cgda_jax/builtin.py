@@ -64,7 +64,7 @@ def experiment_path(name: str) -> pathlib.Path:
     Raises:
         FileNotFoundError: no such built-in experiment (the message lists them).
     """
-    stem = name[:-5] if name.endswith(".toml") else name
+    stem = name.removesuffix(".toml")
     names = experiment_names()
     if stem not in names:
         raise FileNotFoundError(

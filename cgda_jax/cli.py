@@ -203,6 +203,7 @@ def _say_chosen(args, label: str, rf) -> None:
 
 
 def cmd_run(args) -> int:
+    from cgda_jax.builtin import resolve_config
     from cgda_jax.experiment import (
         RunFolder,
         check_experiment,
@@ -211,8 +212,6 @@ def cmd_run(args) -> int:
         load_config,
         plan_folder,
     )
-
-    from cgda_jax.builtin import resolve_config
 
     cfg = load_config(resolve_config(args.config), args.overrides)
     facts = check_experiment(cfg)

@@ -57,7 +57,6 @@ from cgda_jax.experiment.config import (
     _coerce as _coerce,
     _merge as _merge,
     _parse_value as _parse_value,
-    _toml_value as _toml_value,
     _type_name as _type_name,
     dump_config as dump_config,
     load_config as load_config,

@@ -8,13 +8,14 @@ Unknown keys and wrong types are errors that name the key (and the file).
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import pathlib
 import tomllib
 import typing
 from collections.abc import Mapping, Sequence
 from typing import Any
+
+import tomli_w
 
 KINDS = ("recognition", "execution")
 SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive", "move_box",
@@ -349,30 +350,6 @@ def load_config(
     return cfg
 
 
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + "}"
-    raise TypeError(f"cannot write {v!r} as TOML")
-
-
 def dump_config(cfg: ExperimentConfig) -> str:
     """The resolved config as TOML text (loads back to an equal config)."""
-    top, tables = [], []
-    for f in dataclasses.fields(cfg):
-        v = getattr(cfg, f.name)
-        if dataclasses.is_dataclass(v):
-            lines = [f"[{f.name}]"] + [
-                f"{g.name} = {_toml_value(getattr(v, g.name))}" for g in dataclasses.fields(v)
-            ]
-            tables.append("\n".join(lines))
-        else:
-            top.append(f"{f.name} = {_toml_value(v)}")
-    return "\n".join(top) + "\n\n" + "\n\n".join(tables) + "\n"
+    return tomli_w.dumps(dataclasses.asdict(cfg))
