@@ -22,9 +22,6 @@ import sys as _sys
 import types as _types
 from typing import TYPE_CHECKING as _TYPE_CHECKING
 
-# The headless OpenGL back-end must be chosen before anything imports mujoco.
-import cgda_jax.sim._mujoco_env  # noqa: E402,F401  (cheap; runs choose_gl_backend)
-
 _LAZY: dict[str, str] = {}  # public name -> module that defines it
 
 # --- core (data, generalization, distances, recognition) ---------------------

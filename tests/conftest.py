@@ -6,12 +6,6 @@ import pytest
 # Run every test on the CPU unless told otherwise; MJX uses its JAX backend there.
 os.environ.setdefault("JAX_PLATFORMS", "cpu")
 
-# Choose the headless GL back-end before any test module imports mujoco (mujoco fixes
-# it at its first import; a test file that imports mujoco first would get GLFW).
-from cgda_jax.sim._mujoco_env import choose_gl_backend  # noqa: E402
-
-choose_gl_backend()
-
 REPO = pathlib.Path(__file__).resolve().parents[1]
 XGNITIVE = pathlib.Path(
     os.environ.get("CGDA_XGNITIVE_DIR", REPO.parent / "shared" / "data" / "xgnitive")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import os
 import pathlib
 from typing import Any
 
@@ -70,6 +69,7 @@ def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
         from PIL import Image
 
         from cgda_jax import plotting
+        from cgda_jax.sim._mujoco_env import last_backend
         from cgda_jax.sim.render import render_trajectory
 
         gif = folder / "execution.gif"
@@ -95,7 +95,7 @@ def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
                     "output.render=false", cfg.name, reason)
         return {"ok": False, "reason": reason}
     return {"ok": True, "gif": "plots/execution.gif", "frames": "plots/frames.png",
-            "backend": os.environ.get("MUJOCO_GL", "")}
+            "backend": last_backend()}
 
 
 def _execution_plots(cfg, plots: pathlib.Path, res, sim, demos, gen) -> None:

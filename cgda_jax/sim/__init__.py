@@ -1,14 +1,9 @@
 """Simulation: robot models, scenes, batched execution in MJX, offscreen rendering."""
 
-# Before the first ``import mujoco``: headless OpenGL choice.  ``mujoco.mjx`` is
-# imported (quietly) only when dynamic mode or the "mjx" kinematics needs it, and the
-# public names below are imported on first access, so ``import cgda_jax`` (which
-# runs this to choose the GL back-end) stays cheap.
+# ``mujoco.mjx`` is imported (quietly) only when dynamic mode or the "mjx" kinematics
+# needs it, and the public names below are imported on first access.  The offscreen
+# OpenGL back-end is chosen when rendering (`cgda_jax.sim._mujoco_env.make_renderer`).
 import importlib as _importlib
-
-from cgda_jax.sim._mujoco_env import choose_gl_backend
-
-choose_gl_backend()
 
 _LAZY = {
     "MODES": "cgda_jax.sim.execute",

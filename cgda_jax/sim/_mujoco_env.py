@@ -1,13 +1,13 @@
-"""Prepare the process for ``import mujoco`` / ``mujoco.mjx`` (run before either).
+"""MuJoCo process matters: the offscreen OpenGL back-end, the quiet ``mujoco.mjx`` import.
 
-Two things that MuJoCo decides at import time:
-
-- The OpenGL back-end for offscreen rendering (``MUJOCO_GL``, read once by
-  ``import mujoco``). On a headless Linux machine (no ``DISPLAY`` /
-  ``WAYLAND_DISPLAY``) the default, GLFW, cannot work; :func:`choose_gl_backend`
-  picks ``egl`` (libEGL, e.g. Debian ``libegl1``) else ``osmesa`` (libOSMesa,
-  ``libosmesa6``). It never overrides a value the user set, never acts when a
-  display exists or when mujoco is already imported.
+- Offscreen rendering: ``import mujoco`` fixes the class of its renderer's OpenGL
+  context from ``MUJOCO_GL`` (unset: GLFW, which needs a display; on a headless
+  machine its context creation can abort the process instead of raising).  Nothing
+  here sets an environment variable: :func:`make_renderer` chooses the back-end when
+  a frame is rendered.  It keeps mujoco's choice when ``MUJOCO_GL`` was set or a
+  display exists; on a headless Linux machine with ``MUJOCO_GL`` unset it builds
+  the ``mujoco.Renderer`` with an EGL context (libEGL, e.g. Debian ``libegl1``),
+  else OSMesa (``libosmesa6``).
 - ``mujoco.mjx`` tries to import NVIDIA Warp and, when it is not installed (the
   normal case on CPU and for the JAX back-end), prints "Failed to import warp: No
   module named 'warp'" to stdout with ``print``. :func:`import_mjx_quietly`
@@ -19,12 +19,15 @@ from __future__ import annotations
 
 import contextlib
 import ctypes.util
+import importlib
 import io
 import os
 import re
 import sys
+import threading
 
-__all__ = ["choose_gl_backend", "import_mjx_quietly", "mjx_module"]
+__all__ = ["headless_backends", "import_mjx_quietly", "last_backend", "make_renderer",
+           "mjx_module"]
 
 #: The lines ``mujoco.mjx.warp`` prints when Warp is simply not installed.
 _WARP_ABSENT = re.compile(
@@ -32,28 +35,92 @@ _WARP_ABSENT = re.compile(
 )
 
 _LIBS = (("egl", "EGL"), ("osmesa", "OSMesa"))
+_HINT = ("set MUJOCO_GL=egl (package libegl1) or MUJOCO_GL=osmesa (package "
+         "libosmesa6) before mujoco is first imported")
+_SWAP = threading.Lock()
+_LAST = {"backend": ""}
 
 
-def choose_gl_backend(environ: dict | None = None) -> str | None:
-    """Set ``MUJOCO_GL`` to an available headless back-end if it is unset.
+def headless_backends(environ=None, platform: str | None = None) -> list[str]:
+    """The offscreen back-ends to try, in order, when mujoco's own choice is GLFW.
 
-    Args:
-        environ: the environment to read and update (default ``os.environ``).
-
-    Returns:
-        The value of ``MUJOCO_GL`` afterwards (None when left unset).
+    Empty when GLFW should be kept: ``MUJOCO_GL`` set by the user, a display
+    (``DISPLAY`` / ``WAYLAND_DISPLAY``), or not Linux.  Otherwise ``egl`` and/or
+    ``osmesa``, those whose library is found.  Reads ``environ`` (default
+    ``os.environ``), never writes it.
     """
     env = os.environ if environ is None else environ
-    if "MUJOCO_GL" in env:
-        return env["MUJOCO_GL"]
-    headless = not (env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
-    if not sys.platform.startswith("linux") or not headless or "mujoco" in sys.modules:
-        return None
-    for backend, lib in _LIBS:
-        if ctypes.util.find_library(lib):
-            env["MUJOCO_GL"] = backend
-            return backend
-    return None
+    platform = sys.platform if platform is None else platform
+    if ("MUJOCO_GL" in env or env.get("DISPLAY") or env.get("WAYLAND_DISPLAY")
+            or not platform.startswith("linux")):
+        return []
+    return [backend for backend, lib in _LIBS if ctypes.util.find_library(lib)]
+
+
+def last_backend() -> str:
+    """The OpenGL back-end of the last renderer :func:`make_renderer` made ("egl",
+    "osmesa", "glfw", ...; "" before the first)."""
+    return _LAST["backend"]
+
+
+def _name(cls) -> str:
+    return getattr(cls, "__module__", "disabled").split(".")[-1]
+
+
+def _is_glfw(cls) -> bool:
+    return cls is not None and getattr(cls, "__module__", "").endswith("glfw")
+
+
+def make_renderer(model, height: int, width: int):
+    """A ``mujoco.Renderer`` whose OpenGL back-end is chosen now (see the module doc).
+
+    Raises:
+        RuntimeError: no offscreen OpenGL can be had (the message says what to
+            install or set).
+    """
+    import mujoco
+
+    # the module whose ``GLContext`` mujoco.Renderer instantiates (mujoco 3 and 4)
+    gl = getattr(sys.modules[mujoco.Renderer.__module__], "gl_context", None)
+    current = getattr(gl, "GLContext", None)
+    if not _is_glfw(current):  # MUJOCO_GL chose egl / osmesa / ..., or disabled it
+        return _renderer(mujoco, model, height, width, _name(current))
+    backends = headless_backends()
+    if not backends:
+        headless = not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+        if sys.platform.startswith("linux") and headless:
+            raise RuntimeError(
+                "no offscreen OpenGL: GLFW needs a display"
+                + ("" if "MUJOCO_GL" in os.environ else
+                   " and neither libEGL nor libOSMesa is installed") + f"; {_HINT}")
+        return _renderer(mujoco, model, height, width, _name(current))
+    errors = []
+    for backend in backends:
+        try:
+            cls = importlib.import_module(f"mujoco.{backend}").GLContext
+            with _SWAP:  # mujoco.Renderer reads gl.GLContext in its __init__ only
+                gl.GLContext = cls
+                try:
+                    renderer = mujoco.Renderer(model, height=height, width=width)
+                    _LAST["backend"] = backend
+                    return renderer
+                finally:
+                    gl.GLContext = current
+        except Exception as err:  # GL back-ends raise various types
+            errors.append(f"{backend}: {type(err).__name__}: {err}")
+    raise RuntimeError(f"cannot create an offscreen MuJoCo renderer ({'; '.join(errors)})"
+                       f"; {_HINT}")
+
+
+def _renderer(mujoco, model, height: int, width: int, backend: str):
+    try:
+        renderer = mujoco.Renderer(model, height=height, width=width)
+        _LAST["backend"] = backend
+        return renderer
+    except Exception as err:  # GL back-ends raise various types
+        raise RuntimeError(
+            f"cannot create an offscreen MuJoCo renderer ({type(err).__name__}: "
+            f"{err}); {_HINT}") from err
 
 
 def import_mjx_quietly() -> None:
@@ -78,6 +145,5 @@ def mjx_module():
     about 1 s, so nothing imports it at ``import cgda_jax``.
     """
     if "mujoco.mjx" not in sys.modules:
-        choose_gl_backend()
         import_mjx_quietly()
     return sys.modules["mujoco.mjx"]

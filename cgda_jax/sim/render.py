@@ -1,13 +1,12 @@
 """Offscreen rendering of an executed trajectory to PNG frames or an animated GIF.
 
-Uses ``mujoco.Renderer`` (MuJoCo C, on the host), which needs an offscreen OpenGL:
-set ``MUJOCO_GL`` BEFORE the first ``import mujoco`` of the process, e.g.
-
-    MUJOCO_GL=egl python my_script.py      # Debian/Ubuntu: apt-get install libegl1
-                                           # (Mesa's EGL or the NVIDIA driver's)
-    MUJOCO_GL=osmesa python my_script.py   # software: apt-get install libosmesa6
-
-Without it MuJoCo tries GLFW, which needs a display.  The scene's decorations (the
+Uses ``mujoco.Renderer`` (MuJoCo C, on the host), which needs an offscreen OpenGL.
+On a headless Linux machine with ``MUJOCO_GL`` unset the back-end is chosen when
+rendering: EGL (Debian/Ubuntu: apt-get install libegl1, Mesa's or the NVIDIA
+driver's), else OSMesa (software: apt-get install libosmesa6); see
+`cgda_jax.sim._mujoco_env.make_renderer`.  ``MUJOCO_GL=egl`` or ``osmesa`` set
+before the first ``import mujoco`` of the process is used as given, and so is
+GLFW where a display exists.  The scene's decorations (the
 paint wall's squares, red once painted) are drawn into each frame.
 
 Frames follow the simulator: in kinematic mode the joint-space interpolation from
@@ -25,42 +24,17 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
+from cgda_jax.sim._mujoco_env import make_renderer
+
 __all__ = ["render_trajectory"]
 
 _GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
 
-def _check_gl_backend() -> None:
-    """Refuse GLFW without a display: ``mujoco`` fixed its GL back-end when it was first
-    imported, and a process that imported it before ``MUJOCO_GL`` was chosen (see
-    `cgda_jax.sim._mujoco_env.choose_gl_backend`) would get GLFW, whose context creation
-    can abort the whole process on a headless machine instead of raising."""
-    import os
-    import sys
-
-    from mujoco import gl_context
-
-    headless = not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    if (sys.platform.startswith("linux") and headless
-            and gl_context.GLContext.__module__.endswith("glfw")):
-        raise RuntimeError(
-            "mujoco was imported with the GLFW back-end, which needs a display; set "
-            "MUJOCO_GL=egl (package libegl1) or MUJOCO_GL=osmesa (package libosmesa6) "
-            "before mujoco is first imported (import cgda_jax first does it for you)")
-
-
 def _renderer(model: mujoco.MjModel, height: int, width: int) -> mujoco.Renderer:
-    _check_gl_backend()
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
     model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
-    try:
-        return mujoco.Renderer(model, height=height, width=width)
-    except Exception as err:  # GL back-ends raise various types
-        raise RuntimeError(
-            "cannot create an offscreen MuJoCo renderer "
-            f"({type(err).__name__}: {err}); set MUJOCO_GL=egl (package libegl1) or "
-            "MUJOCO_GL=osmesa (package libosmesa6) before importing mujoco"
-        ) from err
+    return make_renderer(model, height, width)  # chooses the GL back-end now
 
 
 def _camera(sim, lookat, distance, azimuth, elevation) -> mujoco.MjvCamera:
