@@ -1,10 +1,35 @@
-"""A one-line progress display on stderr for the strategies' ``progress_fn``."""
+"""A progress display for the strategies' ``progress_fn``: a tqdm bar on a terminal or
+in a notebook, whole lines elsewhere (CI logs, files)."""
 
 from __future__ import annotations
 
 import sys
 import time
 from typing import Any, TextIO
+
+
+def _in_notebook() -> bool:
+    """Running in a Jupyter kernel (where tqdm.auto shows a widget)."""
+    ipython = sys.modules.get("IPython")
+    try:
+        return "IPKernelApp" in ipython.get_ipython().config  # type: ignore[union-attr]
+    except (AttributeError, TypeError):
+        return False
+
+
+def _tqdm(**kwargs):
+    """A tqdm bar: ``tqdm.auto`` in a notebook (a widget when ipywidgets is there),
+    the text bar otherwise."""
+    if kwargs.get("file") is None:
+        try:
+            from tqdm.auto import tqdm
+
+            return tqdm(**kwargs)
+        except ImportError:  # notebook without ipywidgets: the text bar
+            pass
+    from tqdm import tqdm
+
+    return tqdm(**kwargs)
 
 
 def _short(v: Any) -> str:
@@ -18,9 +43,11 @@ def _short(v: Any) -> str:
 class ProgressLine:
     """Callable progress reporter: ``[label] gen 40 | points 8/11 | worst 0.034 | run 1.2 s``.
 
-    On a terminal one line is rewritten in place (``\\r``) and ended when the run is
-    done. Elsewhere (CI logs, files, notebooks) whole lines are written instead: the
-    first update, then at most one every ``interval_s`` seconds, and the last.
+    On a terminal a `tqdm` bar over the goal points (``[label] 8/11 points |###  |,
+    gen 40 | worst 0.034 | run 1.2 s``) is redrawn in place and ended when the run
+    is done; in a Jupyter notebook (``stream`` not given) it is ``tqdm.auto``'s bar.
+    Elsewhere (CI logs, files) whole lines are written instead: the first update,
+    then at most one every ``interval_s`` seconds, and the last.
 
     The time shown is split when the strategy reports it (``elapsed_s``): ``run``
     is the time spent running compiled generations, ``setup+compile`` the time
@@ -47,17 +74,21 @@ class ProgressLine:
         self.quiet = quiet
         self.interval_s = interval_s
         self.t0 = time.perf_counter()
-        self.width = 0
         self.last_line = None  # perf_counter of the last non-TTY line
         self.pending = None  # a non-TTY line skipped since (written by close())
         try:
             self.tty = bool(self.stream.isatty())
         except (AttributeError, ValueError):
             self.tty = False
+        self.notebook = stream is None and not self.tty and _in_notebook()
+        self.bar = None  # the tqdm bar while one is shown
 
-    def _text(self, info: dict[str, Any], now: float) -> str:
-        parts = [f"[{self.label}] gen {info.get('generations', '?')}"]
+    def _text(self, info: dict[str, Any], now: float, bar: bool = False) -> str:
+        head = "" if bar else f"[{self.label}] "
+        parts = [f"{head}gen {info.get('generations', '?')}"]
         for key, name in self._KEYS:
+            if bar and name in ("points", "point"):
+                continue  # the bar shows them
             if key in info:
                 text = _short(info[key])
                 n_points = self.total or info.get("points")
@@ -77,36 +108,56 @@ class ProgressLine:
             return
         now = time.perf_counter()
         done = bool(info.get("done"))
+        if self.tty or self.notebook:
+            self._update_bar(info, now, done)
+            return
         line = self._text(info, now)
-        if self.tty:
-            pad = max(self.width - len(line), 0)
-            self.width = 0 if done else len(line)
-            self.stream.write("\r" + line + " " * pad + ("\n" if done else ""))
-        else:
-            due = self.last_line is None or now - self.last_line >= self.interval_s
-            if not (done or due):
-                self.pending = line
-                return
-            self.last_line, self.pending = now, None
-            self.stream.write(line + "\n")
+        due = self.last_line is None or now - self.last_line >= self.interval_s
+        if not (done or due):
+            self.pending = line
+            return
+        self.last_line, self.pending = now, None
+        self.stream.write(line + "\n")
         self.stream.flush()
 
+    def _update_bar(self, info: dict[str, Any], now: float, done: bool) -> None:
+        total = self.total or info.get("points")
+        total = total if isinstance(total, int) else None
+        if self.bar is None:
+            self.bar = _tqdm(
+                total=total, desc=f"[{self.label}]", unit="point", leave=True,
+                file=None if self.notebook else self.stream, mininterval=0.0,
+                bar_format="{desc} {n_fmt}/{total_fmt} points |{bar:20}|{postfix}")
+        if total and self.bar.total != total:
+            self.bar.total = total
+        n = info.get("points_done", info.get("point"))
+        n = n[0] if isinstance(n, list) and len(n) == 1 else n
+        if isinstance(n, int):
+            self.bar.n = n
+        self.bar.set_postfix_str(self._text(info, now, bar=True), refresh=False)
+        self.bar.refresh()
+        if done:
+            self.bar.close()
+            self.bar = None
+
     def close(self) -> None:
-        """End the display: finish a TTY line, or write the last skipped line."""
+        """End the display: close the bar, or write the last skipped line."""
         if self.quiet:
             return
-        if self.tty and self.width:
-            self.stream.write("\n")
-        elif not self.tty and self.pending is not None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+        elif self.pending is not None:
             self.stream.write(self.pending + "\n")
-        self.width, self.pending = 0, None
+        self.pending = None
         self.stream.flush()
 
     def message(self, text: str) -> None:
-        """A plain status line (not overwritten); ends a pending TTY line first."""
-        if not self.quiet:
-            if self.tty and self.width:
-                self.stream.write("\n")
-                self.width = 0
+        """A plain status line, printed above the bar while one is shown."""
+        if self.quiet:
+            return
+        if self.bar is not None:
+            self.bar.write(text, file=None if self.notebook else self.stream)
+        else:
             self.stream.write(text + "\n")
             self.stream.flush()

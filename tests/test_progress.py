@@ -1,4 +1,4 @@
-"""Progress display: whole lines off a terminal, one rewritten line on a terminal."""
+"""Progress display: whole lines off a terminal, a tqdm bar on a terminal."""
 
 import io
 
@@ -40,15 +40,28 @@ def test_non_tty_close_writes_the_last_line_of_an_unfinished_run():
     assert len(s2.getvalue().splitlines()) == 3
 
 
-def test_tty_rewrites_one_line_and_ends_it():
+def test_tty_shows_a_tqdm_bar_over_the_points_and_ends_it():
+    s = _Tty()
+    bar = ProgressLine("x", total_points=9, stream=s)
+    _updates(bar, 3, done_last=False)
+    text = s.getvalue()
+    assert "\n" not in text and text.count("\r") >= 3  # redrawn in place
+    last = text.split("\r")[-1]
+    assert last.startswith("[x] 3/9 points |") and "gen 30 | worst 0.3333 |" in last
+    bar.message("note")  # printed above the bar, which stays
+    assert "note\n" in s.getvalue() and bar.bar is not None
+    _updates(bar, 1)  # done: the bar is closed, its line ended
+    assert s.getvalue().endswith("\n") and bar.bar is None
+    assert s.getvalue().rstrip().split("\r")[-1].startswith("[x] 1/9 points")
+
+
+def test_tty_bar_takes_its_total_from_the_updates():
     s = _Tty()
     bar = ProgressLine("x", stream=s)
-    _updates(bar, 3, done_last=False)
-    assert s.getvalue().count("\r") == 3 and "\n" not in s.getvalue()
-    bar.message("note")  # ends the pending line first
-    assert s.getvalue().endswith("\nnote\n")
-    _updates(bar, 1)
-    assert s.getvalue().endswith("\n")
+    bar({"generations": 5, "points_done": 2, "points": 11, "done": False})
+    assert s.getvalue().split("\r")[-1].startswith("[x] 2/11 points |")
+    bar.close()
+    assert s.getvalue().endswith("\n") and bar.bar is None
 
 
 def test_time_is_split_into_setup_and_run_when_known():
