@@ -154,7 +154,8 @@ SOURCES = ("pyproject.toml", "README.md", "cgda_jax", "models", "experiments")
 
 def _readme_python_example() -> str:
     text = (REPO / "README.md").read_text()
-    block = re.search(r"^## In Python\n+```python\n(.*?)^```", text, re.M | re.S)
+    block = re.search(r"^## In Python\n+```python\n(.*?)^```", text,
+                      re.MULTILINE | re.DOTALL)
     assert block, "README.md has no '## In Python' ```python block"
     return block.group(1)
 
@@ -199,8 +200,8 @@ def test_wheel_install_runs_from_anywhere(tmp_path):
     venv = tmp_path / "venv"
     _run([sys.executable, "-m", "venv", "--without-pip", str(venv)], tmp_path, env)
     py = venv / "bin" / "python"
-    site = pathlib.Path(_run([str(py), "-c", "import sysconfig; print(sysconfig."
-                              "get_paths()['purelib'])"], tmp_path, env).stdout.strip())
+    where = "import sysconfig; print(sysconfig.get_paths()['purelib'])"
+    site = pathlib.Path(_run([str(py), "-c", where], tmp_path, env).stdout.strip())
     deps = dict.fromkeys([sysconfig.get_paths()["purelib"],
                           sysconfig.get_paths()["platlib"]])
     (site / "_cgda_test_deps.pth").write_text("\n".join(deps) + "\n")
