@@ -72,7 +72,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
 
 RUN_EXAMPLES = """\
 examples:
-  cgda run clean_ie                  # a built-in experiment (`cgda list`): results/clean_ie/
+  cgda run clean_ie                  # built-in (`cgda list`) -> results/clean_ie/
   cgda run my_experiment.toml        # a config file of your own
   cgda run paint_iet --out /tmp/paint
   cgda run paint_iet --out /tmp/paint --overwrite   # replace it

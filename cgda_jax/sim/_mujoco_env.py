@@ -1,4 +1,4 @@
-"""MuJoCo process matters: the offscreen OpenGL back-end, the quiet ``mujoco.mjx`` import.
+"""MuJoCo process matters: the offscreen OpenGL back-end, a quiet ``mujoco.mjx`` import.
 
 - Offscreen rendering: ``import mujoco`` fixes the class of its renderer's OpenGL
   context from ``MUJOCO_GL`` (unset: GLFW, which needs a display; on a headless
@@ -108,8 +108,8 @@ def make_renderer(model, height: int, width: int):
                     gl.GLContext = current
         except Exception as err:  # GL back-ends raise various types
             errors.append(f"{backend}: {type(err).__name__}: {err}")
-    raise RuntimeError(f"cannot create an offscreen MuJoCo renderer ({'; '.join(errors)})"
-                       f"; {_HINT}")
+    raise RuntimeError("cannot create an offscreen MuJoCo renderer "
+                       f"({'; '.join(errors)}); {_HINT}")
 
 
 def _renderer(mujoco, model, height: int, width: int, backend: str):
