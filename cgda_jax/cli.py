@@ -118,8 +118,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"cgda {_version()}")
     sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list}")
     fmt = argparse.RawDescriptionHelpFormatter
-    run = sub.add_parser("run", help="run one experiment config (TOML)",
-                         description="Run one experiment described by a TOML file.",
+    run = sub.add_parser("run", help="run one experiment: a built-in one by name "
+                         "(`cgda list`) or a config file (TOML)",
+                         description="Run one experiment described by a TOML file "
+                         "or a built-in one named by `cgda list`.",
                          epilog=RUN_EXAMPLES, formatter_class=fmt)
     run.add_argument("config", help="experiment file (TOML), or the name of a built-in "
                      "experiment (`cgda list`), e.g. clean_ie")
