@@ -3,6 +3,7 @@ in a notebook, whole lines elsewhere (CI logs, files)."""
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from typing import Any, TextIO
@@ -30,6 +31,16 @@ def _tqdm(**kwargs):
     from tqdm import tqdm
 
     return tqdm(**kwargs)
+
+
+def _size(stream) -> tuple[int, int]:
+    """The terminal's columns and rows; 100 x 24 where unknown or 0 (a pty without a
+    size, where tqdm would draw nothing)."""
+    try:
+        size = os.get_terminal_size(stream.fileno())
+    except (AttributeError, OSError, ValueError):
+        return 100, 24
+    return size.columns or 100, size.lines or 24
 
 
 def _short(v: Any) -> str:
@@ -127,6 +138,8 @@ class ProgressLine:
             self.bar = _tqdm(
                 total=total, desc=f"[{self.label}]", unit="point", leave=True,
                 file=None if self.notebook else self.stream, mininterval=0.0,
+                **({} if self.notebook else dict(zip(("ncols", "nrows"),
+                                                     _size(self.stream)))),
                 bar_format="{desc} {n_fmt}/{total_fmt} points |{bar:20}|{postfix}")
         if total and self.bar.total != total:
             self.bar.total = total

@@ -77,3 +77,21 @@ def test_time_is_split_into_setup_and_run_when_known():
     _updates(bar, 2)
     bar.close()
     assert quiet.getvalue() == ""
+
+
+def test_bar_is_drawn_on_a_terminal_without_a_size():
+    """A pty of 0 x 0 (e.g. under `script`): tqdm alone would draw nothing."""
+    import os
+    import pty
+
+    master, slave = pty.openpty()
+    try:
+        with open(slave, "w", closefd=False) as stream:
+            assert stream.isatty()
+            bar = ProgressLine("x", total_points=2, stream=stream)
+            bar({"generations": 3, "points_done": 2, "done": True})
+        data = os.read(master, 4096)
+    finally:
+        os.close(master)
+        os.close(slave)
+    assert b"[x] 2/2 points |" in data and b"gen 3" in data
