@@ -79,18 +79,23 @@ def test_time_is_split_into_setup_and_run_when_known():
     assert quiet.getvalue() == ""
 
 
-def test_bar_is_drawn_on_a_terminal_without_a_size():
-    """A pty of 0 x 0 (e.g. under `script`): tqdm alone would draw nothing."""
+def test_bar_is_drawn_on_a_terminal_without_a_size(monkeypatch):
+    """stderr a pty of 0 x 0 (e.g. under `script`): tqdm alone would draw nothing."""
     import os
     import pty
+    import select
+    import sys
 
     master, slave = pty.openpty()
     try:
         with open(slave, "w", closefd=False) as stream:
             assert stream.isatty()
-            bar = ProgressLine("x", total_points=2, stream=stream)
+            monkeypatch.setattr(sys, "stderr", stream)  # tqdm sizes only std streams
+            bar = ProgressLine("x", total_points=2)
             bar({"generations": 3, "points_done": 2, "done": True})
-        data = os.read(master, 4096)
+        data = b""
+        while select.select([master], [], [], 0.5)[0]:
+            data += os.read(master, 4096)
     finally:
         os.close(master)
         os.close(slave)
