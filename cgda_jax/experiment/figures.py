@@ -60,7 +60,7 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
     from cgda_jax.plotting import plot_cost_matrix, plot_demonstrations
 
     r, cfg = run.result, run.config
-    labels = r.get("feature_labels") or r["features"]
+    labels = r.get("feature_labels") or feature_labels(cfg, r["features"])
     unit = error_unit(labels)
     metric = r["metric"].upper()
     written = [out / "cost_matrix.png"]
@@ -72,11 +72,15 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         path=written[0],
     )
     cols = None if cfg.data.features == "marker" else list(range(min(3, len(labels))))
+    shown = "" if cols is None or len(cols) == len(labels) else (
+        f"\n(drawn: {', '.join(r['features'][c] for c in cols)} of "
+        f"{len(labels)} features)")
     for a in r["actions"]:
         path = out / f"generalization_{a}.png"
         plot_demonstrations(
             run.demonstrations(a), run.generalization(a), features=cols, names=labels,
-            title=f"{run.name}: {a} demonstrations and generalization", path=path,
+            title=f"{run.name}: {a} demonstrations and generalization{shown}",
+            path=path,
         )
         written.append(path)
     return written
@@ -86,8 +90,8 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
     from cgda_jax import plotting
 
     r, a = run.result, run.arrays
-    labels = r.get("feature_labels") or r.get("feature_names")
-    unit = r.get("error_unit")
+    labels = r.get("feature_labels") or feature_labels(run.config, r["feature_names"])
+    unit = r["error_unit"] if "feature_labels" in r else error_unit(labels)
     what = f"{run.name} ({r['strategy'].upper()})"
     written = []
 
@@ -128,7 +132,7 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
 def _camera(sim) -> dict[str, Any]:
     paint = getattr(sim.scene, "centres", None) is not None
     camera: dict[str, Any] = {
-        "distance": None if paint else 1.3 * float(sim.robot.mj_model.stat.extent)}
+        "distance": (1.9 if paint else 1.3) * float(sim.robot.mj_model.stat.extent)}
     path = getattr(sim.scene, "goal_path", None)
     if path is not None:  # objects: look at them and the hand, from their side
         hand = np.asarray(sim.robot.marker_position(sim.robot.start_genes), float)
@@ -184,10 +188,15 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
         # the paint wall is updated per frame: keep every kinematic sub-step there
         fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
         marker = type(sim.scene).__name__ == "MarkerScene"
+        goal = np.asarray(run.arrays["goal"], float)
+        camera = _camera(sim)
+        if marker:  # look between the robot and its goal points
+            camera["lookat"] = (np.asarray(sim.robot.mj_model.stat.center)
+                                + goal.mean(axis=0)) / 2
         frames = render_frames(
             sim, joints, frames_per_waypoint=fpw, width=size[0], height=size[1],
-            goal_points=np.asarray(run.arrays["goal"]) if marker else None,
-            captions=_captions(run, sim), **_camera(sim),
+            goal_points=goal if marker else None, captions=_captions(run, sim),
+            **camera,
         )
         out.mkdir(parents=True, exist_ok=True)
         fps = max(4, 2 * fpw)

@@ -114,7 +114,9 @@ def plot_time_per_point(
     points numbered from 1."""
     s = np.asarray(seconds, dtype=float).ravel()
     fig, ax = plt.subplots(figsize=(6.4, 3.4))
-    ax.bar(point_numbers(len(s)), s, color="tab:gray")
+    x = point_numbers(len(s))
+    ax.bar(x, s, color="tab:gray")
+    ax.set_xlim(x[0] - 0.6, x[-1] + 0.6)
     ax.set_xlabel(POINT_AXIS)
     ax.set_ylabel(ylabel)
     integer_axis(ax.xaxis)
@@ -138,20 +140,25 @@ def plot_point_errors(
     finite execution marked with a red cross at the top."""
     e = np.asarray(errors, dtype=float).ravel()
     x = point_numbers(len(e))
-    ok = np.isfinite(e) & (e < tolerance)
+    finite = np.isfinite(e)
+    ok = finite & (e < tolerance)
+    bad = finite & ~ok
     fig, ax = plt.subplots(figsize=(6.4, 3.4))
-    shown = np.where(np.isfinite(e), e, np.nan)
-    ax.bar(x[ok], shown[ok], color="tab:green", label="within tolerance")
-    bad = ~ok & np.isfinite(e)
-    ax.bar(x[bad], shown[bad], color=EXEC, label="beyond tolerance")
     u = f" {unit}" if unit else ""
     ax.axhline(tolerance, color="black", ls="--", lw=1.0,
                label=f"tolerance {tolerance:.4g}{u}")
-    top = max(tolerance, np.nanmax(shown) if np.isfinite(shown).any() else 0) * 1.15
-    if (~np.isfinite(e)).any():
-        ax.plot(x[~np.isfinite(e)], np.full((~np.isfinite(e)).sum(), top * 0.97), "x",
+    # bars, and a marker on each (an error of 0 still shows)
+    for mask, colour, text in ((ok, "tab:green", "within tolerance"),
+                               (bad, EXEC, "beyond tolerance")):
+        if mask.any():
+            ax.bar(x[mask], e[mask], width=0.6, color=colour, alpha=0.55)
+            ax.plot(x[mask], e[mask], "o", color=colour, ms=4, label=text)
+    top = max(tolerance, float(e[finite].max()) if finite.any() else 0.0) * 1.15
+    if (~finite).any():
+        ax.plot(x[~finite], np.full((~finite).sum(), top * 0.97), "x",
                 color=EXEC, ms=8, mew=2, label="no finite execution")
     ax.set_ylim(0, top)
+    ax.set_xlim(x[0] - 0.6, x[-1] + 0.6)
     ax.set_xlabel(POINT_AXIS)
     ax.set_ylabel("point error" + _unit(unit))
     integer_axis(ax.xaxis)

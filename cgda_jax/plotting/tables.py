@@ -43,7 +43,8 @@ def plot_cost_matrix(
             f"matrix shape {m.shape} does not match {len(queries)} queries x "
             f"{len(references)} references"
         )
-    fig, ax = plt.subplots(figsize=(1.3 * len(references) + 2.8, 0.7 * len(queries) + 1.9))
+    fig, ax = plt.subplots(
+        figsize=(1.1 * len(references) + 2.6, 1.1 * len(queries) + 1.9))
     positive = np.maximum(m, 1e-12)
     lo, hi = positive.min(), positive.max()
     norm = LogNorm(lo, hi if hi > lo else lo * 10)

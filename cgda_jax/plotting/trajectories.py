@@ -106,8 +106,7 @@ def plot_demonstrations(
                     label=demo_label if k == 0 else None)
         if gen is not None:
             ax.plot(*gcurve.T, color=GOAL, lw=2.2, label="generalization (linear RBF)")
-            ax.scatter(*knots.T, color=GOAL, s=16, label=f"knots = goal points "
-                       f"({len(knots)})")
+            ax.scatter(*knots.T, color=GOAL, s=16, label=f"knots ({len(knots)})")
         if ex is not None:
             ax.plot(*ex.T, "-o", color=EXEC, lw=1.6, ms=3, label="executed")
         equal_3d(ax, [as_curve(d.features)[:, cols] for d in demos]
@@ -131,7 +130,7 @@ def plot_demonstrations(
                 ax.plot(gt, gcurve[:, i], color=GOAL, lw=2,
                         label="generalization (linear RBF)")
                 ax.plot(kt, knots[:, i], "o", color=GOAL, ms=3.5,
-                        label="knots = goal points")
+                        label=f"knots ({len(knots)})")
             if ex is not None:
                 ax.plot(ex_t, ex[:, i], "s", color=EXEC, ms=3.5, label="executed")
             ax.set_ylabel(labels[c], fontsize=8)
@@ -143,8 +142,11 @@ def plot_demonstrations(
         handles, texts = axes.flat[0].get_legend_handles_labels()
         fig.legend(handles, texts, loc="lower center", ncol=len(texts), fontsize=8,
                    frameon=False)
-        fig.tight_layout(rect=(0, 0.06 if nrow > 1 else 0.1, 1, 1))
-    if title:
+        if title:
+            fig.suptitle(title)
+        top = 1 - 0.45 / fig.get_figheight() if title else 1
+        fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, top))
+    if title and len(cols) == 3:
         fig.suptitle(title)
     return finish(fig, path, tight=len(cols) == 3)
 

@@ -4,6 +4,7 @@ with Pillow) or a folder of PNGs; and a text caption drawn into a frame."""
 from __future__ import annotations
 
 import pathlib
+import warnings
 
 import numpy as np
 
@@ -38,11 +39,15 @@ def write_video(images, out_path: str | pathlib.Path, fps: int = 12
     if suffix == ".mp4":
         import imageio.v2 as iio2
 
-        with iio2.get_writer(out_path, format="FFMPEG", mode="I", fps=fps,
-                             codec="libx264", pixelformat="yuv420p", quality=8,
-                             macro_block_size=16) as writer:
-            for img in images:
-                writer.append_data(img)
+        with warnings.catch_warnings():
+            # ffmpeg runs as a subprocess (fork + exec at once): JAX's warning
+            # about forking a multithreaded process does not apply
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+            with iio2.get_writer(out_path, format="FFMPEG", mode="I", fps=fps,
+                                 codec="libx264", pixelformat="yuv420p", quality=8,
+                                 macro_block_size=16) as writer:
+                for img in images:
+                    writer.append_data(img)
         return [out_path]
     if suffix == ".gif":
         iio.imwrite(out_path, np.stack(images), extension=".gif", plugin="pillow",
@@ -66,7 +71,7 @@ def caption(image: np.ndarray, text: str) -> np.ndarray:
     from PIL import Image, ImageDraw, ImageFont
 
     im = Image.fromarray(np.asarray(image, np.uint8))
-    size = max(10, image.shape[0] // 28)
+    size = max(10, image.shape[0] // 22)
     try:
         font = ImageFont.load_default(size=size)
     except TypeError:  # Pillow < 10.1: one bitmap size
