@@ -200,7 +200,8 @@ def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
         bar.close()
     verdict = "ok" if result.get("success") else "NOT met"
     extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
-             else f"max point error {result['max_point_error']:.4g}")
+             else f"max point error {result['max_point_error']:.4g}"
+             + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     _say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
     return result

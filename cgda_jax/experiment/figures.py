@@ -212,7 +212,7 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
             path=out / "frames.png",
         )
         _close_all()
-    except Exception as err:  # no GL, missing library, driver trouble: never fatal
+    except Exception as err:  # noqa: BLE001 - no GL, a missing library: never fatal
         reason = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
         log.warning("%s: frames not rendered (%s); set MUJOCO_GL=egl or osmesa, or "
                     "output.render=false", run.name, reason)

@@ -78,7 +78,7 @@ def _report(cfg: ExperimentConfig, result: dict, plots: list[str] | None = None)
             f"| points | {result['points']} |",
             f"| max point error | {_with_unit(result['max_point_error'], unit)} "
             f"(tolerance {_with_unit(result['tolerance'], unit)}) |",
-            f"| final fitness | {result['final_fitness']:.4g} |",
+            f"| final fitness | {_with_unit(result['final_fitness'], unit)} |",
             f"| generations | {result['generations']} |",
             f"| evaluations | {result['evaluations']} |",
             f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",

@@ -152,7 +152,8 @@ def plot_point_errors(
                                (bad, EXEC, "beyond tolerance")):
         if mask.any():
             ax.bar(x[mask], e[mask], width=0.6, color=colour, alpha=0.55)
-            ax.plot(x[mask], e[mask], "o", color=colour, ms=4, label=text)
+            ax.plot(x[mask], e[mask], "o", color=colour, ms=4, label=text,
+                    clip_on=False, zorder=3)
     top = max(tolerance, float(e[finite].max()) if finite.any() else 0.0) * 1.15
     if (~finite).any():
         ax.plot(x[~finite], np.full((~finite).sum(), top * 0.97), "x",

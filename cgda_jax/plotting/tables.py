@@ -51,7 +51,7 @@ def plot_cost_matrix(
     image = ax.imshow(positive, cmap="viridis_r", norm=norm)
     bar = fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04)
     bar.set_label(f"{label} (log scale)\nbright = low = similar", fontsize=8)
-    bar.ax.tick_params(labelsize=7)
+    bar.ax.tick_params(which="both", labelsize=7)
     best = m.argmin(axis=1)
     shown = norm(positive)
     for i in range(m.shape[0]):

@@ -144,8 +144,7 @@ def plot_demonstrations(
                    frameon=False)
         if title:
             fig.suptitle(title)
-        top = 1 - 0.45 / fig.get_figheight() if title else 1
-        fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, top))
+        fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
     if title and len(cols) == 3:
         fig.suptitle(title)
     return finish(fig, path, tight=len(cols) == 3)
