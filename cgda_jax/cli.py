@@ -18,6 +18,8 @@ import threading
 import time
 import traceback
 
+from cgda_jax.cli_plot import add_plot_parser, cmd_plot
+
 #: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
 
@@ -100,22 +102,6 @@ compiles (tens of seconds); later runs reuse the compilation cache.
 """
 
 
-PLOT_EXAMPLES = """\
-examples:
-  cgda plot results/clean_ie                 # redraw into results/clean_ie/plots
-  cgda plot results/clean_ie --out /tmp/figs # somewhere else
-  cgda plot results/demo                     # every experiment of a `cgda demo`
-  cgda plot results/clean_ie --no-render     # figures only, no video
-
-Redraws the figures of a results folder from what it stores (config.toml,
-result.json, arrays.npz): the PNGs, and for an execution that was rendered the
-robot's video (plots/execution.mp4 and .gif, 640x480) and frame strip. Into the
-folder's own plots/, report.md is rewritten to show them. In Python:
-`cgda_jax.load_run(folder)`. Exit status: 0 done, 2 not a results folder (or
---out not writable), 3 any other failure.
-"""
-
-
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="cgda",
@@ -153,19 +139,7 @@ def _parser() -> argparse.ArgumentParser:
                       "...)")
     demo.add_argument("--small", action="store_true",
                       help="fewer generations and samples (a quick check)")
-    plot = sub.add_parser(
-        "plot", help="redraw the figures (and video) of a results folder",
-        description="Redraw the figures of a results folder.", epilog=PLOT_EXAMPLES,
-        formatter_class=fmt,
-    )
-    plot.add_argument("folder", help="a results folder (of `cgda run` or `cgda demo`)")
-    plot.add_argument("--out", metavar="DIR",
-                      help="write the figures here (default: FOLDER/plots)")
-    plot.add_argument("--no-render", action="store_true",
-                      help="figures only: do not render the robot's video and frames")
-    plot.add_argument("--quiet", action="store_true", help="print nothing on success")
-    plot.add_argument("--no-cache", action="store_true",
-                      help="do not use the persistent JAX compilation cache")
+    add_plot_parser(sub, fmt)
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -305,50 +279,6 @@ def cmd_demo(args) -> int:
     _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
                f"in {wall:.1f} s -> {rf.path / 'report.md'}")
     return EXIT_MET if success else EXIT_NOT_MET
-
-
-def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
-    from cgda_jax.experiment.figures import draw_figures, render_run
-    from cgda_jax.experiment.load import load_run
-    from cgda_jax.experiment.report import _report
-    from cgda_jax.experiment.results import check_writable
-
-    run = load_run(folder)
-    own = out is None
-    out = run.folder / "plots" if own else out
-    check_writable(out, f"plots folder {out}")
-    written = draw_figures(run, out)
-    render = run.result.get("render")
-    if render is not None and not args.no_render and run.kind == "execution":
-        render = render_run(run, out)
-        if render["ok"]:
-            written += [out / "frames.png", out / "execution.mp4", out / "execution.gif"]
-    if own:
-        result = dict(run.result, render=render) if render is not None else run.result
-        plots = sorted(str(p.relative_to(run.folder)) for p in written
-                       if p.suffix == ".png")
-        (run.folder / "report.md").write_text(_report(run.config, result, plots))
-    _say(args, f"[{run.name}] {len(written)} files -> {out}")
-    return written
-
-
-def cmd_plot(args) -> int:
-    from cgda_jax.experiment.load import REQUIRED
-    from cgda_jax.experiment.results import MARKER, expand
-
-    folder = expand(args.folder)
-    out = expand(args.out) if args.out else None
-    subs = []
-    if folder.is_dir() and not (folder / "config.toml").is_file() and (
-            folder / MARKER).is_file():  # a `cgda demo` folder: one per experiment
-        subs = sorted(p for p in folder.iterdir()
-                      if p.is_dir() and all((p / f).is_file() for f in REQUIRED))
-    if subs:
-        for sub in subs:
-            _plot_one(sub, None if out is None else out / sub.name, args)
-    else:
-        _plot_one(folder, out, args)
-    return EXIT_MET
 
 
 def _diverged(err: BaseException) -> bool:
