@@ -85,6 +85,8 @@ _LAZY.update({
 _LAZY.update({
     "ExperimentConfig": "cgda_jax.experiment",
     "load_config": "cgda_jax.experiment",
+    "load_run": "cgda_jax.experiment.load",
+    "Run": "cgda_jax.experiment.load",
     "run_experiment": "cgda_jax.experiment",
 })
 
@@ -143,6 +145,7 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.experiment import (  # noqa: F401
         ExperimentConfig, load_config, run_experiment,
     )
+    from cgda_jax.experiment.load import Run, load_run  # noqa: F401
     from cgda_jax.generalize import (  # noqa: F401
         GeneralizedAction, generalize, rbf_interpolate,
     )

@@ -1,4 +1,5 @@
-"""The ``cgda`` command: ``cgda run CONFIG``, ``cgda demo`` and ``cgda list``.
+"""The ``cgda`` command: ``cgda run CONFIG``, ``cgda demo``, ``cgda list`` and
+``cgda plot FOLDER``.
 
 Argument parsing, the JAX compilation cache, progress and error reporting only; the
 work is done by :mod:`cgda_jax.experiment`.
@@ -17,6 +18,8 @@ import tempfile
 import threading
 import time
 import traceback
+
+from cgda_jax.cli_plot import add_plot_parser, cmd_plot
 
 #: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
@@ -116,7 +119,7 @@ def _parser() -> argparse.ArgumentParser:
         "`cgda run --help` lists the options.",
     )
     p.add_argument("--version", action="version", version=f"cgda {_version()}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list,plot}")
     fmt = argparse.RawDescriptionHelpFormatter
     run = sub.add_parser("run", help="run one experiment: a built-in one by name "
                          "(`cgda list`) or a config file (TOML)",
@@ -151,6 +154,7 @@ def _parser() -> argparse.ArgumentParser:
     sub.add_parser("list", help="the built-in experiments, one line each",
                    description="The built-in experiments: `cgda run NAME` runs one; "
                    "`cgda run NAME --dry-run` prints its config.")
+    add_plot_parser(sub, fmt)
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -185,7 +189,8 @@ def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
         bar.close()
     verdict = "ok" if result.get("success") else "NOT met"
     extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
-             else f"max point error {result['max_point_error']:.4g}")
+             else f"max point error {result['max_point_error']:.4g}"
+             + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     _say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
     return result
@@ -249,8 +254,9 @@ def summary_table(results: dict[str, dict]) -> list[str]:
             key = (f"accuracy {r['accuracy']:.0%} "
                    f"({len(r['features'])} features, {r['metric']})")
         else:
-            key = (f"{r['strategy'].upper()}: max point error {r['max_point_error']:.3g} "
-                   f"(tolerance {r['tolerance']:.3g}), {r['points']} points, "
+            u = f" {r['error_unit']}" if r.get("error_unit") else ""
+            key = (f"{r['strategy'].upper()}: max point error {r['max_point_error']:.3g}"
+                   f"{u} (tolerance {r['tolerance']:.3g}{u}), {r['points']} points, "
                    f"{r['generations']} generations")
         rows.append(f"| [{name}](#{name}) | {verdict} | {key} | "
                     f"{r.get('total_time_s', r.get('wall_time_s', 0.0)):.1f} s |")
@@ -399,6 +405,8 @@ def _dispatch(args, signals: _Signals) -> int:
             enable_compilation_cache()
         if args.command == "run":
             return cmd_run(args)
+        if args.command == "plot":
+            return cmd_plot(args)
         return cmd_demo(args)
     except KeyboardInterrupt as e:
         return _interrupted(args, getattr(e, "signum", signal.SIGINT))

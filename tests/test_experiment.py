@@ -114,6 +114,12 @@ def test_render_switch_writes_gif_and_frame_strip_or_nothing(tmp_path):
     assert (tmp_path / "on/plots/execution.gif").stat().st_size > 1000
     assert (tmp_path / "on/plots/frames.png").stat().st_size > 2000
     assert "![robot executing](plots/execution.gif)" in (tmp_path / "on/report.md").read_text()
+    import imageio.v3 as iio
+
+    gif = iio.imread(tmp_path / "on/plots/execution.gif", index=None)
+    mp4 = np.stack(list(iio.imiter(tmp_path / "on/plots/execution.mp4")))
+    assert gif.shape[1:] == mp4.shape[1:] == (480, 640, 3)
+    assert len(mp4) == 1 + 3 * 2  # start + 2 sub-steps per waypoint, 3 goal points
     off = run_experiment(load_config(None, TINY_RUN + ["output.plots=false",
                                                        "output.render=false"]), tmp_path / "off")
     assert "render" not in off and not (tmp_path / "off/plots").exists()

@@ -23,7 +23,7 @@ def test_demonstrations_3d_and_panels(tmp_path):
     _png(tmp_path / "a.png")
     paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
     fig = plotting.plot_demonstrations(paint, features=["hue", "value"], path=tmp_path / "b.png")
-    assert [a.get_title() for a in fig.axes if a.get_visible()] == ["hue", "value"]
+    assert [a.get_ylabel() for a in fig.axes if a.get_visible()] == ["hue", "value"]
     with pytest.raises(KeyError, match="nope"):
         plotting.plot_demonstrations(paint, features=["nope"])
 
@@ -43,7 +43,7 @@ def test_fitness_goal_time_frames(tmp_path):
     h = np.r_[np.linspace(5, 1, 10), [np.nan] * 3]
     fig = plotting.plot_fitness(h, path=tmp_path / "f.png")
     x, y = fig.axes[0].lines[1].get_data()  # the red minimum marker
-    assert x[0] == 9 and y[0] == 1.0
+    assert x[0] == 10 and y[0] == 1.0  # generations counted from 1
     plotting.plot_fitness(np.ones((3, 5)), labels=["p0", "p1", "p2"], path=tmp_path / "g.png")
     goal = np.linspace(0, 100, 17)[:, None]
     fig = plotting.plot_goal_vs_executed(goal, goal + 1, ["painted"], tolerance=3.0,
@@ -75,11 +75,14 @@ def test_flat_3d_trajectory_keeps_room_for_its_ticks():
     assert len([t for t in ax.get_xticks() if ax.get_xlim()[0] <= t <= ax.get_xlim()[1]]) <= 4
 
 
-def test_host_sampling_matches_the_generalized_action():
-    """Plots sample a GeneralizedAction in NumPy; same curve as ``sample``."""
+def test_knot_curve_is_the_generalized_action_between_its_knots():
+    """Plots draw a GeneralizedAction in NumPy between its first and last knot only:
+    equal to the RBF there, nothing extrapolated beyond."""
     from cgda_jax.generalize import generalize
 
     demos = clean_circle_demos(n=3, seed=1)
     for gen in (generalize(demos, interval_s=1.0), generalize(demos, interval_s=0.7)):
-        np.testing.assert_allclose(plotting._as_curve(gen, 57), np.asarray(gen.sample(57)),
-                                   rtol=1e-5, atol=1e-5)
+        t, curve = plotting.knot_curve(gen, 57)
+        kt = np.asarray(gen.knot_times)
+        assert t[0] == kt.min() and t[-1] == kt.max() and kt.min() > 0
+        np.testing.assert_allclose(curve, np.asarray(gen(t)), rtol=1e-5, atol=1e-5)

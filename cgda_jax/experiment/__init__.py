@@ -26,7 +26,10 @@ Modules, one job each:
 - :mod:`~cgda_jax.experiment.run`: recognition and execution runs.
 - :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved into
   place when complete, locked, never mixing two runs).
-- :mod:`~cgda_jax.experiment.report`: JSON, plots, rendered frames, ``report.md``.
+- :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
+- :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+  drawn from what its folder stores (also ``cgda plot``).
+- :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
 - :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo``.
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
@@ -66,14 +69,20 @@ from cgda_jax.experiment.demo import (
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
 )
+from cgda_jax.experiment.figures import (
+    draw_figures as draw_figures,
+    render_run as render_run,
+)
+from cgda_jax.experiment.load import (
+    Run as Run,
+    load_run as load_run,
+)
 from cgda_jax.experiment.report import (
     _close_all as _close_all,
-    _execution_plots as _execution_plots,
     _jsonable as _jsonable,
     _report as _report,
     _write_json as _write_json,
     log as log,
-    render_execution as render_execution,
 )
 from cgda_jax.experiment.results import (
     FolderBusy as FolderBusy,
@@ -109,12 +118,14 @@ __all__ = [
     "OutputConfig",
     "RecognitionConfig",
     "RobotConfig",
+    "Run",
     "RunFolder",
     "SceneConfig",
     "StrategyConfig",
     "check_experiment",
     "dump_config",
     "load_config",
+    "load_run",
     "run_experiment",
     "validate_config",
 ]

@@ -1,7 +1,8 @@
 """Running an experiment (recognition or execution, see the package docstring) into
-a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``,
-``report.md``; dynamic runs also replay their result on finer physics. The folder
-itself (temporary folder, lock, move into place) belongs to
+a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``
+(+ the robot's video ``plots/execution.mp4`` and ``.gif``), ``report.md``; read it
+back with `cgda_jax.load_run`. Dynamic runs also replay their result on finer
+physics. The folder itself (temporary folder, lock, move into place) belongs to
 `cgda_jax.experiment.results`.
 """
 
@@ -26,13 +27,14 @@ from cgda_jax.experiment.config import (
     ExperimentConfig,
     dump_config,
 )
-from cgda_jax.experiment.report import (
-    _close_all,
-    _execution_plots,
-    _report,
-    _write_json,
-    render_execution,
+from cgda_jax.experiment.figures import (
+    draw_figures,
+    error_unit,
+    feature_labels,
+    render_run,
 )
+from cgda_jax.experiment.load import run_in_memory
+from cgda_jax.experiment.report import _report, _write_json
 from cgda_jax.experiment.results import RunFolder, expand
 from cgda_jax.experiment.validate import check_experiment
 
@@ -77,6 +79,7 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
         "kind": "recognition",
         "name": cfg.name,
         "features": list(library.feature_names),
+        "feature_labels": feature_labels(cfg, library.feature_names),
         "metric": r.metric,
         "actions": names,
         "queries": [t.name for _, t in tests],
@@ -87,27 +90,24 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
         "success": accuracy == 1.0,
         "wall_time_s": time.perf_counter() - t0,
     }
-    np.savez(out / "arrays.npz", cost_matrix=costs,
-             **{f"knots_{a}": np.asarray(library[a].knots) for a in names})
+    arrays = {"cost_matrix": costs}
+    for a in names:
+        arrays[f"knot_times_{a}"] = np.asarray(library[a].knot_times)
+        arrays[f"knots_{a}"] = np.asarray(library[a].knots)
+        arrays.update(_demo_arrays(demos[a][: d.n_train], f"demo_{a}_"))
+    np.savez(out / "arrays.npz", **arrays)
     if cfg.output.plots:
-        from cgda_jax import plotting
-
-        plots = out / "plots"
-        plotting.plot_cost_matrix(
-            costs, [q.lower() for q in truth], names, label=f"{r.metric.upper()} cost",
-            title=f"{r.metric.upper()} cost: test (rows) vs generalized",
-            path=plots / "cost_matrix.png",
-        )
-        cols = (list(library.feature_names)[:3] if d.features != "marker"
-                else None)
-        for a in names:
-            plotting.plot_demonstrations(
-                demos[a][: d.n_train], library[a], features=cols,
-                title=f"{a}: demonstrations and generalization",
-                path=plots / f"generalization_{a}.png",
-            )
-        _close_all()
+        draw_figures(run_in_memory(out, cfg, result, arrays), out / "plots")
     return result
+
+
+def _demo_arrays(demos, prefix: str, scale: float = 1.0) -> dict[str, np.ndarray]:
+    """``{prefix}{k}_times`` and ``{prefix}{k}_features`` (times scale) per demo."""
+    out = {}
+    for k, d in enumerate(demos):
+        out[f"{prefix}{k}_times"] = np.asarray(d.times, np.float64)
+        out[f"{prefix}{k}_features"] = np.asarray(d.features, np.float64) * scale
+    return out
 
 
 def replay_check(sim, res, factor: int = 4) -> dict:
@@ -131,7 +131,8 @@ def run_execution(
 ) -> dict:
     """Build the goal and the simulator, run the strategy, save and plot."""
     goal, demos, gen = build_goal(cfg)
-    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    waypoint_s = default_waypoint_s(demos, len(goal))
+    sim = build_simulator(cfg, waypoint_s, goal)
     if goal.shape[1] != sim.n_features:
         raise ConfigError(
             f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "
@@ -145,8 +146,18 @@ def run_execution(
     )
     res.save(out)  # result.json + arrays.npz from the strategy
     summary = json.loads((out / "result.json").read_text())
+    labels = feature_labels(cfg, sim.feature_names)
     summary.update({"kind": "execution", "name": cfg.name,
-                    "feature_names": list(sim.feature_names)})
+                    "feature_names": list(sim.feature_names),
+                    "feature_labels": labels, "error_unit": error_unit(labels),
+                    "build": {"waypoint_s": waypoint_s}})
+    with np.load(out / "arrays.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    if gen is not None:  # the generalization and demonstrations, in the goal's units
+        arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)
+        arrays["knots"] = np.asarray(gen.knots, np.float64) * cfg.data.scale
+        arrays.update(_demo_arrays(demos, "demo", cfg.data.scale))
+    np.savez(out / "arrays.npz", **arrays)
     if sim.mode == "dynamic":
         summary["physics"] = {
             "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,
@@ -154,10 +165,11 @@ def run_execution(
             "welded_joints": list(sim.physics.welded),
         }
         summary["replay"] = replay_check(sim, res)
+    run = run_in_memory(out, cfg, summary, arrays)
     if cfg.output.plots:
-        _execution_plots(cfg, out / "plots", res, sim, demos, gen)
+        draw_figures(run, out / "plots")
     if cfg.output.render:
-        summary["render"] = render_execution(cfg, out / "plots", res.joints, sim)
+        summary["render"] = render_run(run, out / "plots", sim)
     return summary
 
 

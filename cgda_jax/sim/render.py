@@ -1,4 +1,5 @@
-"""Offscreen rendering of an executed trajectory to PNG frames or an animated GIF.
+"""Offscreen rendering of an executed trajectory to images, an MP4 or GIF video, or
+PNG frames.
 
 Uses ``mujoco.Renderer`` (MuJoCo C, on the host), which needs an offscreen OpenGL.
 On a headless Linux machine with ``MUJOCO_GL`` unset the back-end is chosen when
@@ -18,15 +19,17 @@ per waypoint tracking the same minimum-jerk reference) and frames are sampled fr
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
 
 from cgda_jax.sim._mujoco_env import make_renderer
+from cgda_jax.sim.video import caption, write_video
 
-__all__ = ["render_trajectory"]
+__all__ = ["Frames", "render_frames", "render_trajectory"]
 
 _GEOM = {"box": mujoco.mjtGeom.mjGEOM_BOX, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
@@ -71,7 +74,8 @@ def _add_decorations(scene: mujoco.MjvScene, decorations) -> None:
 
 def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
     """Yield (qpos (nq,) of `_model(sim)`, marker positions since the last frame
-    (K, 3)) per frame."""
+    (K, 3), k) per frame: k = 0 at the start, k = j while moving to (and at) the
+    j-th waypoint (from 1)."""
     robot = sim.robot
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     genes = np.clip(robot.start_genes, lo, hi)  # where `Simulator.init_state` starts
@@ -87,10 +91,10 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
         data.qpos[:] = phys.qpos0
         data.qpos[phys.gene_qadr] = genes
         mujoco.mj_kinematics(model, data)
-        yield data.qpos.copy(), data.site_xpos[phys.site_id][None].copy()
+        yield data.qpos.copy(), data.site_xpos[phys.site_id][None].copy(), 0
         every = max(1, sim.physics_steps // frames_per_waypoint)
         prev = ctrl(genes)
-        for wp in waypoints:
+        for j, wp in enumerate(waypoints, start=1):
             target = ctrl(np.clip(wp, lo, hi))
             trail = []
             for k in range(1, sim.physics_steps + 1):
@@ -99,7 +103,7 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
                 mujoco.mj_kinematics(model, data)
                 trail.append(data.site_xpos[phys.site_id].copy())
                 if k % every == 0 or k == sim.physics_steps:
-                    yield data.qpos.copy(), np.array(trail)
+                    yield data.qpos.copy(), np.array(trail), j
                     trail = []
             prev = target
         return
@@ -108,13 +112,13 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
     data.qpos[:] = np.asarray(robot.qpos0, np.float64)
     data.qpos[robot.qpos_adr] = genes
     mujoco.mj_kinematics(model, data)
-    yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
-    for wp in waypoints:
+    yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy(), 0
+    for j, wp in enumerate(waypoints, start=1):
         wp = np.clip(wp, lo, hi)
         for k in range(1, frames_per_waypoint + 1):
             data.qpos[robot.qpos_adr] = genes + k / frames_per_waypoint * (wp - genes)
             mujoco.mj_kinematics(model, data)
-            yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy()
+            yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy(), j
         genes = wp
 
 
@@ -147,36 +151,66 @@ def _scene_states(scene, trails: list[np.ndarray]) -> list:
     return out
 
 
-def render_trajectory(
+@dataclasses.dataclass
+class Frames:
+    """Rendered frames of an execution.
+
+    Attributes:
+        images: (H, W, 3) uint8 images, one per frame.
+        points: (len(images),) int: 0 for the start frame, j for the frames moving to
+            (and, the last of them, at) the j-th waypoint = goal point j (from 1).
+    """
+
+    images: list[np.ndarray]
+    points: np.ndarray
+
+    def at_points(self) -> list[int]:
+        """Index of the frame at the start and at each waypoint (the last frame of
+        each ``points`` value)."""
+        p = np.asarray(self.points)
+        return [int(np.flatnonzero(p == k)[-1]) for k in np.unique(p)]
+
+
+def _goal_decorations(goal_points, current: int) -> list:
+    """Goal points (K, 3) as spheres: the one being reached (``current``, from 1)
+    yellow and larger, the others translucent green."""
+    out = []
+    for j, pos in enumerate(np.asarray(goal_points, np.float64), start=1):
+        if j == current:
+            out.append(("sphere", np.full(3, 0.016), pos, (1.0, 0.85, 0.0, 0.95)))
+        else:
+            out.append(("sphere", np.full(3, 0.011), pos, (0.1, 0.8, 0.2, 0.55)))
+    return out
+
+
+def render_frames(
     sim,
     waypoints,
-    out_path: str | pathlib.Path,
     *,
     frames_per_waypoint: int | None = None,
-    width: int = 480,
-    height: int = 360,
-    fps: int = 12,
+    width: int = 640,
+    height: int = 480,
     lookat: Sequence[float] | None = None,
     distance: float | None = None,
     azimuth: float = 35.0,
     elevation: float = -20.0,
-) -> list[pathlib.Path]:
-    """Render the robot executing ``waypoints`` offscreen.
+    goal_points=None,
+    captions: Callable[[int, object], str] | None = None,
+) -> Frames:
+    """Render the robot executing ``waypoints`` offscreen, in memory.
 
     Args:
         sim: a `Simulator` (its robot, scene and mode are used).
         waypoints: (N, DoF) joint values, clipped into the limits as in execution.
-        out_path: a ``.gif`` file (animated; falls back to PNG frames in a folder of
-            the same stem when Pillow is missing), or a folder for ``frame_0000.png``...
         frames_per_waypoint: frames per waypoint (default ``sim.substeps``; the paint
             state is updated at every frame, and in dynamic mode at every physics step).
         width, height: image size in pixels.
-        fps: GIF frame rate.
         lookat, distance, azimuth, elevation: free camera (defaults frame the robot
             and the wall from behind its right shoulder).
-
-    Returns:
-        The files written.
+        goal_points: optional (K, 3) world positions drawn as spheres (e.g. the goal
+            of the marker scene); the one being reached is highlighted.
+        captions: optional ``captions(point, scene_state) -> str`` written in the
+            image's top left corner (point: 0 at the start, j towards waypoint j).
 
     Raises:
         ValueError: waypoints of the wrong shape.
@@ -185,56 +219,68 @@ def render_trajectory(
     waypoints = np.asarray(waypoints, dtype=np.float64)
     sim._check_waypoints(waypoints)
     frames_per_waypoint = int(frames_per_waypoint or sim.substeps)
-    out_path = pathlib.Path(out_path).expanduser()
     model = _model(sim)
     data = mujoco.MjData(model)
     cam = _camera(sim, lookat, distance, azimuth, elevation)
     scene = sim.scene
 
     postures = list(_postures(sim, waypoints, frames_per_waypoint))
-    states = _scene_states(scene, [trail for _, trail in postures])
-    images = []
+    states = _scene_states(scene, [trail for _, trail, _ in postures])
+    images, points = [], []
     renderer = _renderer(model, height, width)
     try:
-        for (qpos, _), state in zip(postures, states):
+        for (qpos, _, k), state in zip(postures, states):
             data.qpos[:] = qpos
             mujoco.mj_kinematics(model, data)
             renderer.update_scene(data, camera=cam)
-            _add_decorations(renderer.scene, scene.decorations(state))
-            images.append(renderer.render().copy())
+            decorations = list(scene.decorations(state))
+            if goal_points is not None:
+                decorations += _goal_decorations(goal_points, k)
+            _add_decorations(renderer.scene, decorations)
+            img = renderer.render().copy()
+            if captions is not None:
+                img = caption(img, captions(k, state))
+            images.append(img)
+            points.append(k)
     finally:
         renderer.close()
-    return _write(images, out_path, fps)
+    return Frames(images, np.asarray(points, int))
 
 
-def _write(
-    images: list[np.ndarray], out_path: pathlib.Path, fps: int
+def render_trajectory(
+    sim,
+    waypoints,
+    out_path: str | pathlib.Path,
+    *,
+    frames_per_waypoint: int | None = None,
+    width: int = 640,
+    height: int = 480,
+    fps: int = 12,
+    lookat: Sequence[float] | None = None,
+    distance: float | None = None,
+    azimuth: float = 35.0,
+    elevation: float = -20.0,
+    goal_points=None,
+    captions: Callable[[int, object], str] | None = None,
 ) -> list[pathlib.Path]:
-    try:
-        from PIL import Image
-    except ImportError:  # pragma: no cover - matplotlib ships with Pillow
-        Image = None
-    if out_path.suffix.lower() == ".gif" and Image is not None:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        frames = [Image.fromarray(img) for img in images]
-        frames[0].save(
-            out_path,
-            save_all=True,
-            append_images=frames[1:],
-            duration=int(1000 / fps),
-            loop=0,
-        )
-        return [out_path]
-    folder = out_path.with_suffix("") if out_path.suffix else out_path
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    for i, img in enumerate(images):
-        path = folder / f"frame_{i:04d}.png"
-        if Image is not None:
-            Image.fromarray(img).save(path)
-        else:  # pragma: no cover
-            import matplotlib.image
+    """Render the robot executing ``waypoints`` offscreen into a file or folder.
 
-            matplotlib.image.imsave(path, img)
-        written.append(path)
-    return written
+    Args:
+        out_path: an ``.mp4`` or ``.gif`` file (see `cgda_jax.sim.video.write_video`),
+            or a folder for ``frame_0000.png``...
+        fps: frame rate of the video.
+        The others: as `render_frames`.
+
+    Returns:
+        The files written.
+
+    Raises:
+        ValueError: waypoints of the wrong shape.
+        RuntimeError: no offscreen OpenGL (see the module doc for ``MUJOCO_GL``).
+    """
+    frames = render_frames(
+        sim, waypoints, frames_per_waypoint=frames_per_waypoint, width=width,
+        height=height, lookat=lookat, distance=distance, azimuth=azimuth,
+        elevation=elevation, goal_points=goal_points, captions=captions,
+    )
+    return write_video(frames.images, pathlib.Path(out_path).expanduser(), fps)

@@ -1,0 +1,223 @@
+"""A run's figures, drawn from what its results folder stores (a `Run`): the same
+code draws them at the end of a run and in ``cgda plot FOLDER``. Also the robot's
+video (MP4 + GIF, 640x480) and frame strip, with the goal drawn in."""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import pathlib
+from typing import Any
+
+import numpy as np
+
+from cgda_jax.experiment.config import ExperimentConfig
+from cgda_jax.experiment.load import Run
+
+log = logging.getLogger("cgda_jax")
+
+VIDEO_SIZE = (640, 480)
+
+
+def feature_labels(cfg: ExperimentConfig, names) -> list[str]:
+    """The feature names of a run with their units (``"X [m]"``)."""
+    from cgda_jax.plotting import units
+
+    if cfg.kind == "recognition":
+        table = units.ARM_UNITS if cfg.data.features == "arm" else units.MARKER_UNITS
+    else:
+        table = units.SIM_UNITS  # the goal is in the simulated scene's features
+    return list(units.with_units(names, table))
+
+
+def error_unit(labels) -> str | None:
+    """The unit of a distance between feature points (None: mixed units)."""
+    from cgda_jax.plotting import units
+
+    return units.common_unit(labels)
+
+
+def _close_all() -> None:
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
+def draw_figures(run: Run, out: str | os.PathLike) -> list[pathlib.Path]:
+    """Every PNG figure of ``run`` into the folder ``out``; the files written."""
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        if run.kind == "recognition":
+            return _recognition_figures(run, out)
+        return _execution_figures(run, out)
+    finally:
+        _close_all()
+
+
+def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
+    from cgda_jax.plotting import plot_cost_matrix, plot_demonstrations
+
+    r, cfg = run.result, run.config
+    labels = r.get("feature_labels") or feature_labels(cfg, r["features"])
+    unit = error_unit(labels)
+    metric = r["metric"].upper()
+    written = [out / "cost_matrix.png"]
+    plot_cost_matrix(
+        run.arrays["cost_matrix"], [q.lower() for q in r["truth"]], r["actions"],
+        label=f"{metric} cost [{unit or 'mixed units'}]",
+        title=f"{run.name}: {metric} cost, test (rows) vs generalized\n"
+              f"{len(labels)} features: {', '.join(r['features'])}",
+        path=written[0],
+    )
+    cols = None if cfg.data.features == "marker" else list(range(min(3, len(labels))))
+    shown = "" if cols is None or len(cols) == len(labels) else (
+        f"\n(drawn: {', '.join(r['features'][c] for c in cols)} of "
+        f"{len(labels)} features)")
+    for a in r["actions"]:
+        path = out / f"generalization_{a}.png"
+        plot_demonstrations(
+            run.demonstrations(a), run.generalization(a), features=cols, names=labels,
+            title=f"{run.name}: {a} demonstrations and generalization{shown}",
+            path=path,
+        )
+        written.append(path)
+    return written
+
+
+def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
+    from cgda_jax import plotting
+
+    r, a = run.result, run.arrays
+    labels = r.get("feature_labels") or feature_labels(run.config, r["feature_names"])
+    unit = r["error_unit"] if "feature_labels" in r else error_unit(labels)
+    what = f"{run.name} ({r['strategy'].upper()})"
+    written = []
+
+    def path(name: str) -> pathlib.Path:
+        written.append(out / name)
+        return written[-1]
+
+    plotting.plot_goal_vs_executed(
+        a["goal"], a["features"], labels, tolerance=r["tolerance"],
+        tolerance_unit=unit, title=f"{what}: goal vs executed per point",
+        path=path("goal_vs_executed.png"),
+    )
+    plotting.plot_point_errors(
+        a["point_errors"], r["tolerance"], unit=unit,
+        title=f"{what}: error per point vs tolerance", path=path("point_errors.png"),
+    )
+    plotting.plot_fitness(
+        a["fitness_history"], unit=unit,
+        title=f"{what}: best fitness per generation", path=path("fitness.png"),
+    )
+    demos, gen = run.demonstrations(), run.generalization()
+    if demos or gen is not None:  # 3 features: in 3-D (paper Fig. 7)
+        plotting.plot_demonstrations(
+            demos, gen, a["features"], names=labels,
+            title=f"{what}: demonstrations, goal and executed",
+            path=path("trajectory_3d.png" if len(labels) == 3 else
+                      "demonstrations.png"),
+        )
+    per_point = (r.get("info") or {}).get("point_generations")
+    if per_point is not None and np.ndim(a["fitness_history"]) == 2:
+        plotting.plot_time_per_point(
+            per_point, ylabel="generations run (restarts included)",
+            title=f"{what}: effort per point", path=path("effort_per_point.png"),
+        )
+    return written
+
+
+def _camera(sim) -> dict[str, Any]:
+    paint = getattr(sim.scene, "centres", None) is not None
+    camera: dict[str, Any] = {
+        "distance": (1.9 if paint else 1.3) * float(sim.robot.mj_model.stat.extent)}
+    path = getattr(sim.scene, "goal_path", None)
+    if path is not None:  # objects: look at them and the hand, from their side
+        hand = np.asarray(sim.robot.marker_position(sim.robot.start_genes), float)
+        points = np.vstack([np.asarray(path, float), hand[None]])
+        centre = (2.0 * points[:-1].mean(axis=0) + hand) / 3.0
+        spread = float(np.linalg.norm(points - centre, axis=1).max())
+        camera = {"lookat": centre, "elevation": -35.0,
+                  "distance": max(0.6, 3.5 * spread),
+                  "azimuth": math.degrees(math.atan2(-centre[1], -centre[0])) + 30.0}
+    return camera
+
+
+def _captions(run: Run, sim):
+    """Per frame: the point being reached, and for paint the target and painted %."""
+    goal = np.asarray(run.arrays["goal"], float)
+    n = len(goal)
+    paint = getattr(sim.scene, "centres", None) is not None
+
+    def text(k: int, state) -> str:
+        head = "start" if k == 0 else f"point {k} of {n}"
+        if not paint:
+            return f"{run.name}: {head}"
+        painted = 100.0 * float(np.mean(np.asarray(state, bool)))
+        target = "" if k == 0 else f"target {goal[k - 1, 0]:.1f} %, "
+        return f"{run.name}: {head}\n{target}painted {painted:.1f} %"
+
+    return text
+
+
+def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
+               size: tuple[int, int] = VIDEO_SIZE) -> dict:
+    """The robot executing the run's best joints: ``execution.mp4``,
+    ``execution.gif`` (``size`` pixels) and the frame strip ``frames.png`` in ``out``.
+
+    The goal is drawn in: the marker scene's goal points as spheres (the one being
+    reached in yellow), the object scenes' goal path, and a caption with the point
+    being reached (paint: its target and the painted percentage).
+
+    Never raises: when offscreen OpenGL (or anything else in rendering) fails,
+    logs one warning on the ``cgda_jax`` logger and returns ``{"ok": False,
+    "reason": ...}``; otherwise ``{"ok": True, "gif": ..., "mp4": ..., "frames": ...,
+    "backend": ...}`` (paths relative to the results folder).
+    """
+    out = pathlib.Path(out)
+    try:
+        from cgda_jax import plotting
+        from cgda_jax.sim._mujoco_env import last_backend
+        from cgda_jax.sim.render import render_frames
+        from cgda_jax.sim.video import write_video
+
+        sim = sim if sim is not None else run.simulator()
+        joints = np.asarray(run.arrays["joints"], np.float32)
+        paint = getattr(sim.scene, "centres", None) is not None
+        # the paint wall is updated per frame: keep every kinematic sub-step there
+        fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
+        marker = type(sim.scene).__name__ == "MarkerScene"
+        goal = np.asarray(run.arrays["goal"], float)
+        camera = _camera(sim)
+        if marker:  # look between the robot and its goal points
+            camera["lookat"] = (np.asarray(sim.robot.mj_model.stat.center)
+                                + goal.mean(axis=0)) / 2
+        frames = render_frames(
+            sim, joints, frames_per_waypoint=fpw, width=size[0], height=size[1],
+            goal_points=goal if marker else None, captions=_captions(run, sim),
+            **camera,
+        )
+        out.mkdir(parents=True, exist_ok=True)
+        fps = max(4, 2 * fpw)
+        write_video(frames.images, out / "execution.mp4", fps)
+        write_video(frames.images, out / "execution.gif", fps)
+        at = frames.at_points()  # start, point 1, ..., point N
+        pick = np.unique(np.linspace(0, len(at) - 1, min(n_strip, len(at)))
+                         .round().astype(int))
+        plotting.plot_frames(
+            [frames.images[at[k]] for k in pick],
+            labels=["start" if k == 0 else f"point {k}" for k in pick],
+            title=f"{run.name}: the robot executing the best trajectory",
+            path=out / "frames.png",
+        )
+        _close_all()
+    except Exception as err:  # noqa: BLE001 - no GL, a missing library: never fatal
+        reason = f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
+        log.warning("%s: frames not rendered (%s); set MUJOCO_GL=egl or osmesa, or "
+                    "output.render=false", run.name, reason)
+        return {"ok": False, "reason": reason}
+    return {"ok": True, "gif": "plots/execution.gif", "mp4": "plots/execution.mp4",
+            "frames": "plots/frames.png", "size": list(size),
+            "backend": last_backend()}

@@ -1,0 +1,173 @@
+"""A results folder back in Python: `load_run` and `Run`.
+
+    >>> run = cgda_jax.load_run("results/clean_ie")      # doctest: +SKIP
+    >>> run.config.strategy.name, run.result["success"]  # the config as run, result.json
+    >>> run.arrays["joints"]                             # everything arrays.npz holds
+    >>> sim = run.simulator()                            # rebuilt as the run built it
+    >>> np.allclose(run.replay(), run.arrays["features"])
+
+What a results folder holds (written by `cgda_jax.experiment.run`):
+
+- ``config.toml``: the resolved config (`run.config`);
+- ``result.json``: the summary (`run.result`), with ``feature_labels`` (names with
+  units), ``error_unit`` and, for executions, ``build.waypoint_s`` (what the simulator
+  was built with);
+- ``arrays.npz`` (`run.arrays`): executions: ``joints`` (N, DoF) in radians, the
+  executed ``features`` (N, F), ``goal`` (N, F), ``point_errors`` (N,),
+  ``fitness_history``; the generalization (``knot_times`` (N,), ``knots`` (N, F),
+  in the goal's units) and the demonstrations (``demo{k}_times``,
+  ``demo{k}_features``, k from 0) where the goal came from demonstrations.
+  Recognitions: ``cost_matrix`` (Q, A); per action A its generalization
+  (``knot_times_A``, ``knots_A``) and training demonstrations
+  (``demo_A_{k}_times``, ``demo_A_{k}_features``);
+- ``plots/`` and ``report.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import pathlib
+import types
+from typing import Any
+
+import numpy as np
+
+from cgda_jax.experiment.config import ExperimentConfig, load_config
+from cgda_jax.experiment.results import MARKER, FolderError, expand
+
+__all__ = ["Run", "load_run"]
+
+#: Files every results folder holds.
+REQUIRED = ("config.toml", MARKER, "arrays.npz")
+
+
+@dataclasses.dataclass
+class Run:
+    """One run's results (see the module docstring for what each holds).
+
+    Attributes:
+        folder: the results folder.
+        config: the `ExperimentConfig` as run (``config.toml``).
+        result: ``result.json`` as a dict.
+        arrays: every array of ``arrays.npz``, by name.
+    """
+
+    folder: pathlib.Path
+    config: ExperimentConfig
+    result: dict[str, Any]
+    arrays: dict[str, np.ndarray]
+
+    @property
+    def kind(self) -> str:
+        """``"execution"`` or ``"recognition"``."""
+        return self.result.get("kind", self.config.kind)
+
+    @property
+    def name(self) -> str:
+        return self.result.get("name", self.config.name)
+
+    def _need_execution(self, what: str) -> None:
+        if self.kind != "execution":
+            raise ValueError(
+                f"{self.folder}: a {self.kind} run has no simulator ({what} needs an "
+                "execution run)"
+            )
+
+    def demonstrations(self, action: str | None = None) -> list:
+        """The stored demonstrations (`cgda_jax.Demonstration`, in the goal's units
+        for an execution); recognition: those of ``action``."""
+        from cgda_jax.data import Demonstration
+
+        prefix = "demo" if action is None else f"demo_{action}_"
+        labels = self.result.get("demo_feature_labels") or self.result.get(
+            "feature_labels")
+        out, k = [], 0
+        while f"{prefix}{k}_times" in self.arrays:
+            feats = self.arrays[f"{prefix}{k}_features"]
+            names = labels if labels and len(labels) == feats.shape[1] else [
+                f"f{i}" for i in range(feats.shape[1])]
+            out.append(Demonstration(self.arrays[f"{prefix}{k}_times"], feats,
+                                     tuple(names), name=f"{prefix}{k}"))
+            k += 1
+        return out
+
+    def generalization(self, action: str | None = None):
+        """The generalization's knots: an object with ``knot_times`` (N,) and
+        ``knots`` (N, F) (what the figures draw), or None when not stored."""
+        suffix = "" if action is None else f"_{action}"
+        if f"knots{suffix}" not in self.arrays or f"knot_times{suffix}" not in self.arrays:
+            return None
+        return types.SimpleNamespace(knot_times=self.arrays[f"knot_times{suffix}"],
+                                     knots=self.arrays[f"knots{suffix}"])
+
+    def simulator(self):
+        """The `Simulator` of the run, rebuilt from its config as the run built it
+        (`cgda_jax.experiment.build.build_simulator` with the stored waypoint time
+        and goal).
+
+        Raises:
+            ValueError: a recognition run (no simulator).
+        """
+        from cgda_jax.experiment.build import build_simulator
+
+        self._need_execution("simulator()")
+        waypoint_s = (self.result.get("build") or {}).get("waypoint_s")
+        return build_simulator(self.config, waypoint_s, self.arrays.get("goal"))
+
+    def replay(self, sim=None) -> np.ndarray:
+        """The features (N, F) of executing the stored best joints on `simulator()`
+        (or ``sim``) from its start state: equal to ``arrays["features"]``.
+
+        Raises:
+            ValueError: a recognition run.
+        """
+        self._need_execution("replay()")
+        sim = sim if sim is not None else self.simulator()
+        joints = np.asarray(self.arrays["joints"], np.float32)
+        return np.asarray(sim.execute(joints), np.float64)
+
+    def execution_result(self):
+        """The strategy's `cgda_jax.ExecutionResult` (``ExecutionResult.load``)."""
+        from cgda_jax.strategies.result import ExecutionResult
+
+        self._need_execution("execution_result()")
+        return ExecutionResult.load(self.folder)
+
+
+def load_run(folder: str | os.PathLike) -> Run:
+    """Read a results folder written by ``cgda run`` / `run_experiment`.
+
+    Raises:
+        FolderError: not a folder, or not a results folder (a file missing: named).
+        ConfigError: its ``config.toml`` no longer loads (e.g. a key since renamed).
+    """
+    folder = expand(folder)
+    if not folder.is_dir():
+        raise FolderError(f"results folder {folder} not found (or not a folder)")
+    missing = [f for f in REQUIRED if not (folder / f).is_file()]
+    if missing:
+        hint = (" (a `cgda demo` folder: pass one experiment's subfolder)"
+                if (folder / MARKER).is_file() and any(
+                    (p / MARKER).is_file() for p in folder.iterdir() if p.is_dir())
+                else "")
+        raise FolderError(f"{folder} is not a results folder: {', '.join(missing)} "
+                          f"missing{hint}")
+    try:
+        result = json.loads((folder / MARKER).read_text())
+    except json.JSONDecodeError as err:
+        raise FolderError(f"{folder / MARKER}: not valid JSON ({err})") from None
+    config = load_config(folder / "config.toml")
+    with np.load(folder / "arrays.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    return Run(folder, config, result, arrays)
+
+
+def run_in_memory(folder: pathlib.Path, config: ExperimentConfig, result: dict,
+                  arrays: dict) -> Run:
+    """The `Run` a folder being written will load as (``result`` through JSON)."""
+    from cgda_jax.experiment.report import _jsonable
+
+    return Run(pathlib.Path(folder), config, json.loads(json.dumps(_jsonable(result))),
+               {k: np.asarray(v) for k, v in arrays.items()})

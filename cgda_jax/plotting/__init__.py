@@ -1,0 +1,55 @@
+"""Figures of the paper from host arrays (matplotlib, Agg backend).
+
+Every function takes NumPy-convertible arrays, returns the
+``matplotlib.figure.Figure`` and, given ``path``, also saves it as a PNG. No JAX
+transforms happen here. Axis labels carry units: pass feature names with their unit
+(``"X [m]"``; `units.with_units` adds them from a table). Goal points are numbered
+from 1 everywhere (``start`` is the posture before the first waypoint), generations
+too.
+
+================================  ===========================================
+paper figure / table              function
+================================  ===========================================
+Fig. 2, Fig. 7                    :func:`plot_demonstrations`
+Tables 2-4                        :func:`plot_cost_matrix`
+Fig. 4                            :func:`plot_fitness`
+Fig. 5, 6, 10                     :func:`plot_goal_vs_executed`
+Fig. 9                            :func:`plot_time_per_point`
+(point errors vs tolerance)       :func:`plot_point_errors`
+Fig. 8, 11                        :func:`plot_frames`
+================================  ===========================================
+
+Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.evolution`,
+`~cgda_jax.plotting.tables`, `~cgda_jax.plotting.frames`, `~cgda_jax.plotting.units`.
+"""
+
+from cgda_jax.plotting import units as units
+from cgda_jax.plotting._base import (
+    FIRST_POINT as FIRST_POINT,
+    POINT_AXIS as POINT_AXIS,
+    knot_curve as knot_curve,
+)
+from cgda_jax.plotting.evolution import (
+    plot_fitness as plot_fitness,
+    plot_point_errors as plot_point_errors,
+    plot_time_per_point as plot_time_per_point,
+)
+from cgda_jax.plotting.frames import plot_frames as plot_frames
+from cgda_jax.plotting.tables import plot_cost_matrix as plot_cost_matrix
+from cgda_jax.plotting.trajectories import (
+    plot_demonstrations as plot_demonstrations,
+    plot_goal_vs_executed as plot_goal_vs_executed,
+)
+
+__all__ = [
+    "FIRST_POINT",
+    "knot_curve",
+    "plot_cost_matrix",
+    "plot_demonstrations",
+    "plot_fitness",
+    "plot_frames",
+    "plot_goal_vs_executed",
+    "plot_point_errors",
+    "plot_time_per_point",
+    "units",
+]

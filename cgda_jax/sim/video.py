@@ -1,0 +1,83 @@
+"""Writing rendered frames: MP4 (H.264, `imageio` + `imageio-ffmpeg`), GIF (`imageio`
+with Pillow) or a folder of PNGs; and a text caption drawn into a frame."""
+
+from __future__ import annotations
+
+import pathlib
+import warnings
+
+import numpy as np
+
+__all__ = ["caption", "write_video"]
+
+
+def write_video(images, out_path: str | pathlib.Path, fps: int = 12
+                ) -> list[pathlib.Path]:
+    """Write (H, W, 3) uint8 ``images``.
+
+    ``out_path`` ending in ``.mp4``: an H.264 video (yuv420p, plays in browsers;
+    sizes are padded to multiples of 16 by ffmpeg if needed); ``.gif``: an animated
+    GIF looping forever; anything else: a folder of ``frame_0000.png``, ...
+
+    Returns:
+        The files written.
+
+    Raises:
+        ValueError: no images, or images of different sizes.
+    """
+    import imageio.v3 as iio
+
+    images = [np.asarray(img, np.uint8) for img in images]
+    if not images:
+        raise ValueError("write_video needs at least one image")
+    if len({img.shape for img in images}) != 1:
+        raise ValueError(f"images of different sizes: {sorted({i.shape for i in images})}")
+    out_path = pathlib.Path(out_path).expanduser()
+    suffix = out_path.suffix.lower()
+    if suffix in (".mp4", ".gif"):
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".mp4":
+        import imageio.v2 as iio2
+
+        with warnings.catch_warnings():
+            # ffmpeg runs as a subprocess (fork + exec at once): JAX's warning
+            # about forking a multithreaded process does not apply
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
+            with iio2.get_writer(out_path, format="FFMPEG", mode="I", fps=fps,
+                                 codec="libx264", pixelformat="yuv420p", quality=8,
+                                 macro_block_size=16) as writer:
+                for img in images:
+                    writer.append_data(img)
+        return [out_path]
+    if suffix == ".gif":
+        iio.imwrite(out_path, np.stack(images), extension=".gif", plugin="pillow",
+                    duration=int(1000 / fps), loop=0)
+        return [out_path]
+    folder = out_path.with_suffix("") if out_path.suffix else out_path
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    for i, img in enumerate(images):
+        path = folder / f"frame_{i:04d}.png"
+        iio.imwrite(path, img)
+        written.append(path)
+    return written
+
+
+def caption(image: np.ndarray, text: str) -> np.ndarray:
+    """``image`` (H, W, 3) with ``text`` (lines) in its top left corner, white on a
+    dark box; the font scales with the image height."""
+    if not text:
+        return image
+    from PIL import Image, ImageDraw, ImageFont
+
+    im = Image.fromarray(np.asarray(image, np.uint8))
+    size = max(10, image.shape[0] // 22)
+    try:
+        font = ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: one bitmap size
+        font = ImageFont.load_default()
+    draw = ImageDraw.Draw(im, "RGBA")
+    x0, y0, x1, y1 = draw.multiline_textbbox((8, 6), text, font=font, spacing=4)
+    draw.rectangle((x0 - 5, y0 - 4, x1 + 5, y1 + 4), fill=(0, 0, 0, 170))
+    draw.multiline_text((8, 6), text, font=font, fill=(255, 255, 255, 255), spacing=4)
+    return np.asarray(im)
