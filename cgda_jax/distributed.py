@@ -9,9 +9,10 @@ on CPU through gloo). No array ever spans processes, so no kernel changes.
 - `initialize`: join the job. Reads the environment (see below) and calls
   ``jax.distributed.initialize`` before anything else touches JAX; a no-op returning
   False when no job is described (a plain single-process run).
-- `launch`: start N copies of a command on this machine (a localhost coordinator on
-  a free port), stream their output prefixed ``[p0]``, ``[p1]``, ..., stop them all
-  when one fails, on a timeout or on Ctrl-C; returns the job's exit status.
+- `launch` (`cgda_jax.launch`; ``python -m cgda_jax.launch -n N -- CMD``): start N
+  copies of a command on this machine (a localhost coordinator on a free port),
+  stream their output prefixed ``[p0]``, ``[p1]``, ..., stop them all when one
+  fails, on a timeout or on Ctrl-C; returns the job's exit status.
 - `distributed_trials`: `run_trials` split over every process's devices, gathered
   to every process; the same results as a single-process `run_trials` with the
   same seeds (tests/test_distributed.py).
@@ -41,14 +42,8 @@ from __future__ import annotations
 
 import os
 import pickle
-import signal
-import socket
-import subprocess
-import sys
-import threading
-import time
-from collections.abc import Iterable, Sequence
-from typing import Any, TextIO
+from collections.abc import Sequence
+from typing import Any
 
 __all__ = [
     "ENV_CLUSTER",
@@ -58,7 +53,6 @@ __all__ = [
     "ENV_PROCESS_ID",
     "allgather_objects",
     "distributed_trials",
-    "free_port",
     "initialize",
     "is_writer",
     "launch",
@@ -219,12 +213,33 @@ def share(n_items: int, counts: Sequence[int] | None = None,
     return range(start, start + sum(per_device[first:first + counts[index]]))
 
 
-def allgather_objects(obj: Any) -> list[Any]:
+#: How long `allgather_objects` waits for the slowest process (seconds).
+GATHER_TIMEOUT_S = 24 * 3600
+_GATHERS = [0]  # calls so far: names each call's barrier (same on every process)
+
+
+def _barrier(timeout_s: float) -> None:
+    """Wait on the coordination service (no collective) until every process is
+    here. The first CPU collective sets up gloo with a fixed 30 s limit for all
+    processes to arrive, so the collectives must start together even when one
+    process's share took minutes longer."""
+    from jax._src import distributed as jax_distributed
+
+    client = getattr(jax_distributed.global_state, "client", None)
+    if client is None:  # pragma: no cover - only without a job
+        return
+    _GATHERS[0] += 1
+    client.wait_at_barrier(f"cgda_allgather_{_GATHERS[0]}",
+                           timeout_in_ms=int(timeout_s * 1000))
+
+
+def allgather_objects(obj: Any, timeout_s: float | None = None) -> list[Any]:
     """Every process's ``obj`` (picklable), in process order, on every process.
 
-    One collective (``process_allgather`` of the pickled bytes padded to the
-    longest); every process must call it, the same number of times. Single
-    process: ``[obj]``.
+    A barrier (waits up to `timeout_s`, default `GATHER_TIMEOUT_S`, for the
+    slowest process), then ``process_allgather`` of the sizes and of the pickled
+    bytes padded to the longest. Every process must call it, the same number of
+    times. Single process: ``[obj]``.
     """
     import jax
     import numpy as np
@@ -233,6 +248,7 @@ def allgather_objects(obj: Any) -> list[Any]:
         return [obj]
     from jax.experimental import multihost_utils
 
+    _barrier(GATHER_TIMEOUT_S if timeout_s is None else timeout_s)
     data = np.frombuffer(pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL),
                          dtype=np.uint8)
     sizes = np.asarray(multihost_utils.process_allgather(
@@ -319,152 +335,8 @@ def distributed_trials(strategy: str, sim: Any, goal: Any, n_trials: int, *,
     return [res for _, part in gathered for res in part]
 
 
-# ---------------------------------------------------------------------------
-# Local launcher
-# ---------------------------------------------------------------------------
+def launch(n_processes: int, argv: Sequence[str], **kwargs: Any) -> int:
+    """`cgda_jax.launch.launch`: run N copies of `argv` as one job on this machine."""
+    from cgda_jax.launch import launch as _launch
 
-
-def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port free on `host` right now (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
-
-
-def _pump(pipe, out: TextIO, prefix: str, lock: threading.Lock) -> None:
-    for raw in iter(pipe.readline, b""):
-        line = raw.decode(errors="replace").rstrip("\r\n")
-        with lock:
-            out.write(f"{prefix}{line}\n")
-            out.flush()
-    pipe.close()
-
-
-def _stop(procs: Iterable[subprocess.Popen], grace_s: float = 5.0) -> None:
-    """SIGTERM each running worker's process group, SIGKILL what is left after
-    `grace_s`."""
-    procs = [p for p in procs if p.poll() is None]
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        for p in procs:
-            try:
-                os.killpg(p.pid, sig)
-            except (ProcessLookupError, PermissionError):
-                pass
-        deadline = time.monotonic() + grace_s
-        while time.monotonic() < deadline and any(p.poll() is None for p in procs):
-            time.sleep(0.05)
-        procs = [p for p in procs if p.poll() is None]
-        if not procs:
-            return
-
-
-def _status(code: int) -> int:
-    return 128 - code if code < 0 else code  # killed by signal n: 128 + n
-
-
-class _Terminated(Exception):
-    pass
-
-
-def launch(n_processes: int, argv: Sequence[str], *,
-           timeout_s: float | None = None, ok_codes: Iterable[int] = (0,),
-           env: dict[str, str] | None = None, host: str = "127.0.0.1",
-           stdout: TextIO | None = None, stderr: TextIO | None = None,
-           prefix: bool = True) -> int:
-    """Run `n_processes` copies of the command `argv` as one job on this machine.
-
-    Each copy gets ``CGDA_COORDINATOR=host:<free port>``, ``CGDA_NUM_PROCESSES``
-    and ``CGDA_PROCESS_ID`` (its script calls `initialize`). Their stdout and
-    stderr go to ours line by line, prefixed ``[p<i>] ``. When one exits with a
-    status not in `ok_codes` (or is killed), the others are stopped at once
-    (SIGTERM, then SIGKILL after 5 s), as on `timeout_s` and on Ctrl-C / SIGTERM
-    to the launcher: no worker outlives it.
-
-    Args:
-        n_processes: N >= 1.
-        argv: the command, e.g. ``[sys.executable, "script.py", ...]``.
-        timeout_s: stop everything after this many seconds (None: no limit).
-        ok_codes: exit statuses that are not failures (e.g. ``(0, 1)`` for a
-            command whose 1 means "goal not met").
-        env: extra environment for the workers.
-        host: the coordinator's address (this machine).
-        stdout, stderr: where the workers' lines go (default ours).
-        prefix: prefix each line with ``[p<i>] ``.
-
-    Returns:
-        Process 0's exit status when every process ended with an ok status;
-        otherwise the first failure's status (a signal n as 128 + n), 124 on the
-        timeout, 130 / 143 when the launcher was interrupted (SIGINT / SIGTERM).
-    """
-    n = int(n_processes)
-    if n < 1:
-        raise ValueError(f"n_processes must be >= 1; got {n_processes}")
-    if not argv:
-        raise ValueError("argv is empty: give the command to run")
-    ok = set(ok_codes)
-    out = stdout or sys.stdout
-    err = stderr or sys.stderr
-    address = f"{host}:{free_port(host)}"
-    base = {**os.environ, **(env or {}), ENV_COORDINATOR: address,
-            ENV_NUM_PROCESSES: str(n), "PYTHONUNBUFFERED": "1"}
-    base.pop(ENV_CLUSTER, None)
-    lock = threading.Lock()
-    procs: list[subprocess.Popen] = []
-    pumps: list[threading.Thread] = []
-    old_term = None
-    in_main = threading.current_thread() is threading.main_thread()
-    if in_main:
-        def on_term(signum, frame):
-            raise _Terminated()
-        old_term = signal.signal(signal.SIGTERM, on_term)
-    try:
-        for i in range(n):
-            p = subprocess.Popen(list(argv), env={**base, ENV_PROCESS_ID: str(i)},
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                 stdin=subprocess.DEVNULL, start_new_session=True)
-            procs.append(p)
-            tag = f"[p{i}] " if prefix else ""
-            for pipe, stream in ((p.stdout, out), (p.stderr, err)):
-                t = threading.Thread(target=_pump, args=(pipe, stream, tag, lock),
-                                     daemon=True)
-                t.start()
-                pumps.append(t)
-        deadline = None if timeout_s is None else time.monotonic() + timeout_s
-        while True:
-            codes = [p.poll() for p in procs]
-            failed = [(i, c) for i, c in enumerate(codes)
-                      if c is not None and c not in ok]
-            if failed:
-                i, c = failed[0]
-                _stop(procs)
-                _note(err, lock, f"process {i} exited with status {_status(c)}; "
-                      "stopped the others")
-                return _status(c) or 1
-            if all(c is not None for c in codes):
-                return _status(codes[0])
-            if deadline is not None and time.monotonic() > deadline:
-                _stop(procs)
-                _note(err, lock, f"timed out after {timeout_s:g} s; stopped all "
-                      f"{n} processes")
-                return 124
-            time.sleep(0.05)
-    except KeyboardInterrupt:
-        _stop(procs)
-        _note(err, lock, "interrupted (SIGINT); stopped all processes")
-        return 130
-    except _Terminated:
-        _stop(procs)
-        _note(err, lock, "interrupted (SIGTERM); stopped all processes")
-        return 143
-    finally:
-        _stop(procs)
-        for t in pumps:
-            t.join(timeout=2.0)
-        if in_main:
-            signal.signal(signal.SIGTERM, old_term)
-
-
-def _note(stream: TextIO, lock: threading.Lock, text: str) -> None:
-    with lock:
-        stream.write(f"launch: {text}\n")
-        stream.flush()
+    return _launch(n_processes, argv, **kwargs)

@@ -3,6 +3,7 @@ through jax.distributed (localhost coordinator, gloo CPU collectives) give the s
 per-seed results as one process; a failing worker stops the job fast."""
 
 import io
+import os
 import pickle
 import sys
 import time
@@ -197,3 +198,35 @@ def test_single_process_without_a_job(monkeypatch):
     goal = sim.execute(jnp.array([[0.3, 0.4, -0.5]]))
     with pytest.raises(ValueError, match="decides `devices`"):
         dist.distributed_trials("ie", sim, goal, 2, devices=2, **KW)
+
+
+def test_launch_module_command_line(capsys):
+    from cgda_jax.launch import main
+
+    code = main(["-n", "2", "--", sys.executable, "-c", SLEEPER.replace(
+        "60", "0.1"), "0"])
+    out = capsys.readouterr().out
+    assert code == 0 and "[p0] hello from 0 2" in out and "[p1] hello from 1 2" in out
+    with pytest.raises(SystemExit):
+        main(["-n", "2"])  # no command
+
+
+def test_sigterm_to_the_launcher_leaves_no_worker():
+    import signal
+    import subprocess
+
+    child = "import os, time; print('pid', os.getpid(), flush=True); time.sleep(60)"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cgda_jax.launch", "-n", "2", "--", sys.executable,
+         "-c", child], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    pids = []
+    while len(pids) < 2:
+        line = proc.stdout.readline()
+        assert line, proc.stderr.read()
+        pids.append(int(line.split()[-1]))
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 143
+    assert "interrupted (SIGTERM)" in proc.stderr.read()
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
