@@ -32,7 +32,7 @@ from cgda_jax.distributed import (
     ENV_PROCESS_ID,
 )
 
-__all__ = ["free_port", "launch", "main"]
+__all__ = ["free_port", "launch", "main", "without_option"]
 
 
 
@@ -181,6 +181,20 @@ def _note(stream: TextIO, lock: threading.Lock, text: str) -> None:
     with lock:
         stream.write(f"launch: {text}\n")
         stream.flush()
+
+
+def without_option(argv: Sequence[str], option: str) -> list[str]:
+    """`argv` without ``option VALUE`` / ``option=VALUE`` (e.g. a CLI re-running
+    itself in each worker without ``--processes N``)."""
+    out, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg == option:
+            skip = True
+        elif not arg.startswith(option + "="):
+            out.append(arg)
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -17,7 +17,8 @@ from cgda_jax import distributed as dist
 from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.strategies import run_trials
 
-TIMEOUT_S = 120  # the whole 2-process job; it is stopped and the test fails after it
+TIMEOUT_S = 240  # the whole 2-process job (~50 s on a loaded 2-core machine); stopped
+# and failed after it
 KW = {"population_size": 6, "tolerance": 0.02, "max_generations": 12, "chunk_size": 4}
 N_TRIALS, SEED = 5, 3  # 3 trials on process 0, 2 on process 1
 
@@ -211,6 +212,14 @@ def test_launch_module_command_line(capsys):
         main(["-n", "2"])  # no command
 
 
+def test_without_option():
+    from cgda_jax.launch import without_option
+
+    argv = ["run", "c.toml", "--processes", "4", "--trials", "8", "--processes=2"]
+    assert without_option(argv, "--processes") == ["run", "c.toml", "--trials", "8"]
+    assert without_option(["--processesx", "1"], "--processes") == ["--processesx", "1"]
+
+
 def test_sigterm_to_the_launcher_leaves_no_worker():
     import signal
     import subprocess
@@ -230,3 +239,25 @@ def test_sigterm_to_the_launcher_leaves_no_worker():
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+GATHER_LATE = """
+import time
+from cgda_jax import distributed as dist
+assert dist.initialize(timeout_s=60)
+import jax
+if jax.process_index() == 1:
+    time.sleep(40)  # longer than gloo's 30 s limit for setting up its first collective
+got = dist.allgather_objects({"p": jax.process_index(), "x": "ab" * jax.process_index()})
+assert got == [{"p": 0, "x": ""}, {"p": 1, "x": "ab"}], got
+print("GATHER-OK", flush=True)
+"""
+
+
+@pytest.mark.slow
+@needs_gloo
+def test_gather_waits_for_a_process_40_s_late():
+    out = io.StringIO()
+    code = dist.launch(2, [sys.executable, "-c", GATHER_LATE], timeout_s=TIMEOUT_S,
+                       env={"JAX_PLATFORMS": "cpu"}, stdout=out, stderr=io.StringIO())
+    assert code == 0 and out.getvalue().count("GATHER-OK") == 2, out.getvalue()
