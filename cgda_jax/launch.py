@@ -150,6 +150,7 @@ def launch(n_processes: int, argv: Sequence[str], *,
             if failed:
                 i, c = failed[0]
                 _stop(procs)
+                _join(pumps)  # their last lines (a traceback) come first
                 _note(err, lock, f"process {i} exited with status {_status(c)}; "
                       "stopped the others")
                 return _status(c) or 1
@@ -157,6 +158,7 @@ def launch(n_processes: int, argv: Sequence[str], *,
                 return _status(codes[0])
             if deadline is not None and time.monotonic() > deadline:
                 _stop(procs)
+                _join(pumps)
                 _note(err, lock, f"timed out after {timeout_s:g} s; stopped all "
                       f"{n} processes")
                 return 124
@@ -171,10 +173,14 @@ def launch(n_processes: int, argv: Sequence[str], *,
         return 143
     finally:
         _stop(procs)
-        for t in pumps:
-            t.join(timeout=2.0)
+        _join(pumps)
         if in_main:
             signal.signal(signal.SIGTERM, old_term)
+
+
+def _join(pumps: list[threading.Thread]) -> None:
+    for t in pumps:
+        t.join(timeout=2.0)
 
 
 def _note(stream: TextIO, lock: threading.Lock, text: str) -> None:
