@@ -25,25 +25,24 @@ the population of each generation's simulator call (P padded likewise).
 Results are the same as unsharded evaluation (each candidate is computed by the same
 per-candidate program; tests/test_sharding.py checks this on 4 forced host devices).
 
-Multi-host set-up (several machines, each with one or more accelerators): start the
-same script on every host and, before anything else touches JAX, call::
+Several processes or machines: `cgda_jax.distributed` is the code path.
+`cgda_jax.distributed.initialize` joins the job described by the environment
+(``CGDA_COORDINATOR`` / ``CGDA_NUM_PROCESSES`` / ``CGDA_PROCESS_ID``, or
+``CGDA_CLUSTER=auto`` for JAX's own SLURM / Open MPI / Kubernetes detection) before
+anything else touches JAX; `cgda_jax.distributed.launch` starts N such processes on
+one machine; `cgda_jax.distributed.distributed_trials` runs each process's share of
+the trials with `run_trials` over that process's *local* devices (a
+`population_sharding` of ``jax.local_devices()``) and gathers the per-seed results to
+every process. No array spans processes there (trials are independent), so the
+kernels and the shardings above are unchanged; only process 0 writes files
+(`cgda_jax.distributed.is_writer`).
 
-    import jax
-    jax.distributed.initialize(
-        coordinator_address="host0:1234",  # host 0's address, any free port
-        num_processes=N_HOSTS,
-        process_id=THIS_HOST_INDEX,        # 0 .. N_HOSTS - 1
-    )
-
-(on SLURM, TPU pods or Kubernetes with the usual environment variables,
-``jax.distributed.initialize()`` with no arguments finds these itself).
-``jax.devices()`` then lists the devices of *all* hosts, so `population_mesh` spans
-them and a population generated inside ``jit`` from the same seed on every host is
-split across the whole cluster by `shard_population`.  Host-side arrays must be
-identical on every process when passed to `shard_leading` (or build the global array
-from per-host pieces with ``jax.make_array_from_process_local_data(sharding, local)``).
-Only process 0 should write results; fetch sharded outputs to the host with
-``jax.experimental.multihost_utils.process_allgather``.
+After ``jax.distributed.initialize``, ``jax.devices()`` lists the devices of *all*
+processes, so `population_mesh()` / ``devices="all"`` would build a mesh spanning
+every process, to split ONE population over every machine (not exercised by the
+tests; every process must then make the same calls with identical host arrays, or
+build global arrays with ``jax.make_array_from_process_local_data``). For many
+trials, `distributed_trials` needs no cross-machine traffic inside a generation.
 
 On one machine, ``XLA_FLAGS=--xla_force_host_platform_device_count=K`` (set before
 JAX is imported) splits the CPU into K devices, which is how the tests run this.

@@ -1,0 +1,342 @@
+"""Several processes (one machine or many) on JAX's own distributed runtime.
+
+Independent trials are embarrassingly parallel, so the multi-process path is plain:
+every process runs its share of the trial seeds on its own devices (the same
+`run_trials` as one process) and the per-seed results are then gathered to every
+process with one collective (``jax.experimental.multihost_utils.process_allgather``;
+on CPU through gloo). No array ever spans processes, so no kernel changes.
+
+- `initialize`: join the job. Reads the environment (see below) and calls
+  ``jax.distributed.initialize`` before anything else touches JAX; a no-op returning
+  False when no job is described (a plain single-process run).
+- `launch` (`cgda_jax.launch`; ``python -m cgda_jax.launch -n N -- CMD``): start N
+  copies of a command on this machine (a localhost coordinator on a free port),
+  stream their output prefixed ``[p0]``, ``[p1]``, ..., stop them all when one
+  fails, on a timeout or on Ctrl-C; returns the job's exit status.
+- `distributed_trials`: `run_trials` split over every process's devices, gathered
+  to every process; the same results as a single-process `run_trials` with the
+  same seeds (tests/test_distributed.py).
+- `share`, `allgather_objects`: the two pieces `distributed_trials` is made of, for
+  other per-seed work (e.g. the CLI's trials of an experiment config).
+- `is_writer`: True on process 0 only. **Rule: only process 0 writes files**
+  (results folders, reports, plots); every process holds the gathered results, the
+  others only compute.
+
+Environment (read by `initialize`; `launch` sets the first three)::
+
+    CGDA_COORDINATOR=host:port   process 0's address and a free port (required for
+                                 the explicit form; process 0 listens there)
+    CGDA_NUM_PROCESSES=N         processes in the job
+    CGDA_PROCESS_ID=i            this process, 0 .. N-1
+    CGDA_LOCAL_DEVICE_IDS=0,1    optional: the local accelerators this process
+                                 uses (e.g. one GPU per process on a GPU node)
+    CGDA_CLUSTER=auto            instead of the three above: JAX's own detection
+                                 (SLURM ``srun``, Open MPI ``mpirun``, Kubernetes,
+                                 Cloud TPU); or name one: slurm, ompi, mpi4py, ...
+
+On CPU the collectives go through gloo (``jax_cpu_collectives_implementation``), set
+by `initialize`; on GPU through NCCL, on TPU through the interconnect, unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = [
+    "ENV_CLUSTER",
+    "ENV_COORDINATOR",
+    "ENV_LOCAL_DEVICE_IDS",
+    "ENV_NUM_PROCESSES",
+    "ENV_PROCESS_ID",
+    "allgather_objects",
+    "distributed_trials",
+    "initialize",
+    "is_writer",
+    "launch",
+    "share",
+]
+
+ENV_COORDINATOR = "CGDA_COORDINATOR"
+ENV_NUM_PROCESSES = "CGDA_NUM_PROCESSES"
+ENV_PROCESS_ID = "CGDA_PROCESS_ID"
+ENV_LOCAL_DEVICE_IDS = "CGDA_LOCAL_DEVICE_IDS"
+ENV_CLUSTER = "CGDA_CLUSTER"
+
+
+def _env_int(name: str, env: dict[str, str]) -> int:
+    if name not in env:
+        raise ValueError(
+            f"{ENV_COORDINATOR} is set but {name} is not: set {ENV_COORDINATOR}, "
+            f"{ENV_NUM_PROCESSES} and {ENV_PROCESS_ID} together"
+        )
+    try:
+        return int(env[name])
+    except ValueError:
+        raise ValueError(f"{name}={env[name]!r} is not an integer") from None
+
+
+def job_from_env(env: dict[str, str] | None = None) -> dict[str, Any] | None:
+    """The keyword arguments of ``jax.distributed.initialize`` the environment asks
+    for, or None when it describes no job (see the module docstring).
+
+    Raises:
+        ValueError: an incomplete or malformed explicit form (names the variable).
+    """
+    env = dict(os.environ if env is None else env)
+    ids = env.get(ENV_LOCAL_DEVICE_IDS, "").strip()
+    try:
+        local = [int(i) for i in ids.split(",")] if ids else None
+    except ValueError:
+        raise ValueError(f"{ENV_LOCAL_DEVICE_IDS}={ids!r}: use e.g. 0 or 0,1") from None
+    if env.get(ENV_COORDINATOR, "").strip():
+        address = env[ENV_COORDINATOR].strip()
+        host, _, port = address.rpartition(":")
+        if not host or not port.isdigit():
+            raise ValueError(f"{ENV_COORDINATOR}={address!r}: use host:port")
+        n = _env_int(ENV_NUM_PROCESSES, env)
+        i = _env_int(ENV_PROCESS_ID, env)
+        if n < 1 or not 0 <= i < n:
+            raise ValueError(
+                f"{ENV_PROCESS_ID}={i} with {ENV_NUM_PROCESSES}={n}: need "
+                f"{ENV_NUM_PROCESSES} >= 1 and 0 <= {ENV_PROCESS_ID} < it"
+            )
+        return {"coordinator_address": address, "num_processes": n, "process_id": i,
+                "local_device_ids": local}
+    cluster = env.get(ENV_CLUSTER, "").strip().lower()
+    if cluster:
+        method = None if cluster == "auto" else cluster
+        return {"cluster_detection_method": method, "local_device_ids": local}
+    return None
+
+
+def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100) -> bool:
+    """Join the multi-process job the environment describes (module docstring).
+
+    Call it first, before any JAX computation (``jax.distributed.initialize`` must
+    precede the backends). Also selects gloo for CPU collectives.
+
+    Args:
+        timeout_s: how long to wait for every process to connect.
+        heartbeat_timeout_s: how soon the others notice a process that died.
+
+    Returns:
+        True when a job was joined (``jax.process_count()`` processes), False when
+        the environment describes none (single process; nothing done) or this
+        process already joined.
+
+    Raises:
+        ValueError: malformed CGDA_* variables.
+        RuntimeError: JAX already ran a computation in this process, or the job
+            could not be joined (the message names the coordinator).
+    """
+    import jax
+
+    job = job_from_env()
+    if job is None or jax.distributed.is_initialized():
+        return False
+    if "jax_cpu_collectives_implementation" in jax.config.values:
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    try:
+        jax.distributed.initialize(
+            **job,
+            initialization_timeout=int(timeout_s),
+            heartbeat_timeout_seconds=int(heartbeat_timeout_s),
+        )
+    except Exception as err:
+        where = job.get("coordinator_address") or (
+            f"{ENV_CLUSTER}={os.environ.get(ENV_CLUSTER)}")
+        raise RuntimeError(
+            f"could not join the multi-process job ({where}): "
+            f"{str(err).strip().splitlines()[0] if str(err).strip() else err!r}"
+        ) from err
+    return True
+
+
+def process_index() -> int:
+    """This process's index (0 when single-process; see `is_writer`)."""
+    import jax
+
+    if jax.distributed.is_initialized():
+        return int(jax.process_index())
+    return int(os.environ.get(ENV_PROCESS_ID, "0") or 0)
+
+
+def is_writer() -> bool:
+    """True on the one process that writes files: process 0.
+
+    After `initialize`, ``jax.process_index() == 0``; before it (or without a job),
+    the ``CGDA_PROCESS_ID`` variable decides, so a worker that has not joined yet
+    still does not write.
+    """
+    return process_index() == 0
+
+
+# ---------------------------------------------------------------------------
+# Splitting work and gathering results
+# ---------------------------------------------------------------------------
+
+
+def _device_counts() -> list[int]:
+    import jax
+
+    counts = [0] * jax.process_count()
+    for d in jax.devices():
+        counts[d.process_index] += 1
+    return counts
+
+
+def share(n_items: int, counts: Sequence[int] | None = None,
+          index: int | None = None) -> range:
+    """This process's contiguous slice of ``range(n_items)``.
+
+    Items are dealt evenly over all devices of all processes (the first
+    ``n_items % D`` devices get one more), so a process gets as many as its local
+    devices take. Contiguous, in process order: the slices of processes 0, 1, ...
+    concatenate to ``range(n_items)``.
+
+    Args:
+        n_items: how many (trials).
+        counts: devices per process (default: from ``jax.devices()``).
+        index: the process (default: this one).
+    """
+    import jax
+
+    counts = list(_device_counts() if counts is None else counts)
+    index = int(jax.process_index() if index is None else index)
+    total = sum(counts)
+    per_device = [n_items // total + (d < n_items % total) for d in range(total)]
+    first = sum(counts[:index])
+    start = sum(per_device[:first])
+    return range(start, start + sum(per_device[first:first + counts[index]]))
+
+
+#: How long `allgather_objects` waits for the slowest process (seconds).
+GATHER_TIMEOUT_S = 24 * 3600
+_GATHERS = [0]  # calls so far: names each call's barrier (same on every process)
+
+
+def _barrier(timeout_s: float) -> None:
+    """Wait on the coordination service (no collective) until every process is
+    here. The first CPU collective sets up gloo with a fixed 30 s limit for all
+    processes to arrive, so the collectives must start together even when one
+    process's share took minutes longer."""
+    from jax._src import distributed as jax_distributed
+
+    client = getattr(jax_distributed.global_state, "client", None)
+    if client is None:  # pragma: no cover - only without a job
+        return
+    _GATHERS[0] += 1
+    client.wait_at_barrier(f"cgda_allgather_{_GATHERS[0]}",
+                           timeout_in_ms=int(timeout_s * 1000))
+
+
+def allgather_objects(obj: Any, timeout_s: float | None = None) -> list[Any]:
+    """Every process's ``obj`` (picklable), in process order, on every process.
+
+    A barrier (waits up to `timeout_s`, default `GATHER_TIMEOUT_S`, for the
+    slowest process), then ``process_allgather`` of the sizes and of the pickled
+    bytes padded to the longest. Every process must call it, the same number of
+    times. Single process: ``[obj]``.
+    """
+    import jax
+    import numpy as np
+
+    if jax.process_count() == 1:
+        return [obj]
+    from jax.experimental import multihost_utils
+
+    _barrier(GATHER_TIMEOUT_S if timeout_s is None else timeout_s)
+    data = np.frombuffer(pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL),
+                         dtype=np.uint8)
+    sizes = np.asarray(multihost_utils.process_allgather(
+        np.array([data.size], np.int64))).reshape(-1)
+    padded = np.zeros(int(sizes.max()), np.uint8)
+    padded[:data.size] = data
+    rows = np.asarray(multihost_utils.process_allgather(padded))
+    return [pickle.loads(rows[k, :int(sizes[k])].tobytes())
+            for k in range(rows.shape[0])]
+
+
+def _portable(err: BaseException) -> BaseException:
+    try:
+        pickle.loads(pickle.dumps(err))
+        return err
+    except Exception:  # noqa: BLE001 - an unpicklable error travels as text
+        return RuntimeError(f"{type(err).__name__}: {err}")
+
+
+def _local_sharding(n_trials: int):
+    import jax
+
+    from cgda_jax.sharding import population_mesh, population_sharding
+
+    local = jax.local_devices()[:max(1, n_trials)]
+    if len(local) == 1:
+        return None  # the unsharded single-device program
+    return population_sharding(mesh=population_mesh(devices=local))
+
+
+def distributed_trials(strategy: str, sim: Any, goal: Any, n_trials: int, *,
+                       seed: int = 0, **kwargs: Any) -> list:
+    """`run_trials` over all processes of the job; every process gets all results.
+
+    Trial r (seed ``seed + r``) runs on the process whose `share` holds r, inside
+    one `run_trials` call per process over its local devices (its ``devices``
+    argument: a sharding of ``jax.local_devices()``), then the results are
+    gathered (`allgather_objects`). Without a job (one process) it is `run_trials`
+    on the local devices.
+
+    Args:
+        strategy, sim, goal, n_trials, seed: as in `run_trials`.
+        **kwargs: the rest of `run_trials`' arguments except ``devices`` (decided
+            here); ``progress_fn`` reports this process's trials only.
+
+    Returns:
+        ``n_trials`` `ExecutionResult`s in seed order, the same per seed as
+        ``run_trials(strategy, sim, goal, n_trials, seed=seed, **kwargs)``;
+        ``info["process"]``/``info["processes"]`` say where each ran, and its
+        wall/compile times are those of that process's batch.
+
+    Raises:
+        The first failing process's exception, on every process (so none waits
+        forever), with a note naming that process.
+    """
+    import jax
+
+    from cgda_jax.strategies.trials import run_trials
+
+    if "devices" in kwargs:
+        raise ValueError("distributed_trials decides `devices` itself (each "
+                         "process uses its local devices); do not pass it")
+    if int(n_trials) < 1:
+        raise ValueError(f"n_trials must be >= 1; got {n_trials}")
+    mine = share(int(n_trials))
+    me, n_proc = int(jax.process_index()), int(jax.process_count())
+    payload: tuple[str, Any]
+    try:
+        results = []
+        if len(mine):
+            results = run_trials(strategy, sim, goal, len(mine),
+                                 seed=seed + mine.start,
+                                 devices=_local_sharding(len(mine)), **kwargs)
+        for res in results:
+            res.info["process"], res.info["processes"] = me, n_proc
+        payload = ("ok", results)
+    except Exception as err:  # noqa: BLE001 - sent to the others, raised below
+        payload = ("error", _portable(err))
+    gathered = allgather_objects(payload)
+    for k, (status, value) in enumerate(gathered):
+        if status == "error":
+            value.add_note(f"(raised on process {k} of {n_proc})")
+            raise value
+    return [res for _, part in gathered for res in part]
+
+
+def launch(n_processes: int, argv: Sequence[str], **kwargs: Any) -> int:
+    """`cgda_jax.launch.launch`: run N copies of `argv` as one job on this machine."""
+    from cgda_jax.launch import launch as _launch
+
+    return _launch(n_processes, argv, **kwargs)
