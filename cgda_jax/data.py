@@ -275,9 +275,10 @@ def load_csv(
         The Demonstration.
 
     Raises:
-        FileNotFoundError: missing file. ValueError: empty file, not UTF-8, bad
-        header, bad values (non-numbers, NaN/inf, beyond float32's range; names the
-        line and column). KeyError: unknown column.
+        FileNotFoundError: missing file.
+        ValueError: empty file, not UTF-8, bad header, bad values (non-numbers,
+            NaN/inf, beyond float32's range; names the line and column).
+        KeyError: unknown column.
     """
     path = _path(path)
     rows = [r for r in _read_rows(path, ",") if any(c.strip() for c in r)]

@@ -95,7 +95,8 @@ class Simulator:
             None: the whole population in one ``vmap`` (fine on a GPU).
 
     Attributes:
-        n_dof, n_features, feature_names, lower (DoF,), upper (DoF,).
+        n_dof, n_features, feature_names, lower, upper: the robot's and the scene's
+            (lower and upper: the (DoF,) joint limits).
     """
 
     def __init__(
