@@ -18,11 +18,6 @@ def test_notebook_runs(path, monkeypatch, request, tmp_path_factory):
     if "real_teo" in path.stem:
         data = request.getfixturevalue("xgnitive_dir")  # skips when absent
         monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(data))
-    if "reading_runs" in path.stem:
-        import cgda_jax
-
-        if "load_run" not in cgda_jax._LAZY:  # written on the `figures` branch
-            pytest.skip("cgda_jax.load_run is not in this tree yet")
     monkeypatch.setenv("CGDA_SMALL", "1")
     monkeypatch.setenv("JAX_PLATFORMS", os.environ.get("JAX_PLATFORMS", "cpu"))
     nb = nbformat.read(path, as_version=4)
