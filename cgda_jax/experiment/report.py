@@ -53,8 +53,8 @@ def render_execution(cfg: ExperimentConfig, folder: pathlib.Path, joints, sim,
     """
     joints = np.asarray(joints, np.float32)
     paint = getattr(sim.scene, "centres", None) is not None
-    # the paint wall is updated per frame: keep every kinematic sub-step there
-    fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
+    # the paint wall sees every sub-step whatever the frames (render._postures)
+    fpw = min(int(sim.substeps), 8) if paint and sim.mode == "kinematic" else 3
     distance = None if paint else 1.6 * float(sim.robot.mj_model.stat.extent)
     camera: dict[str, Any] = {"distance": distance}
     path = getattr(sim.scene, "goal_path", None)
@@ -172,9 +172,14 @@ def _report(cfg: ExperimentConfig, result: dict) -> str:
                 f"waypoint, timestep {phys['timestep']:g} s, "
                 f"{len(phys['welded_joints'])} joints welded |",
             ]
+        if result.get("substeps"):
+            lines += [f"| kinematic sub-steps per waypoint | {result['substeps']} |"]
         if replay:
+            where = (f"timestep {replay['timestep']:g} s (MuJoCo C)"
+                     if "timestep" in replay
+                     else f"{replay['substeps']} sub-steps per waypoint")
             lines += [
-                f"| replay at timestep {replay['timestep']:g} s (MuJoCo C) | "
+                f"| replay at {where} | "
                 f"success {replay['success']}, max point error "
                 f"{replay['max_point_error']:.4g}, max feature difference "
                 f"{replay['max_feature_difference']:.3g} |",

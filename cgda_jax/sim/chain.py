@@ -39,7 +39,7 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["ChainOp", "build_chain_fk", "chain_ops"]
+__all__ = ["ChainOp", "build_chain_fk", "chain_ops", "hinge_reach"]
 
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -263,3 +263,24 @@ def build_chain_fk(
         return p
 
     return fk
+
+
+def hinge_reach(ops: Sequence[ChainOp], travel: Sequence[float]) -> float:
+    """An upper bound on the distance from the site to any evolved hinge's axis,
+    over every posture: for each hinge op, the lengths of the translations between
+    it and the site (rotations keep lengths; slide genes add ``travel[gene]``, their
+    largest displacement); the largest over the hinges (0 without hinges).
+
+    Args:
+        ops: `chain_ops` of the site.
+        travel: (DoF,) the largest ``|gene - offset|`` of each gene (slides only).
+    """
+    bound, reach = 0.0, 0.0
+    for op in reversed(ops):  # from the site up to the world
+        if op.kind == "const":
+            bound += float(np.linalg.norm(op.vec))
+        elif op.kind == "slide":
+            bound += float(np.linalg.norm(op.vec)) * float(travel[op.gene])
+        else:
+            reach = max(reach, bound)
+    return reach
