@@ -10,7 +10,7 @@ import pytest
 from cgda_jax import PaintWall, Simulator
 from cgda_jax.experiment.build import build_goal, build_simulator
 from cgda_jax.experiment.config import load_config
-from cgda_jax.sim.execute import path_substeps
+from cgda_jax.sim.chain import path_substeps
 from cgda_jax.sim.scenes import segment_distance2
 from cgda_jax.strategies.trials import run_trials
 

@@ -10,16 +10,18 @@ Modes:
         kinematics of the marker at each.  A scene with ``sweep`` (the paint wall)
         sees the straight segments between consecutive positions (from the last
         position of the previous move on), with enough sub-steps that they stay
-        within the scene's ``path_tolerance`` of the curved path (`path_substeps`);
-        other scenes are updated at each position.  No dynamics.
+        within the scene's ``path_tolerance`` of the curved path
+        (`cgda_jax.sim.chain.path_substeps`); other scenes are updated at each
+        position.  No dynamics.
     dynamic: a waypoint lasts ``waypoint_s`` seconds of physics (gravity, position
         actuators, joint limits).  The actuators track a smooth reference: a
         minimum-jerk move from the previous waypoint to this one over the first
         ``move_fraction`` of the time, then the waypoint is held while the arm
         settles; the features are read at the end.  The scene sees every physics
-        step (a paint wall: the segments between consecutive steps).  Every evolved joint needs a position actuator; fixed joints
-        are held by theirs; joints neither evolved nor fixed are welded where they
-        start (see `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
+        step (a paint wall: the segments between consecutive steps).  Every
+        evolved joint needs a position actuator; fixed joints are held by theirs;
+        joints neither evolved nor fixed are welded where they start (see
+        `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
         or MuJoCo C (``physics``); both give the same features.
 
 Waypoints outside the joint limits are clipped into them (the robot cannot go there).
@@ -46,52 +48,9 @@ from jax import Array
 
 from cgda_jax.sim.robot import Robot
 
-__all__ = ["MODES", "SimState", "Simulator", "path_substeps"]
+__all__ = ["MODES", "SimState", "Simulator"]
 
 MODES = ("kinematic", "dynamic")
-
-
-def path_substeps(robot: Robot, tolerance: float) -> int:
-    """Kinematic sub-steps per move that keep the straight segments between them
-    within ``tolerance`` (m) of the marker's true path, for any move between the
-    joint limits (hinge chains).
-
-    On a move that is linear in joint space, ``q(t) = q0 + t dq`` (t in [0, 1]),
-    the marker's acceleration is at most ``1.5 R |dq|_1^2``, R a bound on its
-    distance from every evolved hinge's axis (`cgda_jax.sim.chain.hinge_reach`):
-    differentiating ``sum_i dq_i a_i x (p - o_i)`` gives, per hinge i, the turn of
-    its axis and anchor by the hinges before it (``|dq_i| sum_{j<i} |dq_j| R``) and
-    the marker's own motion (``|dq_i| sum_j |dq_j| R``); summed, at most
-    ``(|dq|_1^2 + |dq|_1^2 / 2) R``.  A chord over a parameter interval h strays
-    at most ``h^2 / 8`` times the largest acceleration from the curve, so with K
-    sub-steps the polyline strays at most ``sag = (3 / 16) R (|dq|_1 / K)^2``,
-    where ``|dq|_1`` is at most the sum of the joint ranges:
-    ``K = ceil(sum(range) sqrt(3 R / (16 tolerance)))``.  A square's distance to
-    the polyline then differs from its distance to the true path by at most
-    ``tolerance``.  Evolved slide joints are not covered by the bound (their
-    ranges are left out of the sum).
-
-    Args:
-        robot: the `Robot`.
-        tolerance: metres (`PaintWall.path_tolerance`).
-    """
-    from cgda_jax.sim.chain import chain_ops, hinge_reach
-
-    if not tolerance > 0:
-        raise ValueError(f"path tolerance must be > 0 metres, got {tolerance}")
-    lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
-    ops = chain_ops(robot.mj_model, np.asarray(robot.qpos0, float),
-                    list(robot.joint_names), robot.marker_site)
-    offsets = np.zeros(robot.n_dof)
-    hinge = np.zeros(robot.n_dof, bool)
-    for op in ops:
-        if op.kind != "const":
-            offsets[op.gene] = op.offset
-            hinge[op.gene] = op.kind == "hinge"
-    travel = np.maximum(np.abs(lower - offsets), np.abs(upper - offsets))
-    reach = hinge_reach(ops, travel)
-    span = float(np.sum((upper - lower)[hinge]))
-    return max(1, int(np.ceil(span * np.sqrt(3.0 * reach / (16.0 * tolerance)))))
 
 
 @struct.dataclass
@@ -124,8 +83,9 @@ class Simulator:
         substeps: kinematic mode: forward-kinematics evaluations per waypoint, equally
             spaced in joint space from the previous posture, the last one at the
             waypoint (1 = jump straight to it).  A scene with a ``path_tolerance``
-            (`PaintWall`) raises it to `path_substeps`, so that the straight segments
-            between sub-steps stay that close to the marker's curved path.
+            (`PaintWall`) raises it to `cgda_jax.sim.chain.path_substeps`, so that
+            the straight segments between sub-steps stay that close to the
+            marker's curved path.
         waypoint_s: dynamic mode: seconds of physics per waypoint (the experiments
             default it to the demonstrations' timing: mean duration / knots).
         physics_steps: dynamic mode: physics steps per waypoint; None (default):
@@ -182,6 +142,8 @@ class Simulator:
         self.substeps = int(substeps)
         tol = getattr(scene, "path_tolerance", None)
         if mode == "kinematic" and tol is not None:
+            from cgda_jax.sim.chain import path_substeps
+
             self.substeps = max(self.substeps, path_substeps(robot, tol))
         self.batch_size = None if batch_size is None else int(batch_size)
         self.move_fraction = float(move_fraction)

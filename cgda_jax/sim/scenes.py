@@ -17,8 +17,8 @@ plus a small pytree state that the simulator carries through its scans:
 `MarkerScene`: the marker position itself (X, Y, Z in the robot's root frame).
 `PaintWall`: a wall of squares painted when the marker's path comes near their
 centres (`segment_distance2`: the swept segment between consecutive positions, not
-only the positions); the feature is the painted percentage.  The authors' TEO wall (Morante et al. 2015) is
-`PaintWall.grid()`'s default.
+only the positions); the feature is the painted percentage.  The authors' TEO wall
+(Morante et al. 2015) is `PaintWall.grid()`'s default.
 `ObjectScene`: features of anything in the simulated world, declared by name (an
 object's position or yaw, a valve's angle; `cgda_jax.sim.features`); the simulator
 reads them from the world state (MuJoCo sensors in dynamic mode, forward kinematics
@@ -118,7 +118,7 @@ class PaintWall:
         normal: (3,) wall normal, for drawing only.
         path_tolerance: metres: a kinematic `Simulator` takes enough sub-steps per
             move that the straight segments between them stay this close to the
-            marker's curved path (`cgda_jax.sim.execute.path_substeps`; 1 mm gives
+            marker's curved path (`cgda_jax.sim.chain.path_substeps`; 1 mm gives
             67 on TEO's arm); None: the simulator's sub-steps as given.
     """
 
