@@ -188,28 +188,36 @@ class MujocoMarker:
         return self.data.site_xpos[self.site].copy()
 
     def init_state(self, start: np.ndarray | None = None) -> tuple:
-        """(posture (DoF,), painted (S,) or None): ``start`` (default zeros),
-        clipped, with the scene updated there."""
+        """(posture (DoF,), painted (S,) or None, marker (3,)): ``start`` (default
+        zeros), clipped, with the scene updated there."""
         q = np.zeros(len(self.qadr)) if start is None else np.asarray(start, float)
         q = np.clip(q, self.lower, self.upper)
         painted = None if self.centres is None else np.zeros(len(self.centres), bool)
-        self._paint(painted, self.marker(q))
-        return q, painted
+        pos = self.marker(q)
+        self._paint(painted, pos, pos)
+        return q, painted, pos
 
-    def _paint(self, painted, pos) -> None:
-        if painted is not None:
-            painted |= np.sum((self.centres - pos) ** 2, axis=1) <= self.radius**2
+    def _paint(self, painted, start, end) -> None:
+        """Paint along the segment start -> end (as ``PaintWall.sweep``)."""
+        if painted is None:
+            return
+        d = end - start
+        dd = float(d @ d)
+        t = np.clip((self.centres - start) @ d / dd, 0, 1) if dd > 0 else 0.0
+        closest = start + np.multiply.outer(t, d)
+        painted |= np.sum((self.centres - closest) ** 2, axis=1) <= self.radius**2
 
     def step(self, state: tuple, waypoint: np.ndarray) -> tuple[tuple, np.ndarray]:
         """Move to one (DoF,) waypoint: (new state, features (F,))."""
-        q, painted = state
+        q, painted, last = state
         painted = None if painted is None else painted.copy()
         w = np.clip(np.asarray(waypoint, np.float64), self.lower, self.upper)
         for a in self.alphas:
             pos = self.marker(q + a * (w - q))
-            self._paint(painted, pos)
+            self._paint(painted, last, pos)
+            last = pos
         feats = pos if painted is None else np.array([100.0 * painted.mean()])
-        return (w, painted), feats
+        return (w, painted, last), feats
 
     def execute(self, waypoints: np.ndarray, start: np.ndarray | None = None):
         """Features (N, F) of executing (N, DoF) waypoints from ``start``."""

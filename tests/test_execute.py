@@ -71,10 +71,11 @@ def _teo_marker(teo, deg):
 
 def test_substeps_paint_along_the_path(teo):
     """A square passed through between two waypoints is painted with sub-steps, and
-    not when the arm jumps."""
+    not when the arm jumps (one straight segment: the chord misses the arc's
+    middle)."""
     a, b = [70, 0, 0], [70, -70, 0]  # arm forward, swept outwards to the right
     mid = _teo_marker(teo, [70, -35, 0])
-    wall = PaintWall(np.array([mid]), radius=0.05)
+    wall = PaintWall(np.array([mid]), radius=0.05, path_tolerance=None)
     assert np.linalg.norm(_teo_marker(teo, a) - mid) > 0.2
     assert np.linalg.norm(_teo_marker(teo, b) - mid) > 0.2
     wps = np.radians([a, b]).astype(np.float32)
@@ -86,19 +87,31 @@ def test_substeps_paint_along_the_path(teo):
 
 def test_teo_paint_features_match_a_host_reference(teo):
     """Painted percentage after each waypoint = a NumPy replay of the same sub-steps
-    through MuJoCo C forward kinematics."""
+    through MuJoCo C forward kinematics, the wall painted along the straight
+    segments between them (the closest point of each segment by projection)."""
     wall = PaintWall.grid()
     sim = Simulator(teo, wall, substeps=4)
+    k_sub = sim.substeps
+    assert k_sub > 4  # raised for the wall's path tolerance
     wps = _random_waypoints(teo, (8,), seed=3)
     got = np.asarray(sim.execute(wps))[:, 0]
+
+    def seg_near(p, q):
+        d = q - p
+        t = np.clip((wall.centres - p) @ d / max(d @ d, 1e-30), 0, 1)
+        closest = p + t[:, None] * d
+        return np.linalg.norm(wall.centres - closest, axis=1) <= 0.12
+
     painted = np.zeros(16, bool)
     prev = np.zeros(3, np.float32)
-    painted |= np.linalg.norm(wall.centres - _c_marker(teo, prev), axis=1) <= 0.12
+    last = _c_marker(teo, prev)
+    painted |= np.linalg.norm(wall.centres - last, axis=1) <= 0.12
     want = []
     for w in wps:
-        for k in range(1, 5):
-            m = _c_marker(teo, prev + k / 4 * (w - prev))
-            painted |= np.linalg.norm(wall.centres - m, axis=1) <= 0.12
+        for k in range(1, k_sub + 1):
+            m = _c_marker(teo, prev + k / k_sub * (w - prev))
+            painted |= seg_near(last, m)
+            last = m
         want.append(100 * painted.mean())
         prev = w
     np.testing.assert_allclose(got, want)

@@ -24,8 +24,10 @@ robot = c.Robot.from_mjcf(c.model_path("teo.xml"),
 sim = c.Simulator(robot, c.PaintWall.grid(), substeps=3)
 wps = np.radians([[40, 0, 60], [60, -30, 60], [70, -60, 40]]).astype(np.float32)
 print("FEATURES", sim.execute(wps)[:, 0].tolist())
-render_trajectory(sim, wps, out + "/run.gif", width=240, height=180)
-render_trajectory(sim, wps, out + "/frames", width=240, height=180)
+render_trajectory(sim, wps, out + "/run.gif", width=240, height=180,
+                  frames_per_waypoint=3)
+render_trajectory(sim, wps, out + "/frames", width=240, height=180,
+                  frames_per_waypoint=3)
 """
 
 
@@ -64,7 +66,7 @@ def test_render_gif_and_frames_show_the_painting(tmp_path):
     features = json.loads(stdout.split("FEATURES", 1)[1].strip().splitlines()[0])
     assert features[-1] > 0  # the path paints something
     frames = sorted((tmp_path / "frames").glob("frame_*.png"))
-    assert len(frames) == 1 + 3 * 3  # start + substeps per waypoint
+    assert len(frames) == 1 + 3 * 3  # start + frames per waypoint
     first = np.asarray(Image.open(frames[0]).convert("RGB"))
     last = np.asarray(Image.open(frames[-1]).convert("RGB"))
     assert first.shape == (180, 240, 3)
@@ -75,7 +77,8 @@ def test_render_gif_and_frames_show_the_painting(tmp_path):
 
 
 def test_host_paint_states_match_the_scene_update_per_frame():
-    """The renderer's NumPy paint states equal PaintWall.update run marker by marker."""
+    """The renderer's paint states equal PaintWall.sweep along the path so far
+    (the straight segments between consecutive markers, as the simulator paints)."""
     import cgda_jax as c
     from cgda_jax.sim.render import _scene_states
 
@@ -86,12 +89,15 @@ def test_host_paint_states_match_the_scene_update_per_frame():
     path += rng.normal(0, 0.05, path.shape)
     trails = np.split(path, [1, 3, 4, 7, 9, 10, 14, 15, 18, 21])
     got = _scene_states(wall, trails)
-    state = wall.init_state()
     assert len(got) == len(trails)
-    for frame, trail in zip(got, trails):
-        for marker in trail:
-            state = wall.update(state, np.asarray(marker, np.float32))
+    ends = np.cumsum([len(t) for t in trails])
+    for frame, end in zip(got, ends):
+        state = wall.sweep(wall.init_state(), path[:end])
         np.testing.assert_array_equal(frame, np.asarray(state))
+    # a stroke across square 5 with both ends 0.2 m from its centre paints it
+    c, dy = wall.centres[5], np.array([-0.1, 0.2, 0.0])
+    stroke = _scene_states(wall, [(c - dy)[None], (c + dy)[None]])
+    assert not stroke[0][5] and stroke[1][5]
     assert 0 < np.sum(got[-1]) and np.sum(got[0]) < np.sum(got[-1])
 
 

@@ -186,8 +186,8 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
         sim = sim if sim is not None else run.simulator()
         joints = np.asarray(run.arrays["joints"], np.float32)
         paint = getattr(sim.scene, "centres", None) is not None
-        # the paint wall is updated per frame: keep every kinematic sub-step there
-        fpw = int(sim.substeps) if paint and sim.mode == "kinematic" else 3
+        # the paint wall sees every sub-step whatever the frames (render._postures)
+        fpw = min(int(sim.substeps), 8) if paint and sim.mode == "kinematic" else 3
         marker = type(sim.scene).__name__ == "MarkerScene"
         goal = np.asarray(run.arrays["goal"], float)
         camera = _camera(sim)

@@ -94,9 +94,14 @@ def _report(cfg: ExperimentConfig, result: dict, plots: list[str] | None = None)
                 f"waypoint, timestep {phys['timestep']:g} s, "
                 f"{len(phys['welded_joints'])} joints welded |",
             ]
+        if result.get("substeps"):
+            lines += [f"| kinematic sub-steps per waypoint | {result['substeps']} |"]
         if replay:
+            where = (f"timestep {replay['timestep']:g} s (MuJoCo C)"
+                     if "timestep" in replay
+                     else f"{replay['substeps']} sub-steps per waypoint")
             lines += [
-                f"| replay at timestep {replay['timestep']:g} s (MuJoCo C) | "
+                f"| replay at {where} | "
                 f"success {replay['success']}, max point error "
                 f"{_with_unit(replay['max_point_error'], unit)}, max feature "
                 f"difference {replay['max_feature_difference']:.3g} |",

@@ -1,8 +1,9 @@
 """Running an experiment (recognition or execution, see the package docstring) into
 a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.png``
 (+ the robot's video ``plots/execution.mp4`` and ``.gif``), ``report.md``; read it
-back with `cgda_jax.load_run`. Dynamic runs also replay their result on finer
-physics. The folder itself (temporary folder, lock, move into place) belongs to
+back with `cgda_jax.load_run`. Every execution run also replays its result on a finer
+simulator (dynamic: finer physics; kinematic: more sub-steps). The folder itself
+(temporary folder, lock, move into place) belongs to
 `cgda_jax.experiment.results`.
 """
 
@@ -110,15 +111,22 @@ def _demo_arrays(demos, prefix: str, scale: float = 1.0) -> dict[str, np.ndarray
     return out
 
 
-def replay_check(sim, res, factor: int = 4) -> dict:
-    """Re-execute the reported joints with `factor` x finer physics on MuJoCo C
-    (`Simulator.finer`): the features must agree, or the optimiser exploited the
-    step size it was evaluated at."""
-    fine = sim.finer(factor)
+#: How much finer a result is replayed: dynamic runs at timestep / 4 (MuJoCo C),
+#: kinematic runs at 16 x the sub-steps.
+REPLAY_FACTOR = {"dynamic": 4, "kinematic": 16}
+
+
+def replay_check(sim, res, factor: int | None = None) -> dict:
+    """Re-execute the reported joints on a `factor` x finer simulator
+    (`Simulator.finer`: dynamic mode timestep / factor on MuJoCo C, kinematic mode
+    factor x the sub-steps; default `REPLAY_FACTOR`): the features must agree, or
+    the optimiser exploited the resolution it was evaluated at."""
+    fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
     feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
     errors = np.linalg.norm(feats - np.asarray(res.goal), axis=-1)
-    return {
-        "timestep": fine.physics.timestep,
+    out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
+           else {"substeps": fine.substeps})
+    return out | {
         "max_feature_difference": float(np.abs(feats - res.features).max()),
         "max_point_error": float(errors.max()),
         "success": bool(np.all(errors < res.tolerance)),
@@ -164,7 +172,9 @@ def run_execution(
             "timestep": sim.physics.timestep, "physics_steps": sim.physics_steps,
             "welded_joints": list(sim.physics.welded),
         }
-        summary["replay"] = replay_check(sim, res)
+    else:
+        summary["substeps"] = sim.substeps
+    summary["replay"] = replay_check(sim, res)
     run = run_in_memory(out, cfg, summary, arrays)
     if cfg.output.plots:
         draw_figures(run, out / "plots")

@@ -39,7 +39,7 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["ChainOp", "build_chain_fk", "chain_ops"]
+__all__ = ["ChainOp", "build_chain_fk", "chain_ops", "hinge_reach", "path_substeps"]
 
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -263,3 +263,65 @@ def build_chain_fk(
         return p
 
     return fk
+
+
+def hinge_reach(ops: Sequence[ChainOp], travel: Sequence[float]) -> float:
+    """An upper bound on the distance from the site to any evolved hinge's axis,
+    over every posture: for each hinge op, the lengths of the translations between
+    it and the site (rotations keep lengths; slide genes add ``travel[gene]``, their
+    largest displacement); the largest over the hinges (0 without hinges).
+
+    Args:
+        ops: `chain_ops` of the site.
+        travel: (DoF,) the largest ``|gene - offset|`` of each gene (slides only).
+    """
+    bound, reach = 0.0, 0.0
+    for op in reversed(ops):  # from the site up to the world
+        if op.kind == "const":
+            bound += float(np.linalg.norm(op.vec))
+        elif op.kind == "slide":
+            bound += float(np.linalg.norm(op.vec)) * float(travel[op.gene])
+        else:
+            reach = max(reach, bound)
+    return reach
+
+
+def path_substeps(robot, tolerance: float) -> int:
+    """Kinematic sub-steps per move that keep the straight segments between them
+    within ``tolerance`` (m) of the marker's true path, for any move between the
+    joint limits (hinge chains).
+
+    On a move that is linear in joint space, ``q(t) = q0 + t dq`` (t in [0, 1]),
+    the marker's acceleration is at most ``1.5 R |dq|_1^2``, R a bound on its
+    distance from every evolved hinge's axis (`hinge_reach`):
+    differentiating ``sum_i dq_i a_i x (p - o_i)`` gives, per hinge i, the turn of
+    its axis and anchor by the hinges before it (``|dq_i| sum_{j<i} |dq_j| R``) and
+    the marker's own motion (``|dq_i| sum_j |dq_j| R``); summed, at most
+    ``(|dq|_1^2 + |dq|_1^2 / 2) R``.  A chord over a parameter interval h strays
+    at most ``h^2 / 8`` times the largest acceleration from the curve, so with K
+    sub-steps the polyline strays at most ``sag = (3 / 16) R (|dq|_1 / K)^2``,
+    where ``|dq|_1`` is at most the sum of the joint ranges:
+    ``K = ceil(sum(range) sqrt(3 R / (16 tolerance)))``.  A square's distance to
+    the polyline then differs from its distance to the true path by at most
+    ``tolerance``.  Evolved slide joints are not covered by the bound (their
+    ranges are left out of the sum).
+
+    Args:
+        robot: the `cgda_jax.sim.robot.Robot`.
+        tolerance: metres (`PaintWall.path_tolerance`).
+    """
+    if not tolerance > 0:
+        raise ValueError(f"path tolerance must be > 0 metres, got {tolerance}")
+    lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
+    ops = chain_ops(robot.mj_model, np.asarray(robot.qpos0, float),
+                    list(robot.joint_names), robot.marker_site)
+    offsets = np.zeros(robot.n_dof)
+    hinge = np.zeros(robot.n_dof, bool)
+    for op in ops:
+        if op.kind != "const":
+            offsets[op.gene] = op.offset
+            hinge[op.gene] = op.kind == "hinge"
+    travel = np.maximum(np.abs(lower - offsets), np.abs(upper - offsets))
+    reach = hinge_reach(ops, travel)
+    span = float(np.sum((upper - lower)[hinge]))
+    return max(1, int(np.ceil(span * np.sqrt(3.0 * reach / (16.0 * tolerance)))))

@@ -7,16 +7,21 @@ device already and every shape (waypoints, sub-steps, physics steps) is static.
 Modes:
     kinematic (default): from the current posture to the waypoint in ``substeps``
         equally spaced joint-space sub-steps (the last one is the waypoint); forward
-        kinematics of the marker at each, the scene updated at each, so the marker
-        sweeps the path (a wall is painted along it).  No dynamics.
+        kinematics of the marker at each.  A scene with ``sweep`` (the paint wall)
+        sees the straight segments between consecutive positions (from the last
+        position of the previous move on), with enough sub-steps that they stay
+        within the scene's ``path_tolerance`` of the curved path
+        (`cgda_jax.sim.chain.path_substeps`); other scenes are updated at each
+        position.  No dynamics.
     dynamic: a waypoint lasts ``waypoint_s`` seconds of physics (gravity, position
         actuators, joint limits).  The actuators track a smooth reference: a
         minimum-jerk move from the previous waypoint to this one over the first
         ``move_fraction`` of the time, then the waypoint is held while the arm
-        settles; the features are read at the end.  The scene is updated at every
-        physics step.  Every evolved joint needs a position actuator; fixed joints
-        are held by theirs; joints neither evolved nor fixed are welded where they
-        start (see `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
+        settles; the features are read at the end.  The scene sees every physics
+        step (a paint wall: the segments between consecutive steps).  Every
+        evolved joint needs a position actuator; fixed joints are held by theirs;
+        joints neither evolved nor fixed are welded where they start (see
+        `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
         or MuJoCo C (``physics``); both give the same features.
 
 Waypoints outside the joint limits are clipped into them (the robot cannot go there).
@@ -58,11 +63,14 @@ class SimState:
         scene: the scene's state (e.g. painted (S,) bool).
         data: dynamic mode: the physics state ``concat(qpos, qvel)`` of the simulated
             model (see `cgda_jax.sim.physics.Physics`); ``None`` in kinematic mode.
+        marker: (3,) the marker's last position, where the next move's swept path
+            starts (None: recomputed from ``genes``).
     """
 
     genes: Array
     scene: Any
     data: Any = None
+    marker: Any = None
 
 
 class Simulator:
@@ -74,7 +82,10 @@ class Simulator:
         mode: "kinematic" (default) or "dynamic".
         substeps: kinematic mode: forward-kinematics evaluations per waypoint, equally
             spaced in joint space from the previous posture, the last one at the
-            waypoint (1 = jump straight to it).
+            waypoint (1 = jump straight to it).  A scene with a ``path_tolerance``
+            (`PaintWall`) raises it to `cgda_jax.sim.chain.path_substeps`, so that
+            the straight segments between sub-steps stay that close to the
+            marker's curved path.
         waypoint_s: dynamic mode: seconds of physics per waypoint (the experiments
             default it to the demonstrations' timing: mean duration / knots).
         physics_steps: dynamic mode: physics steps per waypoint; None (default):
@@ -130,6 +141,11 @@ class Simulator:
         self.scene = scene
         self.mode = mode
         self.substeps = int(substeps)
+        tol = getattr(scene, "path_tolerance", None)
+        if mode == "kinematic" and tol is not None:
+            from cgda_jax.sim.chain import path_substeps
+
+            self.substeps = max(self.substeps, path_substeps(robot, tol))
         self.batch_size = None if batch_size is None else int(batch_size)
         self.move_fraction = float(move_fraction)
         self.n_dof = robot.n_dof
@@ -212,7 +228,7 @@ class Simulator:
             data = self.physics.start_state(genes0)  # at rest
         marker = self.robot.marker_position(genes0)  # welded joints sit at qpos0
         scene = self.scene.update(self.scene.init_state(), marker)
-        return SimState(genes=genes0, scene=scene, data=data)
+        return SimState(genes=genes0, scene=scene, data=data, marker=marker)
 
     def step(self, state: SimState, waypoint: Array) -> tuple[SimState, Array]:
         """Move to one waypoint.
@@ -234,17 +250,31 @@ class Simulator:
         alphas = jnp.asarray(self._alphas)[:, None]
         path = state.genes + alphas * (target - state.genes)  # (K, DoF)
         markers = jax.vmap(self.robot.marker_position)(path)  # (K, 3)
-
-        def paint(scene_state, marker):
-            return self.scene.update(scene_state, marker), None
-
-        scene_state, _ = jax.lax.scan(paint, state.scene, markers)
+        scene_state = self._paint(state, markers)
         if self._fset is not None:  # objects: forward kinematics of the whole world
             data = self.robot.kinematics_data(self.robot.qpos(target))
             features = self._fset.from_data(data)
         else:
             features = self.scene.features(scene_state, markers[-1])
-        return state.replace(genes=target, scene=scene_state), features
+        return state.replace(genes=target, scene=scene_state,
+                             marker=markers[-1]), features
+
+    def _paint(self, state: SimState, markers: Array):
+        """The scene state after the marker moved from ``state.marker`` through
+        ``markers`` (K, 3): `sweep` along the polyline where the scene has it, else
+        `update` at each position."""
+        sweep = getattr(self.scene, "sweep", None)
+        if sweep is not None:
+            start = state.marker
+            if start is None:
+                start = self.robot.marker_position(state.genes)
+            start = jnp.asarray(start, markers.dtype)
+            return sweep(state.scene, jnp.concatenate([start[None], markers]))
+
+        def paint(scene_state, marker):
+            return self.scene.update(scene_state, marker), None
+
+        return jax.lax.scan(paint, state.scene, markers)[0]
 
     def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
         phys = self.physics
@@ -254,16 +284,13 @@ class Simulator:
         ctrl = c0 + jnp.asarray(self._profile)[:, None] * (c1 - c0)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
         path = sens[:, phys.marker_adr:phys.marker_adr + 3]
-
-        def paint(scene_state, marker):
-            return self.scene.update(scene_state, marker), None
-
-        scene_state, _ = jax.lax.scan(paint, state.scene, path)
+        scene_state = self._paint(state, path)
         if self._fset is not None:  # objects: the world's sensors at the end
             features = self._fset.from_sensordata(sens[-1])
         else:
             features = self.scene.features(scene_state, path[-1])
-        return SimState(genes=target, scene=scene_state, data=data), features
+        return SimState(genes=target, scene=scene_state, data=data,
+                        marker=path[-1]), features
 
     def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:
         shape = tuple(jnp.shape(waypoints))

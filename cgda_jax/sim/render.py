@@ -113,12 +113,21 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
     data.qpos[robot.qpos_adr] = genes
     mujoco.mj_kinematics(model, data)
     yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy(), 0
+    n, k_sub = frames_per_waypoint, sim.substeps
+
+    def marker(alpha):
+        data.qpos[robot.qpos_adr] = genes + alpha * (wp - genes)
+        mujoco.mj_kinematics(model, data)
+        return data.site_xpos[robot.site_id].copy()
+
     for j, wp in enumerate(waypoints, start=1):
         wp = np.clip(wp, lo, hi)
-        for k in range(1, frames_per_waypoint + 1):
-            data.qpos[robot.qpos_adr] = genes + k / frames_per_waypoint * (wp - genes)
-            mujoco.mj_kinematics(model, data)
-            yield data.qpos.copy(), data.site_xpos[robot.site_id][None].copy(), j
+        # the trail holds the simulator's sub-steps since the previous frame
+        subs = [marker(i / k_sub) for i in range(1, k_sub + 1)]
+        for k in range(1, n + 1):
+            trail = subs[(k - 1) * k_sub // n:k * k_sub // n]
+            marker(k / n)
+            yield data.qpos.copy(), np.array(trail).reshape(-1, 3), j
         genes = wp
 
 
@@ -130,17 +139,19 @@ def _model(sim) -> mujoco.MjModel:
 def _scene_states(scene, trails: list[np.ndarray]) -> list:
     """The scene state after each frame's marker trail (K_i, 3), on the host.
 
-    A paint wall (``centres`` (S, 3), ``radius``) is evaluated in NumPy for all
-    markers at once (the same rule as ``PaintWall.update``: painted for good once
-    within ``radius``); other scenes go through ``scene.update`` per marker.
+    A scene with ``sweep`` (a paint wall) sees the polyline through every marker
+    of every trail at once, as the simulator's moves do (`PaintWall.near_segment`
+    per segment, painted for good); other scenes go through ``scene.update`` per
+    marker.
     """
     state = scene.init_state()
-    centres = getattr(scene, "centres", None)
-    if centres is not None and hasattr(scene, "radius"):
+    if hasattr(scene, "near_segment"):
         markers = np.concatenate(trails).astype(np.float32)  # (K, 3) as simulated
-        d2 = np.sum((np.asarray(centres, np.float32)[None] - markers[:, None]) ** 2, axis=-1)
-        hit = np.logical_or.accumulate(d2 <= np.float32(scene.radius) ** 2, axis=0)
-        hit |= np.asarray(state, bool)
+        hit = np.asarray(scene.near(markers[0]), bool)[None]
+        if len(markers) > 1:
+            seg = np.asarray(scene.near_segment(markers[:-1], markers[1:]), bool)
+            hit = np.concatenate([hit, seg])
+        hit = np.logical_or.accumulate(hit, axis=0) | np.asarray(state, bool)
         ends = np.cumsum([len(t) for t in trails]) - 1
         return [hit[k] for k in ends]
     out = []
@@ -203,7 +214,8 @@ def render_frames(
         sim: a `Simulator` (its robot, scene and mode are used).
         waypoints: (N, DoF) joint values, clipped into the limits as in execution.
         frames_per_waypoint: frames per waypoint (default ``sim.substeps``; the paint
-            state is updated at every frame, and in dynamic mode at every physics step).
+            state follows every kinematic sub-step or physics step, as simulated,
+            whatever the frames).
         width, height: image size in pixels.
         lookat, distance, azimuth, elevation: free camera (defaults frame the robot
             and the wall from behind its right shoulder).

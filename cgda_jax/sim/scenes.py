@@ -4,14 +4,21 @@ A scene is static configuration (shapes and constants, closed over by the simula
 plus a small pytree state that the simulator carries through its scans:
 
 - ``init_state() -> state``
-- ``update(state, marker_pos (3,)) -> state``  (called at every sub-step)
+- ``update(state, marker_pos (3,)) -> state``  (the marker is at ``marker_pos``)
 - ``features(state, marker_pos (3,)) -> (F,)``  (called at each waypoint)
 - ``feature_names`` (F,), ``n_features``
+- optional ``sweep(state, path (K + 1, 3)) -> state``: the marker moved along the
+  polyline ``path`` (straight segments between consecutive positions).  For each
+  move the simulator passes the previous position followed by every sub-step
+  (kinematic mode) or physics step (dynamic mode) when the scene has it, else it
+  calls ``update`` at each position; a scene that depends on the whole path
+  (`PaintWall`) defines it so that nothing between two sampled positions is missed.
 
 `MarkerScene`: the marker position itself (X, Y, Z in the robot's root frame).
-`PaintWall`: a wall of squares painted when the marker comes near their centres; the
-feature is the painted percentage.  The authors' TEO wall (Morante et al. 2015) is
-`PaintWall.grid()`'s default.
+`PaintWall`: a wall of squares painted when the marker's path comes near their
+centres (`segment_distance2`: the swept segment between consecutive positions, not
+only the positions); the feature is the painted percentage.  The authors' TEO wall
+(Morante et al. 2015) is `PaintWall.grid()`'s default.
 `ObjectScene`: features of anything in the simulated world, declared by name (an
 object's position or yaw, a valve's angle; `cgda_jax.sim.features`); the simulator
 reads them from the world state (MuJoCo sensors in dynamic mode, forward kinematics
@@ -27,11 +34,40 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["TEO_WALL_Y", "TEO_WALL_Z", "MarkerScene", "ObjectScene", "PaintWall"]
+__all__ = [
+    "TEO_WALL_Y",
+    "TEO_WALL_Z",
+    "MarkerScene",
+    "ObjectScene",
+    "PaintWall",
+    "segment_distance2",
+]
 
 #: The authors' paint wall (world frame, robot waist at z = 0.3).
 TEO_WALL_Y = (-0.8, -0.6, -0.4, -0.2)
 TEO_WALL_Z = (0.32, 0.52, 0.72, 0.92)
+
+
+def segment_distance2(points: Array, start: Array, end: Array) -> Array:
+    """Squared distance from each of ``points`` (S, 3) to the segment
+    ``start -> end`` ((..., 3) each), in closed form: the segment's closest point to
+    p is ``start + t d`` with ``d = end - start`` and
+    ``t = clip((p - start) . d / (d . d), 0, 1)`` (a zero-length segment is its
+    start point).  Returns (..., S).
+
+    Written per coordinate, without (..., S, 3) temporaries or small matrix
+    products (slow on XLA's CPU back-end under ``vmap``):
+    ``|p - start - t d|^2 = |p - start|^2 - 2 t (p - start) . d + t^2 d . d``.
+    """
+    points = jnp.asarray(points)
+    start = jnp.asarray(start, points.dtype)
+    d = jnp.asarray(end, points.dtype) - start
+    rel = [points[:, c] - start[..., c, None] for c in range(3)]  # (..., S) each
+    rel_d = sum(r * d[..., c, None] for c, r in enumerate(rel))
+    rel2 = sum(r * r for r in rel)
+    dd = jnp.sum(d * d, axis=-1)[..., None]
+    t = jnp.clip(rel_d / jnp.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return jnp.maximum(rel2 - 2.0 * t * rel_d + t * t * dd, 0.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,21 +102,31 @@ class MarkerScene:
 
 @dataclass(frozen=True, eq=False)
 class PaintWall:
-    """A wall of S squares; a square is painted, for good, once the marker is within
-    ``radius`` of its centre.  Feature: painted percentage (F = 1), in multiples of
-    100 / S.  State: ``painted`` (S,) bool.
+    """A wall of S squares; a square is painted, for good, once the marker's path
+    comes within ``radius`` of its centre.  Feature: painted percentage (F = 1), in
+    multiples of 100 / S.  State: ``painted`` (S,) bool.
+
+    `update` paints at one position; `sweep` paints along the straight segments
+    between consecutive positions (closed-form point-to-segment distance), which is
+    what the simulator calls for each move: the marker may travel further between
+    two sub-steps than a square's painting diameter.
 
     Args:
         centres: (S, 3) square centres in the robot's root frame (metres).
         radius: painting distance (metres); the authors used 0.12.
         size: square side (metres), for drawing only.
         normal: (3,) wall normal, for drawing only.
+        path_tolerance: metres: a kinematic `Simulator` takes enough sub-steps per
+            move that the straight segments between them stay this close to the
+            marker's curved path (`cgda_jax.sim.chain.path_substeps`; 1 mm gives
+            67 on TEO's arm); None: the simulator's sub-steps as given.
     """
 
     centres: np.ndarray
     radius: float = 0.12
     size: float = 0.20
     normal: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    path_tolerance: float | None = 0.001
     feature_names: tuple[str, ...] = field(default=("painted",))
 
     def __post_init__(self):
@@ -93,6 +139,9 @@ class PaintWall:
             raise ValueError("PaintWall centres contain NaN or inf")
         if not self.radius > 0:
             raise ValueError(f"PaintWall radius must be > 0, got {self.radius}")
+        if self.path_tolerance is not None and not self.path_tolerance > 0:
+            raise ValueError(
+                f"PaintWall path_tolerance must be > 0, got {self.path_tolerance}")
         object.__setattr__(self, "centres", centres)
 
     @classmethod
@@ -104,6 +153,7 @@ class PaintWall:
         root_height: float = 0.3,
         radius: float = 0.12,
         size: float = 0.20,
+        path_tolerance: float | None = 0.001,
     ) -> PaintWall:
         """A vertical wall (normal +x) of len(ys) x len(zs) squares at ``x``.
 
@@ -113,7 +163,8 @@ class PaintWall:
         (z - 0.3).  Order: z-major (bottom row first), then y.
         """
         centres = [(x, y, z - root_height) for z in zs for y in ys]
-        return cls(np.array(centres), radius=radius, size=size)
+        return cls(np.array(centres), radius=radius, size=size,
+                   path_tolerance=path_tolerance)
 
     @property
     def n_squares(self) -> int:
@@ -131,8 +182,24 @@ class PaintWall:
         d2 = jnp.sum((jnp.asarray(self.centres) - marker_pos) ** 2, axis=-1)
         return d2 <= self.radius**2
 
+    def near_segment(self, start: Array, end: Array) -> Array:
+        """(..., S) bool: squares within ``radius`` of the segment ``start -> end``
+        (``(3,)`` each, or batched ``(..., 3)``)."""
+        start = jnp.asarray(start, jnp.float32)
+        end = jnp.asarray(end, jnp.float32)
+        d2 = segment_distance2(jnp.asarray(self.centres), start, end)
+        return d2 <= self.radius**2
+
     def update(self, state: Array, marker_pos: Array) -> Array:
         return state | self.near(marker_pos)
+
+    def sweep(self, state: Array, path: Array) -> Array:
+        """Paint along the polyline ``path`` (K + 1, 3): the K straight segments
+        between consecutive positions (all at once; one position paints at it)."""
+        path = jnp.asarray(path, jnp.float32)
+        if path.shape[0] == 1:
+            return self.update(state, path[0])
+        return state | jnp.any(self.near_segment(path[:-1], path[1:]), axis=0)
 
     def features(self, state: Array, marker_pos: Array) -> Array:
         del marker_pos
