@@ -60,30 +60,29 @@ IE_KW = {"population_size": 8, "tolerance": 0.004, "max_generations": 12, "chunk
 
 
 def test_ie_points_pooled_equal_single_runs_and_the_pool_shrinks(sim, goal):
-    trials = run_trials("ie", sim, goal, 5, seed=3, **IE_KW)
-    assert [t.info["seed"] for t in trials] == [3, 4, 5, 6, 7]
+    trials = run_trials("ie", sim, goal, 4, seed=3, **IE_KW)
+    assert [t.info["seed"] for t in trials] == [3, 4, 5, 6]
     info = trials[0].info
     assert info["batching"] == "points"
     sizes = info["batch_sizes"]
-    assert sizes[0] == 5 * len(goal)  # every point of every trial at the start
+    assert sizes[0] == 4 * len(goal)  # every point of every trial at the start
     assert sizes == sorted(sizes, reverse=True) and sizes[-1] < sizes[0]
-    assert set(sizes) <= set(ladder(5 * len(goal), 8))
+    assert set(sizes) <= set(ladder(4 * len(goal), 8))
     tries = np.array([t.info["point_tries"] for t in trials])
     assert (tries > 1).any()  # restarts happened
-    for t in trials:
-        single = run_ie(sim, goal, seed=t.info["seed"], **IE_KW)
-        same(t, single)
-        assert t.info["point_generations"] == single.info["point_generations"]
-        assert t.info["point_tries"] == single.info["point_tries"]
-
-
-def test_ie_pooled_equals_lockstep_batch(sim, goal):
-    pooled = run_trials("ie", sim, goal, 3, seed=0, **IE_KW)
-    lock = run_trials("ie", sim, goal, 3, seed=0, batching="lockstep", **IE_KW)
-    assert lock[0].info.get("batching") is None
-    for p, q in zip(pooled, lock, strict=True):
-        np.testing.assert_allclose(p.joints, q.joints, rtol=1e-4, atol=1e-4)
-        assert p.info["point_generations"] == q.info["point_generations"]
+    assert len({t.generations for t in trials}) > 1
+    # every trial against the lock-step batch (per-trial programs, one compile) ...
+    lock = run_trials("ie", sim, goal, 4, seed=3, batching="lockstep", **IE_KW)
+    assert "batching" not in lock[0].info
+    for t, q in zip(trials, lock, strict=True):
+        same(t, q)
+        assert t.info["point_generations"] == q.info["point_generations"]
+        assert t.info["point_tries"] == q.info["point_tries"]
+    # ... and the trial with the most restarts against its single run
+    t = trials[int(np.argmax(tries.sum(axis=1)))]
+    single = run_ie(sim, goal, seed=t.info["seed"], **IE_KW)
+    same(t, single)
+    assert t.info["point_tries"] == single.info["point_tries"]
 
 
 FTE_KW = {"population_size": 8, "tolerance": 0.05, "max_generations": 30, "chunk_size": 2,
@@ -91,24 +90,25 @@ FTE_KW = {"population_size": 8, "tolerance": 0.05, "max_generations": 30, "chunk
 
 
 def test_fte_trials_repacked_equal_single_runs(sim, goal):
-    trials = run_trials("fte", sim, goal[:3], 4, seed=1, **FTE_KW)
+    trials = run_trials("fte", sim, goal[:3], 3, seed=1, **FTE_KW)
     sizes = trials[0].info["batch_sizes"]
     assert trials[0].info["batching"] == "trials"
-    assert sizes[0] == 4 and sizes[-1] < 4 and sizes == sorted(sizes, reverse=True)
+    assert sizes[0] == 3 and sizes[-1] < 3 and sizes == sorted(sizes, reverse=True)
     assert len({t.generations for t in trials}) > 1
-    for t in trials:
+    for t in trials[1:]:  # seeds other than the batch's first
         same(t, run_fte(sim, goal[:3], seed=t.info["seed"], **FTE_KW))
 
 
+@pytest.mark.slow  # a third strategy through the same driver as FTE's (compiles)
 def test_iet_trials_repacked_equal_single_runs(robot):
     paint = Simulator(robot, PaintWall(jnp.array([[0.2, 0.0, 0.3], [0.0, 0.2, 0.3]])),
                       substeps=2)
     goal = np.array([[50.0], [100.0]])
     kw = {"population_size": 6, "tolerance": 1.0, "max_generations": 8, "chunk_size": 4,
               "restarts": 1, "backtracks": 1}
-    trials = run_trials("iet", paint, goal, 3, seed=2, **kw)
+    trials = run_trials("iet", paint, goal, 2, seed=2, **kw)
     assert trials[0].info["batching"] == "trials"
-    for t in trials:
+    for t in trials[1:]:
         single = run_iet(paint, goal, seed=t.info["seed"], **kw)
         np.testing.assert_allclose(t.joints, single.joints, rtol=1e-4, atol=1e-4)
         assert t.evaluations == single.evaluations and t.success == single.success
