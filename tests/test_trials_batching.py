@@ -1,13 +1,16 @@
 """Shrinking trial batches (cgda_jax.strategies.batching): each trial equals its single
 run, and the batch really shrinks as trials (or IE points) finish."""
 
+import functools
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
-from cgda_jax.strategies import run_fte, run_ie, run_iet, run_trials
-from cgda_jax.strategies.batching import ladder
+from cgda_jax.strategies import run_fte, run_ie, run_iet, run_trials, runner
+from cgda_jax.strategies.batching import drive_ie_points, ladder
+from cgda_jax.strategies.ie import IEPlan
 
 JOINTS = ["yaw", "shoulder", "elbow"]
 
@@ -78,6 +81,13 @@ def test_ie_points_pooled_equal_single_runs_and_the_pool_shrinks(sim, goal):
         same(t, q)
         assert t.info["point_generations"] == q.info["point_generations"]
         assert t.info["point_tries"] == q.info["point_tries"]
+    # the pool evaluated in blocks of 3 evolutions (sizes rounded up to whole blocks)
+    blocked = runner.run(
+        IEPlan, sim, goal, [3, 4, 5, 6], algorithm="CMA_ES",
+        driver=functools.partial(drive_ie_points, block_evaluations=24), **IE_KW)
+    assert blocked[0].info["batch_sizes"][0] == 21  # 20 points -> 7 blocks of 3
+    for t, q in zip(blocked, lock, strict=True):
+        same(t, q)
     # ... and the trial with the most restarts against its single run
     t = trials[int(np.argmax(tries.sum(axis=1)))]
     single = run_ie(sim, goal, seed=t.info["seed"], **IE_KW)

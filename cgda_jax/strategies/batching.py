@@ -180,15 +180,43 @@ class _Pool:
     next_f: jax.Array
 
 
-def _pool_step(plan: IEPlan, p: _Pool) -> tuple[_Pool, dict[str, jax.Array]]:
-    """`IEPlan.step` (independent points) on a pool of points from several trials."""
+def _blocked_size(size: int, block: int | None) -> int:
+    """`size` rounded up to a multiple of its block count (see `_pool_step`)."""
+    if not block or size <= block:
+        return size
+    n_blocks = -(-size // block)
+    return n_blocks * -(-size // n_blocks)
+
+
+def _pool_step(plan: IEPlan, p: _Pool, block: int | None
+               ) -> tuple[_Pool, dict[str, jax.Array]]:
+    """`IEPlan.step` (independent points) on a pool of points from several trials.
+
+    With `block`, the evolutions (ask, evaluate, tell) run in ``ceil(P / block)``
+    equal blocks one after the other (`lax.map`), not as one batch: on a CPU a
+    simulator call of many thousand candidates outgrows the caches and costs about
+    twice as much per candidate (measured, benchmarks/bench_trials.py).
+    """
     s = p.s
     size = s.done.shape[0]
     start = plan.sim.init_state()
     states = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))), start)
-    evo, metrics = jax.vmap(
-        lambda e, g, st: plan.evolve(e, plan.point_fitness(st, g), plan._stop)
-    )(s.evo, p.goal, states)
+
+    def evolve(e, g, st):
+        return jax.vmap(
+            lambda e, g, st: plan.evolve(e, plan.point_fitness(st, g), plan._stop)
+        )(e, g, st)
+
+    n_blocks = 1 if not block or size <= block else -(-size // block)
+    if n_blocks == 1:
+        evo, metrics = evolve(s.evo, p.goal, states)
+    else:
+        split = (lambda t: jax.tree.map(
+            lambda x: x.reshape((n_blocks, size // n_blocks, *x.shape[1:])), t))
+        evo, metrics = jax.lax.map(lambda a: evolve(*a),
+                                   (split(s.evo), split(p.goal), split(states)))
+        evo, metrics = jax.tree.map(lambda x: x.reshape((size, *x.shape[2:])),
+                                    (evo, metrics))
     better = evo.best_fitness < s.best_fitness
     best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
     best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
@@ -240,10 +268,16 @@ def drive_ie_points(
     chunk_size: int = 10,
     progress_fn: Callable[[dict[str, Any]], None] | None = None,
     min_size: int = 8,
+    block_evaluations: int | None = -1,
 ) -> list[Any]:
     """Like `runner.drive` for an IE plan with independent points, but the batch is
     the pool of (trial, point) evolutions still running, re-packed between chunks
-    into the smallest size of `ladder` (R * N) that holds them."""
+    into the smallest size of `ladder` (R * N) that holds them.
+
+    `block_evaluations`: evaluate the pool in blocks of about this many candidates
+    (see `_pool_step`); -1 (default): 2048 on a CPU, one batch on other devices;
+    None: one batch.
+    """
     if plan.sequential:
         raise ValueError("drive_ie_points needs independent points (kinematic mode, "
                          "stateless scene); use drive_repacked")
@@ -258,8 +292,13 @@ def drive_ie_points(
     next_g = jnp.asarray(np.where(pts < n_pts - 1, np.arange(total) + 1, -1))
     goal = jnp.tile(plan.goal, (n, 1))
 
+    if block_evaluations == -1:
+        block_evaluations = 2048 if jax.default_backend() == "cpu" else None
+    block = (None if not block_evaluations else
+             max(1, int(block_evaluations) // int(plan.info["population_size"])))
+
     def chunk(p):
-        p, metrics = jax.lax.scan(lambda c, _: _pool_step(plan, c), p, None,
+        p, metrics = jax.lax.scan(lambda c, _: _pool_step(plan, c, block), p, None,
                                   length=chunk_size)
         return p, metrics
 
@@ -286,7 +325,7 @@ def drive_ie_points(
     batch_sizes: list[int] = []
     generations = 0
     while active.size:
-        size = _bucket(sizes, active.size)
+        size = _blocked_size(_bucket(sizes, active.size), block)
         idx = _pad(active, size)
         pos = np.full(total, -1)
         pos[active] = np.arange(active.size)
