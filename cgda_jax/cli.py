@@ -82,6 +82,7 @@ examples:
   cgda run clean_ie --set strategy.population_size=64 \\
       --set strategy.seed=3 --set output.render=false
   cgda run clean_ie --dry-run        # check + print the resolved config
+  cgda run clean_ie --trials 30     # success rate of seeds 0..29
 
 The results folder gets report.md (start there), result.json, arrays.npz,
 config.toml (the resolved config; re-run it with `cgda run <folder>/config.toml`)
@@ -90,7 +91,9 @@ written aside and moved into place when complete: a failed or interrupted run
 leaves the folder as it was. A non-empty --out is refused unless --overwrite; a
 lock refuses a second run into a folder in use.
 Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
-tables printed by --dry-run. Exit status: 0 goal met, 1 goal not met, 2 bad input
+tables printed by --dry-run. With --trials N the folder gets trials.json and a
+report.md success-rate table instead, and the exit status is 0 once they are
+written, whatever the rate. Exit status: 0 goal met, 1 goal not met, 2 bad input
 (config, files, results folder not empty, in use or not writable), 3 any other
 failure (a diverged simulation; otherwise the traceback is saved to a log file
 whose path is printed), 130 / 143 interrupted (SIGINT / SIGTERM).
@@ -140,6 +143,10 @@ def _parser() -> argparse.ArgumentParser:
                      help="check everything the run would check (config, files, "
                      "robot, scene, algorithm, sizes, results folder) and print the "
                      "resolved config; compiles no simulation, runs nothing")
+    run.add_argument("--trials", type=int, metavar="N",
+                     help="run N seeds (strategy.seed, +1, ...) in one batched call "
+                     "and write their success rate (trials.json, report.md); exit "
+                     "status 0 whatever the rate (execution configs only)")
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",
         description="The paper's main results in one go.",
@@ -221,6 +228,10 @@ def cmd_run(args) -> int:
     )
 
     cfg = load_config(resolve_config(args.config), args.overrides)
+    if getattr(args, "trials", None) is not None:
+        from cgda_jax.experiment.trials import check_trials
+
+        check_trials(cfg, args.trials)
     facts = check_experiment(cfg)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
@@ -232,6 +243,8 @@ def cmd_run(args) -> int:
     with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
         args.run_folder = rf
         _say_chosen(args, cfg.name, rf)
+        if getattr(args, "trials", None) is not None:
+            return _run_trials(cfg, rf, args)
         result = _run_one(cfg, rf.path, rf.work, args)
     if not args.quiet:
         print(rf.path / "report.md")
@@ -242,6 +255,28 @@ def cmd_list(args) -> int:
     from cgda_jax.builtin import experiment_lines
 
     print("\n".join(experiment_lines()))
+    return EXIT_MET
+
+
+def _run_trials(cfg, rf, args) -> int:
+    """``--trials N``: the success rate of N seeds (status 0 once written)."""
+    from cgda_jax.experiment.trials import run_trials_experiment
+    from cgda_jax.progress import ProgressLine
+
+    bar = ProgressLine(cfg.name, quiet=args.quiet)
+    _say(args, f"[{cfg.name}] {cfg.strategy.name.upper()} execution, {args.trials} "
+               "seeds in one batch ...")
+    rf.work.mkdir(exist_ok=True)
+    try:
+        s = run_trials_experiment(cfg, args.trials, rf.work, progress_fn=bar)
+    finally:
+        bar.close()
+    lo, hi = s["wilson95"]
+    # the summary line goes to stdout even with --quiet: it is the result
+    print(f"[{cfg.name}] {s['successes']}/{s['trials']} seeds met the goal: success "
+          f"rate {s['success_rate']:.0%} (Wilson 95% {lo:.0%} to {hi:.0%}), median "
+          f"max point error {s['median_max_point_error']:.4g} "
+          f"({s['total_time_s']:.1f} s) -> {rf.path / 'report.md'}")
     return EXIT_MET
 
 

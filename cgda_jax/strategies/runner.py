@@ -240,6 +240,7 @@ def run(
     progress_fn: Callable[[dict[str, Any]], None] | None = None,
     devices: int | str | NamedSharding | None = None,
     shard: str = "population",
+    driver: Callable[..., list[ExecutionResult]] | None = None,
     **plan_kwargs: Any,
 ) -> list[ExecutionResult]:
     """Checks `goal` and the common settings, builds the plan, runs it for `seeds`.
@@ -253,6 +254,8 @@ def run(
         shard: which axis `devices` splits: "population" (the candidates of each
             generation's batched simulator call, see `PlanBase`) or "trials" (the R
             runs, see `drive`).
+        driver: runs the plan instead of `drive` (same call, no sharding), e.g.
+            the shrinking batches of `cgda_jax.strategies.batching`.
         **plan_kwargs: the rest of the plan's constructor arguments.
 
     Returns:
@@ -270,9 +273,13 @@ def run(
     plan = plan_cls(sim, goal, tolerance=tolerance, max_generations=max_generations,
                     sharding=sharding if shard == "population" else None,
                     **plan_kwargs)
-    results = drive(plan, seed_keys(seeds), chunk_size=chunk_size,
-                    progress_fn=progress_fn,
-                    sharding=sharding if shard == "trials" else None)
+    if driver is not None and sharding is None:
+        results = driver(plan, seed_keys(seeds), chunk_size=chunk_size,
+                         progress_fn=progress_fn)
+    else:
+        results = drive(plan, seed_keys(seeds), chunk_size=chunk_size,
+                        progress_fn=progress_fn,
+                        sharding=sharding if shard == "trials" else None)
     n_devices = 1 if sharding is None else int(sharding.mesh.size)
     for seed, res in zip(seeds, results, strict=True):
         res.info["seed"] = seed

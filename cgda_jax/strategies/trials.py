@@ -6,6 +6,7 @@ from collections.abc import Callable
 from typing import Any
 
 from cgda_jax.strategies import ie, iet
+from cgda_jax.strategies.batching import driver as batching_driver
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
 from cgda_jax.strategies.iet import IETPlan
@@ -40,12 +41,16 @@ def run_trials(
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
+    batching: str = "auto",
     **strategy_kwargs: Any,
 ) -> list[ExecutionResult]:
     """Runs `n_trials` independent trials of a strategy at once.
 
     Trial r uses seed ``seed + r`` and gives the same result as the single run with that
-    seed; the batch runs until every trial stopped (finished trials are frozen).
+    seed (up to float32 rounding: the batch is another shape of the same program).
+    By default the batch shrinks as trials finish (`cgda_jax.strategies.batching`):
+    finished trials, or for IE with independent points finished points, leave it
+    between chunks, so a trial that stops early costs no more than its own run.
 
     Args:
         strategy: "fte", "ie", "iet" or "oet".
@@ -59,27 +64,59 @@ def run_trials(
             (R is padded up to a multiple of K by repeating the last trial, whose
             copies are dropped; choose R a multiple of K to waste nothing). Each
             trial gives the same result as unsharded. Multi-host: see
-            `cgda_jax.sharding`.
+            `cgda_jax.sharding`. Sharded batches run in lock-step.
+        batching: "auto" (default: IE points pooled over the trials where points
+            are independent, else finished trials dropped), "trials" or
+            "lockstep" (every trial runs until the slowest stops; one compiled
+            chunk); see `cgda_jax.strategies.batching.driver`.
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
             stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
             OET: max_steps, lookahead).
 
     Returns:
-        R `ExecutionResult`s; their wall/compile times are those of the whole batch.
+        R `ExecutionResult`s; their wall/compile times are those of the whole batch;
+        ``info["batching"]`` and ``info["batch_sizes"]`` (batch of each chunk) say
+        how it shrank.
     """
-    if strategy not in STRATEGIES:
-        raise ValueError(f"unknown strategy {strategy!r}; choose one of {sorted(STRATEGIES)}")
     if int(n_trials) < 1:
         raise ValueError(f"n_trials must be >= 1; got {n_trials}")
-    plan_cls, defaults = STRATEGIES[strategy]
-    unknown = sorted(set(strategy_kwargs) - set(defaults))
-    if unknown:
-        raise ValueError(f"unknown settings {unknown} for strategy {strategy!r}")
-    return run(
-        plan_cls, sim, goal, [seed + r for r in range(int(n_trials))],
+    return run_seeds(
+        strategy, sim, goal, [seed + r for r in range(int(n_trials))],
         algorithm=algorithm, population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        progress_fn=progress_fn, devices=devices, shard="trials",
-        **{**defaults, **strategy_kwargs},
-    )
+        progress_fn=progress_fn, devices=devices, batching=batching,
+        **strategy_kwargs)
+
+
+def run_seeds(
+    strategy: str,
+    sim: Any,
+    goal: Any,
+    seeds: list[int],
+    *,
+    devices: int | str | None = None,
+    batching: str = "auto",
+    **kwargs: Any,
+) -> list[ExecutionResult]:
+    """`run_trials` for an explicit list of seeds (one trial each, in one batch).
+
+    `kwargs`: the other arguments of `run_trials` and the strategy's settings.
+    """
+    if strategy not in STRATEGIES:
+        raise ValueError(f"unknown strategy {strategy!r}; choose one of {sorted(STRATEGIES)}")
+    seeds = [int(x) for x in seeds]
+    if not seeds:
+        raise ValueError("seeds is empty: give at least one")
+    drive_fn = batching_driver(batching)
+    plan_cls, defaults = STRATEGIES[strategy]
+    common = ("algorithm", "population_size", "tolerance", "max_generations",
+              "chunk_size", "algorithm_kwargs", "algorithm_params", "progress_fn")
+    run_kw = {k: kwargs.pop(k) for k in common if k in kwargs}
+    run_kw = {"algorithm": "CMA_ES", "population_size": 16, "tolerance": 0.02,
+              "max_generations": 100, "chunk_size": 10, **run_kw}
+    unknown = sorted(set(kwargs) - set(defaults))
+    if unknown:
+        raise ValueError(f"unknown settings {unknown} for strategy {strategy!r}")
+    return run(plan_cls, sim, goal, seeds, devices=devices, shard="trials",
+               driver=drive_fn, **run_kw, **{**defaults, **kwargs})

@@ -1,0 +1,77 @@
+"""``cgda run CONFIG --trials N``: the success-rate table of N seeds, and its errors."""
+
+import json
+import pathlib
+
+import pytest
+
+from cgda_jax.cli import main
+from cgda_jax.experiment.trials import summarize, wilson_interval
+
+EXPERIMENTS = pathlib.Path(__file__).resolve().parents[1] / "experiments"
+SMALL = ["--set", "strategy.population_size=8", "--set", "strategy.max_generations=12",
+         "--set", "strategy.tolerance=0.05"]
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path_factory.getbasetemp() / "jaxcache"))
+
+
+def test_wilson_interval_known_values():
+    lo, hi = wilson_interval(0, 10)
+    assert lo == 0.0 and hi == pytest.approx(0.2775, abs=1e-4)
+    lo, hi = wilson_interval(5, 10)
+    assert (lo, hi) == (pytest.approx(0.2366, abs=1e-4), pytest.approx(0.7634, abs=1e-4))
+    lo, hi = wilson_interval(30, 30)
+    assert lo == pytest.approx(0.8865, abs=1e-4) and hi == 1.0
+    s = summarize([{"seed": i, "success": i != 1, "max_point_error": 0.01 * i,
+                    "generations": 10} for i in range(3)])
+    assert s["successes"] == 2 and s["success_rate"] == pytest.approx(2 / 3)
+
+
+def test_trials_writes_the_success_rate_table(tmp_path, capsys):
+    out = tmp_path / "t"
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), *SMALL, "--trials", "3",
+                 "--out", str(out), "--quiet"])
+    assert code == 0
+    captured = capsys.readouterr()
+    assert captured.err == ""
+    line = captured.out.strip().splitlines()[-1]
+    assert "/3 seeds met the goal" in line and "Wilson 95%" in line
+    data = json.loads((out / "trials.json").read_text())
+    assert data["trials"] == 3 and [r["seed"] for r in data["records"]] == [0, 1, 2]
+    for r in data["records"]:
+        assert {"success", "max_point_error", "generations", "run_time_s"} <= set(r)
+        assert r["success"] == (r["max_point_error"] < 0.05)
+    k = sum(r["success"] for r in data["records"])
+    assert data["successes"] == k and data["success_rate"] == pytest.approx(k / 3)
+    lo, hi = data["wilson95"]
+    assert lo <= k / 3 <= hi
+    report = (out / "report.md").read_text()
+    assert "Wilson 95% interval" in report and f"| 3 | {k} |" in report
+    assert report.count("\n| ") >= 2 + 3  # two table rows + one row per seed
+    assert json.loads((out / "result.json").read_text())["kind"] == "trials"
+
+
+@pytest.mark.parametrize("n", ["0", "-2"])
+def test_bad_trial_count_exits_2_with_one_line(n, capsys, tmp_path):
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--trials", n,
+                 "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "--trials must be a whole number >= 1" in err and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
+
+
+def test_trials_not_a_number_is_a_usage_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--trials", "many"])
+    assert exc.value.code == 2
+    assert "--trials" in capsys.readouterr().err
+
+
+def test_trials_of_a_recognition_config_is_refused(capsys):
+    code = main(["run", str(EXPERIMENTS / "recognition_spatial.toml"), "--trials", "3"])
+    err = capsys.readouterr().err
+    assert code == 2 and "needs an execution experiment" in err
