@@ -20,6 +20,12 @@ import time
 import traceback
 
 from cgda_jax.cli_plot import add_plot_parser, cmd_plot
+from cgda_jax.cli_trials import (
+    add_trials_arguments,
+    join_job,
+    launch_if_asked,
+    run_trials_command,
+)
 
 #: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
@@ -143,10 +149,7 @@ def _parser() -> argparse.ArgumentParser:
                      help="check everything the run would check (config, files, "
                      "robot, scene, algorithm, sizes, results folder) and print the "
                      "resolved config; compiles no simulation, runs nothing")
-    run.add_argument("--trials", type=int, metavar="N",
-                     help="run N seeds (strategy.seed, +1, ...) in one batched call "
-                     "and write their success rate (trials.json, report.md); exit "
-                     "status 0 whatever the rate (execution configs only)")
+    add_trials_arguments(run)
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",
         description="The paper's main results in one go.",
@@ -228,7 +231,7 @@ def cmd_run(args) -> int:
     )
 
     cfg = load_config(resolve_config(args.config), args.overrides)
-    if getattr(args, "trials", None) is not None:
+    if args.trials is not None:
         from cgda_jax.experiment.trials import check_trials
 
         check_trials(cfg, args.trials)
@@ -240,11 +243,13 @@ def cmd_run(args) -> int:
         print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
               f"{folder}\n" + dump_config(cfg), end="")
         return EXIT_MET
+    if args.trials is not None:
+        return run_trials_command(
+            cfg, args, lambda: RunFolder(target, overwrite=args.overwrite, fresh=fresh),
+            lambda text: _say(args, text), lambda rf: _say_chosen(args, cfg.name, rf))
     with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
         args.run_folder = rf
         _say_chosen(args, cfg.name, rf)
-        if getattr(args, "trials", None) is not None:
-            return _run_trials(cfg, rf, args)
         result = _run_one(cfg, rf.path, rf.work, args)
     if not args.quiet:
         print(rf.path / "report.md")
@@ -255,28 +260,6 @@ def cmd_list(args) -> int:
     from cgda_jax.builtin import experiment_lines
 
     print("\n".join(experiment_lines()))
-    return EXIT_MET
-
-
-def _run_trials(cfg, rf, args) -> int:
-    """``--trials N``: the success rate of N seeds (status 0 once written)."""
-    from cgda_jax.experiment.trials import run_trials_experiment
-    from cgda_jax.progress import ProgressLine
-
-    bar = ProgressLine(cfg.name, quiet=args.quiet)
-    _say(args, f"[{cfg.name}] {cfg.strategy.name.upper()} execution, {args.trials} "
-               "seeds in one batch ...")
-    rf.work.mkdir(exist_ok=True)
-    try:
-        s = run_trials_experiment(cfg, args.trials, rf.work, progress_fn=bar)
-    finally:
-        bar.close()
-    lo, hi = s["wilson95"]
-    # the summary line goes to stdout even with --quiet: it is the result
-    print(f"[{cfg.name}] {s['successes']}/{s['trials']} seeds met the goal: success "
-          f"rate {s['success_rate']:.0%} (Wilson 95% {lo:.0%} to {hi:.0%}), median "
-          f"max point error {s['median_max_point_error']:.4g} "
-          f"({s['total_time_s']:.1f} s) -> {rf.path / 'report.md'}")
     return EXIT_MET
 
 
@@ -436,6 +419,7 @@ def _dispatch(args, signals: _Signals) -> int:
     try:
         if args.command == "list":
             return cmd_list(args)
+        join_job(args)  # a multi-process --trials job: before any JAX work
         if not args.no_cache:
             enable_compilation_cache()
         if args.command == "run":
@@ -474,6 +458,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt as e:
             return _interrupted(None, getattr(e, "signum", signal.SIGINT))
         _log_warnings()
+        launched = launch_if_asked(args, sys.argv[1:] if argv is None else list(argv))
+        if launched is not None:
+            return launched
         return _dispatch(args, signals)
 
 

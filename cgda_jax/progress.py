@@ -44,8 +44,12 @@ def _size(stream) -> tuple[int, int]:
 
 
 def _short(v: Any) -> str:
-    if isinstance(v, list):  # one entry per trial; show the first
-        v = v[0] if len(v) == 1 else v
+    if isinstance(v, list):  # one entry per trial: one value, or their range
+        if len(v) == 1:
+            v = v[0]
+        elif v and all(isinstance(x, (int, float)) for x in v):
+            lo, hi = _short(min(v)), _short(max(v))
+            return lo if lo == hi else f"{lo}..{hi}"
     if isinstance(v, float):
         return f"{v:.4g}"
     return str(v)

@@ -3,6 +3,7 @@
 import json
 import pathlib
 
+import numpy as np
 import pytest
 
 from cgda_jax.cli import main
@@ -75,3 +76,45 @@ def test_trials_of_a_recognition_config_is_refused(capsys):
     code = main(["run", str(EXPERIMENTS / "recognition_spatial.toml"), "--trials", "3"])
     err = capsys.readouterr().err
     assert code == 2 and "needs an execution experiment" in err
+
+
+def test_processes_needs_trials_and_a_positive_count(capsys, tmp_path):
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--processes", "2",
+                 "--out", str(tmp_path / "x")])
+    assert code == 2 and "--processes needs --trials" in capsys.readouterr().err
+    code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--trials", "2",
+                 "--processes", "0", "--out", str(tmp_path / "y")])
+    assert code == 2 and "--processes must be >= 1" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+
+
+def test_trials_over_two_processes_equal_one_process(tmp_path):
+    """``--processes 2`` starts two local processes as one jax.distributed job (the
+    README's command): process 0 alone writes the folder, whose records equal the
+    one-process run's seed by seed."""
+    import os
+    import subprocess
+    import sys
+
+    args = ["run", str(EXPERIMENTS / "clean_ie.toml"), *SMALL, "--trials", "3",
+            "--quiet", "--no-cache"]
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    env.pop("CGDA_PROCESS_ID", None)
+    two = subprocess.run([sys.executable, "-m", "cgda_jax.cli", *args, "--processes",
+                          "2", "--out", str(tmp_path / "two")], env=env, timeout=400,
+                         capture_output=True, text=True)
+    assert two.returncode == 0, two.stdout + two.stderr
+    # one summary line, from process 0 (the others are quiet)
+    assert two.stdout.count("seeds met the goal") == 1 and "[p0] [clean_ie] " in two.stdout
+    assert main([*args, "--out", str(tmp_path / "one")]) == 0
+    one = json.loads((tmp_path / "one/trials.json").read_text())
+    both = json.loads((tmp_path / "two/trials.json").read_text())
+    assert both["processes"] == 2 and one["processes"] == 1
+    keys = ("seed", "success", "generations", "evaluations")
+    assert [[r[k] for k in keys] for r in both["records"]] == \
+        [[r[k] for k in keys] for r in one["records"]]
+    np.testing.assert_allclose([r["max_point_error"] for r in both["records"]],
+                               [r["max_point_error"] for r in one["records"]],
+                               rtol=1e-5)
+    # the workers wrote nothing beside process 0's folder
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one", "two"]
