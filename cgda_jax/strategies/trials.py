@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from cgda_jax.strategies import ie, iet
+from cgda_jax.strategies import fte, ie, iet
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
 from cgda_jax.strategies.iet import IETPlan
@@ -15,7 +15,11 @@ from cgda_jax.strategies.runner import run
 
 #: Strategy name -> (plan class, defaults of its extra settings).
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
-    "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
+    "fte": (FTEPlan, {"stagnation": 10, "distance": None,
+                      "restarts": fte.RESTARTS, "min_improvement": fte.MIN_IMPROVEMENT,
+                      "init": fte.INIT, "init_samples": fte.INIT_SAMPLES,
+                      "init_std": fte.INIT_STD, "refine": "none", "refine_steps": 100,
+                      "refine_gamma": fte.REFINE_GAMMA}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
                     "refine": "none", "reach_check": False}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
@@ -60,7 +64,9 @@ def run_trials(
             copies are dropped; choose R a multiple of K to waste nothing). Each
             trial gives the same result as unsharded. Multi-host: see
             `cgda_jax.sharding`.
-        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
+        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance,
+            restarts, min_improvement, init, init_samples, init_std, refine,
+            refine_steps, refine_gamma; IE: restarts,
             stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
             OET: max_steps, lookahead).
 
