@@ -144,14 +144,14 @@ def pick_candidate(
     """Per point, one of its candidates (N, K, D) at random: among those within
     `tolerance` (errors (N, K)) and farther than `radius` from ``avoid`` (N, D) (NaN
     rows: nothing to avoid) when there are any, else among those within tolerance,
-    else the best. Returns genes (N, D)."""
+    else among those away from ``avoid``, else any. Returns genes (N, D)."""
     ok = errors < tolerance
-    pref = ok
+    away = jnp.ones(errors.shape, bool)
     if avoid is not None:
-        gap = jnp.linalg.norm(genes - avoid[:, None, :], axis=-1)
-        pref = ok & ~(gap <= radius)
-    pref = jnp.where(jnp.any(pref, axis=1, keepdims=True), pref, ok)
+        away = ~(jnp.linalg.norm(genes - avoid[:, None, :], axis=-1) <= radius)
+    pref = ok & away
+    for alt in (ok, away, jnp.isfinite(errors)):
+        pref = jnp.where(jnp.any(pref, axis=1, keepdims=True), pref, alt)
     score = jax.random.uniform(key, errors.shape) + pref  # a random preferred one
-    best = jnp.argmin(errors, axis=1)
-    i = jnp.where(jnp.any(pref, axis=1), jnp.argmax(score, axis=1), best)
+    i = jnp.argmax(score, axis=1)
     return jnp.take_along_axis(genes, i[:, None, None], axis=1)[:, 0]

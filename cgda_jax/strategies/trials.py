@@ -24,7 +24,8 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
                     "refine": "none", "reach_check": False}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
                       "warm_start": False}),
-    "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
+    "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
+                      "stagnation": None}),
 }
 
 
@@ -68,7 +69,7 @@ def run_trials(
             restarts, min_improvement, init, init_samples, init_std, refine,
             refine_steps, refine_gamma; IE: restarts,
             stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
-            OET: max_steps, lookahead).
+            OET: max_steps, lookahead, restarts, stagnation).
 
     Returns:
         R `ExecutionResult`s; their wall/compile times are those of the whole batch.
