@@ -27,9 +27,14 @@ fresh step size keep every shape static and, on these goals, are what escapes a
 wrong inverse-kinematics branch.
 
 Initialisation (``init``): "middle" (u = 0, the paper), "start" (the start posture at
-every point) or "sampled" (for every goal point the nearest of `init_samples` random
+every point), "sampled" (for every goal point the nearest of `init_samples` random
 postures, executed once per run in batches of the population size; restarts draw
-from the same pool; `cgda_jax.strategies.seeding`).
+from the same pool; `cgda_jax.strategies.seeding`), "reach" (the 8 nearest samples of
+every point descended by gradient on its error, as `refine.reachability` does; the
+best candidate per point is the first mean, restarts draw other candidates; needs a
+differentiable execution: kinematic mode, stateless scene) or "auto" (default:
+"reach" where possible, else "sampled"). A start mean other than the middle is
+evaluated (one execution), so a sound start is already a candidate.
 Means other than the middle start with step size `init_std` (distribution-based
 algorithms; population-based ones draw their own uniform population).
 
@@ -54,18 +59,12 @@ from cgda_jax.strategies.base import (
     PlanBase,
     evolution_init,
     freeze,
-    from_joints,
     points_independent,
 )
-from cgda_jax.strategies.refine import REFINE, point_loss, polish_trajectory
+from cgda_jax.strategies.fte_starts import first_mean, restart_mean, start_pool
+from cgda_jax.strategies.refine import REFINE, polish_trajectory
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
-from cgda_jax.strategies.seeding import (
-    descended_candidates,
-    nearest_in_pool,
-    pick_candidate,
-    sample_pool,
-)
 
 #: Fitness names accepted by ``distance=``.
 DISTANCES = ("dtw", "dtw_multi", "euclidean")
@@ -75,12 +74,12 @@ INITS = ("auto", "middle", "start", "sampled", "reach")
 RESTARTS = 8
 MIN_IMPROVEMENT = 0.05
 INIT = "auto"
-REACH_STARTS = 8
 INIT_SAMPLES = 2048
-INIT_STD = 0.08
+INIT_STD = None
+#: Step size of tries from a mean other than the middle, per init mode (init_std None).
+MODE_STD = {"start": 0.08, "sampled": 0.08, "reach": 0.01}
 REFINE_GAMMA = 1e-3
 
-_SAMPLE_SALT = 0x5EED  # key of the try-0 samples: fold_in(key, salt)
 
 
 def resolve_distance(distance):
@@ -203,8 +202,9 @@ class FTEPlan(PlanBase):
         # a mean that is not the middle: a smaller first step size, unless set
         self.try_params = self.params
         fields = getattr(self.params, "__dataclass_fields__", {})
-        if init_std is not None and "std_init" in fields and "std_init" not in user_params:
-            self.try_params = self.params.replace(std_init=jnp.asarray(init_std))
+        std = MODE_STD.get(init, 0.08) if init_std is None else float(init_std)
+        if "std_init" in fields and "std_init" not in user_params:
+            self.try_params = self.params.replace(std_init=jnp.asarray(std))
 
     # ---- fitness and execution
     def _trajectory(self, u_flat):
@@ -223,44 +223,6 @@ class FTEPlan(PlanBase):
         return jnp.where(jnp.isfinite(e), e, jnp.inf)
 
     # ---- tries
-    def _pool(self, key):
-        """The sampled postures of a run and, for init "reach", the descended
-        candidates of every point (empty arrays where unused), and the
-        evaluations spent (count, invalid)."""
-        zero = jnp.zeros((), jnp.int32)
-        f_dim = self.goal.shape[1]
-        empty = (jnp.zeros((0, self.n_dof)), jnp.zeros((0, f_dim)),
-                 jnp.zeros((self.n_points, 0, self.n_dof)),
-                 jnp.zeros((self.n_points, 0)))
-        if self.init_mode not in ("sampled", "reach"):
-            return (*empty, zero, zero)
-        state = self.sim.init_state()
-        u, f, bad = sample_pool(
-            jax.random.fold_in(key, _SAMPLE_SALT),
-            lambda x: self.point_features(state, x), self.n_dof, self.init_samples,
-            batch=self.algo.population_size)
-        evals = jnp.asarray(u.shape[0], jnp.int32)
-        if self.init_mode == "sampled":
-            return (u, f, *empty[2:], evals, bad)
-        cand_u, cand_err = descended_candidates(
-            u, f, self.goal,
-            lambda g: point_loss(self.sim, state, g, self.lower, self.upper),
-            n_starts=REACH_STARTS)
-        return (*empty[:2], cand_u, cand_err, evals, bad)
-
-    def _first_mean(self, s):
-        if self.init_mode == "middle":
-            return None
-        if self.init_mode == "start":
-            q0 = self.sim.init_state().genes
-            u0 = from_joints(jnp.asarray(q0, jnp.float32), self.lower, self.upper)
-            return jnp.tile(u0, self.n_points)
-        if self.init_mode == "reach":
-            i = jnp.argmin(s.cand_err, axis=1)
-            return jnp.take_along_axis(s.cand_u, i[:, None, None], axis=1).reshape(-1)
-        genes, _ = nearest_in_pool(s.pool_u, s.pool_f, self.goal)
-        return genes.reshape(-1)
-
     def _start(self, key, mean, params):
         """A try from `mean`; a mean other than the middle is evaluated too (one
         more evaluation) and is the try's first best when valid."""
@@ -279,44 +241,22 @@ class FTEPlan(PlanBase):
             invalid=evo.invalid + (~jnp.isfinite(f)).astype(jnp.int32))
 
     def _restart(self, s: FTEState) -> Evolution:
-        """Try ``s.tries``: odd tries repair the best trajectory (its points that miss
-        the tolerance get fresh postures), even ones start wholly fresh; fresh
-        postures are the nearest of a random half of the sampled pool, away from the
-        postures the missed points stuck at (init "sampled"), or uniform random
-        (otherwise)."""
-        t = s.tries
-        k_mean, k_evo = jax.random.split(jax.random.fold_in(s.key, t))
-        best = s.best_u.reshape(self.n_points, self.n_dof)
-        miss = ~(s.best_errors < self.tolerance)
-        avoid = jnp.where((miss & jnp.isfinite(s.best_fitness))[:, None], best,
-                          jnp.nan)
-        if self.init_mode == "reach":
-            fresh = pick_candidate(k_mean, s.cand_u, s.cand_err, self.tolerance,
-                                   avoid)
-        elif self.init_mode == "sampled":
-            fresh, _ = nearest_in_pool(s.pool_u, s.pool_f, self.goal, key=k_mean,
-                                       avoid=avoid)
-        else:
-            fresh = jax.random.uniform(k_mean, (self.n_points, self.n_dof),
-                                       minval=-1.0, maxval=1.0)
-        repair = jnp.where(miss[:, None], fresh, best)
-        use = (t % 2 == 1) & jnp.isfinite(s.best_fitness)
-        mean = jnp.where(use, repair, fresh).reshape(-1)
-        return self._start(k_evo, mean, self.try_params)
+        mean, key = restart_mean(self, s)
+        return self._start(key, mean, self.try_params)
 
     def _met(self, errors):
         return jnp.all(errors < self.tolerance)
 
     # ---- plan functions
     def init(self, key):
-        pool_u, pool_f, cand_u, cand_err, evals, bad = self._pool(key)
+        pool_u, pool_f, cand_u, cand_err, evals, bad = start_pool(self, key)
         zero = jnp.zeros((), jnp.int32)
         s = FTEState(
             evo=None, key=key, tries=zero + 1, ref=None, stall=zero, best_u=None,
             best_fitness=None, best_errors=None, generations=zero,
             evaluations=evals, invalid=bad, pool_u=pool_u, pool_f=pool_f,
             cand_u=cand_u, cand_err=cand_err, done=jnp.asarray(False))
-        mean = self._first_mean(s)
+        mean = first_mean(self, s)
         evo = self._start(key, mean, self.params if mean is None else self.try_params)
         errors = jnp.where(evo.found, self._errors(evo.best_u), jnp.inf)
         errors = jnp.broadcast_to(errors, (self.n_points,))
@@ -473,8 +413,9 @@ def run_fte(
             each goal point; these evaluations count in ``evaluations``).
         init_samples: random postures sampled per sampled start.
         init_std: initial step size of tries that start elsewhere than the middle
-            (algorithms with ``std_init``, unless `algorithm_params` sets it; None:
-            the algorithm's own).
+            (algorithms with ``std_init``, unless `algorithm_params` sets it).
+            None: 0.01 after init "reach" (the mean is already near a solution),
+            else 0.08.
         refine: "none", "adam" or "lbfgs": polish the best trajectory by descending
             the soft-DTW to the goal through the kinematic chain, keeping the
             iterate with the lowest true `distance` (never worse). Needs kinematic
