@@ -55,7 +55,8 @@ def main() -> None:
                              **SETTINGS[name])
             total = time.perf_counter() - t0
             ok = sum(r.success for r in res)
-            tries = [t for r in res for t in r.info.get("point_tries", [])]
+            tries = [t for r in res  # IE/IET per point, FTE per run
+                     for t in r.info.get("point_tries", [r.info.get("tries", 1)])]
             rows.append({
                 "joints": n, "strategy": name, "successes": ok, "seeds": args.seeds,
                 "worst_error_mm": 1e3 * max(r.max_point_error for r in res),

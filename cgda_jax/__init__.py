@@ -37,6 +37,7 @@ _LAZY.update({
     "dtw_multi": "cgda_jax.distance",
     "euclidean": "cgda_jax.distance",
     "resample": "cgda_jax.distance",
+    "soft_dtw": "cgda_jax.distance",
     "GeneralizedAction": "cgda_jax.generalize",
     "generalize": "cgda_jax.generalize",
     "rbf_interpolate": "cgda_jax.generalize",
@@ -141,7 +142,7 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
         Demonstration, load_csv, load_npz, load_xgnitive, save_csv, save_npz,
         validate_demonstrations,
     )
-    from cgda_jax.distance import dtw, dtw_multi, euclidean, resample  # noqa: F401
+    from cgda_jax.distance import dtw, dtw_multi, euclidean, resample, soft_dtw  # noqa: F401
     from cgda_jax.experiment import (  # noqa: F401
         ExperimentConfig, load_config, run_experiment,
     )

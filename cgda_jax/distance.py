@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from cgda_jax.checks import check_finite
 
-__all__ = ["dtw", "dtw_multi", "euclidean", "resample"]
+__all__ = ["dtw", "dtw_multi", "euclidean", "resample", "soft_dtw"]
 
 # A large finite value for "unreachable" cells: inf would turn into NaN under grad.
 _BIG = 1e30
@@ -76,6 +76,7 @@ def _accumulated_cost(
     x: jax.Array,
     y: jax.Array,
     local_cost: Callable[[jax.Array, jax.Array], jax.Array],
+    combine: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
 ) -> jax.Array:
     """Final cell D(N-1, M-1) of the DTW accumulated-cost matrix.
 
@@ -85,6 +86,9 @@ def _accumulated_cost(
         local_cost: maps time-last aligned samples ``x[i]``, ``y[d - i]`` of shape
             (F, N) to the local costs of those cells, shape (*C, N) (``C`` = extra
             cost dims kept separate, e.g. one DTW per feature).
+        combine: how a cell combines its three predecessors ``D(i-1, j)``,
+            ``D(i, j-1)``, ``D(i-1, j-1)``; default their minimum (soft-DTW: a
+            soft minimum).
 
     Returns:
         (*C,) accumulated cost of the optimal warping path.
@@ -109,9 +113,12 @@ def _accumulated_cost(
         c = local_cost(xt, y_diag)
         j = d - rows
         valid = (j >= 0) & (j < m)
-        best = jnp.minimum(
-            jnp.minimum(prev1[..., :-1], prev1[..., 1:]), prev2[..., :-1]
-        )
+        if combine is None:
+            best = jnp.minimum(
+                jnp.minimum(prev1[..., :-1], prev1[..., 1:]), prev2[..., :-1]
+            )
+        else:
+            best = combine(prev1[..., :-1], prev1[..., 1:], prev2[..., :-1])
         new = jnp.concatenate([border, jnp.where(valid, c + best, big)], axis=-1)
         return (prev1, new), None
 
@@ -125,6 +132,27 @@ def _abs_cost(xd: jax.Array, yd: jax.Array) -> jax.Array:
 
 def _euclid_cost(xd: jax.Array, yd: jax.Array) -> jax.Array:
     return jnp.sqrt(jnp.sum((xd - yd) ** 2, axis=0))
+
+
+def _safe_euclid_cost(xd: jax.Array, yd: jax.Array) -> jax.Array:
+    """`_euclid_cost` with a finite gradient (0) where the two samples coincide."""
+    sq = jnp.sum((xd - yd) ** 2, axis=0)
+    pos = sq > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
+
+
+def _soft_min(gamma: float) -> Callable[[jax.Array, jax.Array, jax.Array], jax.Array]:
+    """``-gamma log(exp(-a/gamma) + exp(-b/gamma) + exp(-c/gamma))``, shifted by the
+    hard minimum so that it stays finite (and its gradient too) when some or all of
+    the three are the "unreachable" value."""
+
+    def combine(a, b, c):
+        m = jnp.minimum(jnp.minimum(a, b), c)
+        z = (jnp.exp(-(a - m) / gamma) + jnp.exp(-(b - m) / gamma)
+             + jnp.exp(-(c - m) / gamma))
+        return m - gamma * jnp.log(z)
+
+    return combine
 
 
 def dtw(x: jax.Array, y: jax.Array) -> jax.Array:
@@ -174,6 +202,49 @@ def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:
     """
     x, y = _pair(x, y, "dtw_multi")
     return _nan_unless_finite(_accumulated_cost(x, y, _euclid_cost), x, y)
+
+
+def soft_dtw(
+    x: jax.Array, y: jax.Array, gamma: float = 0.01, *, multi: bool = False
+) -> jax.Array:
+    """Soft-DTW: DTW with the minimum replaced by a soft minimum, differentiable.
+
+    The recursion is ``R(i, j) = c(i, j) + softmin_gamma(R(i-1, j), R(i, j-1),
+    R(i-1, j-1))`` with ``softmin_gamma(a, b, c) = -gamma log(e^{-a/gamma} +
+    e^{-b/gamma} + e^{-c/gamma})`` (Cuturi & Blondel 2017). The local cost and the
+    normalisation are those of `dtw` (``multi=False``: per feature ``|x_i - y_j|``,
+    summed over features, divided by N + M) or of `dtw_multi` (``multi=True``:
+    ``||x_i - y_j||_2``, unnormalised), so as ``gamma -> 0`` it tends to that DTW
+    (it is never above it: the soft minimum is at most the minimum, by at most
+    ``gamma log 3`` per cell). `jax.grad` works through it, also where two
+    samples coincide (the Euclidean cost's gradient is taken as 0 there).
+
+    Args:
+        x: (N, F) or (N,) first trajectory.
+        y: (M, F) or (M,) second trajectory (same F).
+        gamma: smoothing, > 0 (a Python float; same units as the local cost).
+        multi: the local cost of `dtw_multi` instead of `dtw`.
+
+    Returns:
+        Scalar; NaN under ``jit`` / ``vmap`` for non-finite input.
+
+    Raises:
+        ValueError: as `dtw`, or gamma <= 0.
+
+    References:
+        Cuturi & Blondel, "Soft-DTW: a Differentiable Loss Function for
+        Time-Series", ICML 2017.
+    """
+    if not float(gamma) > 0:
+        raise ValueError(f"soft_dtw: gamma must be > 0, got {gamma}")
+    x, y = _pair(x, y, "soft_dtw")
+    combine = _soft_min(float(gamma))
+    if multi:
+        value = _accumulated_cost(x, y, _safe_euclid_cost, combine)
+    else:
+        per_dim = _accumulated_cost(x, y, _abs_cost, combine)
+        value = jnp.sum(per_dim) / (x.shape[0] + y.shape[0])
+    return _nan_unless_finite(value, x, y)
 
 
 def resample(x: jax.Array, n: int) -> jax.Array:

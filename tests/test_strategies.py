@@ -103,8 +103,9 @@ def test_ie_batched_equals_each_point_alone(sim, goal):
 def test_fte_dtw_converges(sim, goal):
     from cgda_jax import dtw
 
+    # the paper's FTE: middle start, no restarts
     res = run_fte(sim, goal[:3], population_size=24, stagnation=20,
-                  max_generations=200, seed=1)
+                  max_generations=200, seed=1, init="middle", restarts=0)
     # the reported fitness is the DTW of the reported execution against the goal
     assert res.final_fitness == pytest.approx(
         float(dtw(jnp.asarray(res.features), jnp.asarray(goal[:3]))), rel=1e-4, abs=1e-6

@@ -38,7 +38,10 @@ class OETState:
     """Carry of an OET run: the current evolution, sim state, localized step k and the
     executed postures (S, DoF) / features (S, F) / targets (S,) so far (`steps` of S),
     the invalid evaluations (total and per step (S,)) and `stuck` (the last evolution
-    found no valid candidate; the run stopped)."""
+    found no valid candidate; the run stopped). Restarts of the current step's
+    evolution: `tries` started, the best over the finished ones (`try_best_u`,
+    `try_best_fitness`) and what they spent (`try_generations`, `try_evaluations`,
+    `try_invalid`); `step_tries` (S,) the tries each executed step took."""
 
     evo: Evolution
     key: jax.Array
@@ -53,6 +56,13 @@ class OETState:
     invalid: jax.Array
     step_invalid: jax.Array
     stuck: jax.Array
+    tries: jax.Array
+    try_best_u: jax.Array
+    try_best_fitness: jax.Array
+    try_generations: jax.Array
+    try_evaluations: jax.Array
+    try_invalid: jax.Array
+    step_tries: jax.Array
 
 
 def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
@@ -92,20 +102,33 @@ class OETPlan(PlanBase):
     Args (beyond `PlanBase`'s):
         max_steps: budget of executed postures (None: 2 N).
         lookahead: localization window size beyond the current step (>= 1).
+        restarts: a step's evolution that stopped above tolerance (stalled) is
+            restarted from a random mean with a fresh key, up to this many times
+            (each try has `max_generations`, as IE's); the best over its tries is
+            executed.
+        stagnation: a try also stops after this many generations without
+            improvement (None: only at tolerance or `max_generations`).
     """
 
     name = "oet"
 
-    def __init__(self, sim, goal, *, max_steps=None, lookahead=1, **kwargs):
+    def __init__(self, sim, goal, *, max_steps=None, lookahead=1, restarts=0,
+                 stagnation=None, **kwargs):
         max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1; got {max_steps}")
         if int(lookahead) < 1:
             raise ValueError(f"lookahead must be >= 1; got {lookahead}")
+        if int(restarts) < 0 or (stagnation is not None and int(stagnation) < 1):
+            raise ValueError(f"restarts must be >= 0 and stagnation >= 1 or None; got "
+                             f"{restarts}, {stagnation}")
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
         self.max_steps = max_steps
         self.lookahead = int(lookahead)
-        self.max_generations_total = self.max_steps * self.max_generations
+        self.restarts = int(restarts)
+        self.stagnation = None if stagnation is None else int(stagnation)
+        self.max_generations_total = (self.max_steps * self.max_generations
+                                      * (1 + self.restarts))
 
     def _target(self, k):
         return jnp.minimum(k + 1, self.n_points - 1)
@@ -133,7 +156,53 @@ class OETPlan(PlanBase):
             invalid=jnp.zeros((), jnp.int32),
             step_invalid=jnp.zeros((s,), jnp.int32),
             stuck=jnp.asarray(False),
+            step_tries=jnp.zeros((s,), jnp.int32),
+            **self._fresh_tries(),
         )
+
+    def _fresh_tries(self) -> dict[str, jax.Array]:
+        zero = jnp.zeros((), jnp.int32)
+        return {"tries": zero + 1,
+                "try_best_u": jnp.zeros((self.n_dof,), jnp.float32),
+                "try_best_fitness": jnp.asarray(jnp.inf, jnp.float32),
+                "try_generations": zero, "try_evaluations": zero,
+                "try_invalid": zero}
+
+    def _try_stop(self, s: OETState):
+        """A try stops at tolerance, at `max_generations` (each try has its own,
+        as IE's), or after `stagnation` generations without improvement."""
+
+        def stop(evo):
+            out = ((evo.best_fitness < self.tolerance)
+                   | (evo.generation >= self.max_generations))
+            if self.stagnation is not None:
+                out = out | (evo.stall >= self.stagnation)
+            return out
+
+        return stop
+
+    def _merged(self, s: OETState) -> OETState:
+        """The step's evolution as one: the best over its tries and their totals."""
+        e = s.evo
+        better = e.best_fitness < s.try_best_fitness
+        return s.replace(evo=e.replace(
+            best_u=jnp.where(better, e.best_u, s.try_best_u),
+            best_fitness=jnp.where(better, e.best_fitness, s.try_best_fitness),
+            generation=e.generation + s.try_generations,
+            evaluations=e.evaluations + s.try_evaluations,
+            invalid=e.invalid + s.try_invalid))
+
+    def _restart(self, s: OETState) -> OETState:
+        """Try ``s.tries`` of the current step: a random mean, a fresh key."""
+        m = self._merged(s)
+        key = jax.random.fold_in(jax.random.fold_in(s.key, s.steps), s.tries)
+        k_mean, k_evo = jax.random.split(key)
+        mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
+        evo = self.start(k_evo, self._fitness(s.sim_state, s.k), mean=mean)
+        return s.replace(
+            evo=evo, tries=s.tries + 1, try_best_u=m.evo.best_u,
+            try_best_fitness=m.evo.best_fitness, try_generations=m.evo.generation,
+            try_evaluations=m.evo.evaluations, try_invalid=m.evo.invalid)
 
     def _execute(self, s: OETState) -> OETState:
         q = self.joints(s.evo.best_u)
@@ -155,6 +224,8 @@ class OETPlan(PlanBase):
             evaluations=s.evaluations + s.evo.evaluations,
             invalid=s.invalid + s.evo.invalid,
             step_invalid=s.step_invalid.at[s.steps].set(s.evo.invalid),
+            step_tries=s.step_tries.at[s.steps].set(s.tries),
+            **self._fresh_tries(),
         )
 
     def _stuck(self, s: OETState) -> OETState:
@@ -168,14 +239,25 @@ class OETPlan(PlanBase):
         )
 
     def _end(self, s: OETState) -> OETState:
-        return jax.lax.cond(s.evo.found, self._execute, self._stuck, s)
+        """The step's try stopped: restart it, or execute the best of its tries."""
+        m = self._merged(s)
+
+        def execute(_):
+            return jax.lax.cond(m.evo.found, self._execute, self._stuck, m)
+
+        if self.restarts == 0:
+            return execute(None)
+        again = (m.evo.best_fitness >= self.tolerance) & (s.tries <= self.restarts)
+        return jax.lax.cond(again, lambda _: self._restart(s), execute, None)
 
     def step(self, s: OETState):
         finished = self.done(s)
-        evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k))
+        evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k),
+                                   self._try_stop(s))
         new = jax.lax.cond(evo.done, self._end, lambda x: x, s.replace(evo=evo))
         new = freeze(finished, s, new)
-        return new, {"best_fitness": metrics["best_fitness"],
+        best = jnp.minimum(metrics["best_fitness"], s.try_best_fitness)
+        return new, {"best_fitness": best,
                      "invalid": metrics["invalid"],
                      "step": jnp.where(finished, -1, s.steps)}
 
@@ -189,7 +271,8 @@ class OETPlan(PlanBase):
         return {"joints": s.joints, "features": s.features, "targets": s.targets,
                 "steps": s.steps, "k": s.k, "step_generations": s.step_generations,
                 "evaluations": s.evaluations, "invalid": s.invalid,
-                "step_invalid": s.step_invalid, "stuck": s.stuck}
+                "step_invalid": s.step_invalid, "stuck": s.stuck,
+                "step_tries": s.step_tries}
 
     def to_result(self, final, history, timing):
         goal = np.asarray(self.goal)
@@ -209,6 +292,8 @@ class OETPlan(PlanBase):
             steps=n, reached_end=int(final["k"]) >= len(goal) - 1,
             targets=final["targets"][:n].tolist(),
             step_generations=gens.tolist(), lookahead=self.lookahead,
+            restarts=self.restarts, stagnation=self.stagnation,
+            step_tries=final["step_tries"][:n].tolist(),
             invalid_evaluations=final["invalid"],
             step_invalid=final["step_invalid"][:n + stuck].tolist(),
             points_without_valid=(
@@ -227,6 +312,8 @@ def run_oet(
     max_generations: int = 100,
     max_steps: int | None = None,
     lookahead: int = 1,
+    restarts: int = 0,
+    stagnation: int | None = None,
     seed: int = 0,
     chunk_size: int = 10,
     algorithm_kwargs: dict | None = None,
@@ -244,6 +331,13 @@ def run_oet(
         max_generations: generation budget per executed posture.
         max_steps: budget of executed postures (default 2 N).
         lookahead: localization window size beyond the current step (>= 1).
+        restarts: a step's evolution that stopped short of `tolerance` (stalled,
+            see `stagnation`) restarts from a random mean with a fresh key, up to
+            this many times (each try has `max_generations`); the best posture
+            over its tries is executed (``info["step_tries"]``). 0: the original
+            OET.
+        stagnation: a try stops after this many generations without
+            improvement (None: only at tolerance or `max_generations`).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
 
@@ -258,7 +352,7 @@ def run_oet(
         population_size=population_size, tolerance=tolerance,
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        max_steps=max_steps, lookahead=lookahead,
-        progress_fn=progress_fn, devices=devices,
+        max_steps=max_steps, lookahead=lookahead, restarts=restarts,
+        stagnation=stagnation, progress_fn=progress_fn, devices=devices,
     )
     return result

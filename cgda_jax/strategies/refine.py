@@ -30,7 +30,7 @@ import optax
 
 from cgda_jax.strategies.base import to_joints
 
-__all__ = ["REFINE", "descend", "polish", "reachability"]
+__all__ = ["REFINE", "descend", "polish", "polish_trajectory", "reachability"]
 
 #: Names accepted by ``refine=``.
 REFINE = ("none", "adam", "lbfgs")
@@ -170,3 +170,81 @@ def reachability(
         "unreachable": [int(i) for i in np.flatnonzero(~(nearest < tolerance))],
         "seconds": time.perf_counter() - t0,
     }
+
+
+def polish_trajectory(
+    sim: Any,
+    u0: jax.Array,
+    goal: jax.Array,
+    distance: Callable[[jax.Array, jax.Array], jax.Array],
+    *,
+    method: str = "adam",
+    steps: int = 100,
+    gamma: float = 1e-3,
+    multi: bool = False,
+    learning_rate: float = 0.02,
+) -> tuple[jax.Array, jax.Array]:
+    """Refine a whole trajectory's genes (FTE) by descending the soft-DTW.
+
+    The loss is ``soft_dtw(executed features, goal, gamma, multi=multi)`` of the
+    trajectory ``to_joints(u.reshape(N, D))`` executed from the start state (the
+    kinematic chain is differentiable); the iterate KEPT is the one with the lowest
+    true `distance` (the FTE fitness), ``u0`` included, so the result is never worse
+    than the start by that distance. Non-finite distances are never kept.
+
+    Args:
+        sim: a simulator whose execution is differentiable (kinematic mode,
+            stateless scene; the caller checks).
+        u0: (N * D,) the start genes (FTE's best).
+        goal: (N, F) goal features.
+        distance: the true fitness ``(executed (N, F), goal (N, F)) -> scalar``.
+        method: "adam" or "lbfgs".
+        steps: optimiser steps.
+        gamma: soft-DTW smoothing.
+        multi: soft-DTW with `dtw_multi`'s local cost (else `dtw`'s).
+        learning_rate: adam's step size (lbfgs uses its line search).
+
+    Returns:
+        ``(genes (N * D,), their distance)``.
+    """
+    from cgda_jax.distance import soft_dtw
+
+    goal = jnp.asarray(goal)
+    lower = jnp.asarray(sim.lower, jnp.float32)
+    upper = jnp.asarray(sim.upper, jnp.float32)
+    n_points = goal.shape[0]
+    state0 = sim.init_state()
+
+    def features(u):
+        q = to_joints(u.reshape(n_points, -1), lower, upper)
+        return sim.rollout(q, state0)[0]
+
+    def loss(u):
+        return soft_dtw(features(u), goal, gamma, multi=multi)
+
+    def score(u):
+        d = distance(features(u), goal)
+        return jnp.where(jnp.isfinite(d), d, jnp.inf)
+
+    opt = _optimizer(method, learning_rate)
+    value_and_grad = (optax.value_and_grad_from_state(loss) if method == "lbfgs"
+                      else jax.value_and_grad(loss))
+
+    def body(carry, _):
+        u, state, best_u, best = carry
+        if method == "lbfgs":
+            value, grad = value_and_grad(u, state=state)
+            updates, state = opt.update(grad, state, u, value=value, grad=grad,
+                                        value_fn=loss)
+        else:
+            value, grad = value_and_grad(u)
+            updates, state = opt.update(grad, state, u)
+        u = optax.apply_updates(u, updates)
+        d = score(u)
+        better = d < best
+        return (u, state, jnp.where(better, u, best_u),
+                jnp.where(better, d, best)), None
+
+    (_, _, best_u, best), _ = jax.lax.scan(
+        body, (u0, opt.init(u0), u0, score(u0)), None, length=int(steps))
+    return best_u, best

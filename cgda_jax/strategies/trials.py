@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from cgda_jax.strategies import ie, iet
+from cgda_jax.strategies import fte, ie, iet
 from cgda_jax.strategies.batching import driver as batching_driver
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
@@ -16,12 +16,17 @@ from cgda_jax.strategies.runner import run
 
 #: Strategy name -> (plan class, defaults of its extra settings).
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
-    "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
+    "fte": (FTEPlan, {"stagnation": 10, "distance": None,
+                      "restarts": fte.RESTARTS, "min_improvement": fte.MIN_IMPROVEMENT,
+                      "init": fte.INIT, "init_samples": fte.INIT_SAMPLES,
+                      "init_std": fte.INIT_STD, "refine": "none", "refine_steps": 100,
+                      "refine_gamma": fte.REFINE_GAMMA}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
                     "refine": "none", "reach_check": False}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
                       "warm_start": False}),
-    "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
+    "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
+                      "stagnation": None}),
 }
 
 
@@ -69,9 +74,11 @@ def run_trials(
             are independent, else finished trials dropped), "trials" or
             "lockstep" (every trial runs until the slowest stops; one compiled
             chunk); see `cgda_jax.strategies.batching.driver`.
-        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
+        **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance,
+            restarts, min_improvement, init, init_samples, init_std, refine,
+            refine_steps, refine_gamma; IE: restarts,
             stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
-            OET: max_steps, lookahead).
+            OET: max_steps, lookahead, restarts, stagnation).
 
     Returns:
         R `ExecutionResult`s; their wall/compile times are those of the whole batch;
