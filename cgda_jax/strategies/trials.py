@@ -17,9 +17,10 @@ from cgda_jax.strategies.runner import run
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
-                    "refine": "none", "reach_check": False}),
+                    "refine": "none", "reach_check": False,
+                    "restart_samples": ie.RESTART_SAMPLES}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
-                      "warm_start": False}),
+                      "warm_start": False, "restart_samples": iet.RESTART_SAMPLES}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1}),
 }
 
@@ -61,7 +62,9 @@ def run_trials(
             trial gives the same result as unsharded. Multi-host: see
             `cgda_jax.sharding`.
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance; IE: restarts,
-            stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
+            stagnation, refine, reach_check,
+            restart_samples; IET: restarts, backtracks, warm_start,
+            restart_samples;
             OET: max_steps, lookahead).
 
     Returns:
