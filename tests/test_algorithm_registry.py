@@ -28,8 +28,8 @@ POP, GENES = 16, 3
 #: Constructor arguments cgda_jax cannot choose: the test passes them, as users must.
 NEEDS = {"RandomSearch": "sampling_fn", "SV_CMA_ES": "num_populations",
          "SV_Open_ES": "num_populations"}
-#: Algorithms whose default parameters need a larger population than POP.
-POPULATION = {"MR15_GA": 32}
+#: Algorithms that need a larger population than POP (none at present).
+POPULATION: dict[str, int] = {}
 #: Algorithms refused (ValueError) for the tiny arm's 3 genes and POP, and why.
 REFUSED = {"LM_MA_ES": "c_c"}
 #: Generation budget per algorithm (default 60).
@@ -135,8 +135,10 @@ def test_stein_variational_population_counts_every_group():
 
 
 def test_too_small_population_is_refused_clearly():
-    with pytest.raises(ValueError, match="MR15_GA"):
-        make_algorithm("MR15_GA", POP, GENES)
+    with pytest.raises(ValueError, match="DifferentialEvolution"):
+        make_algorithm("DifferentialEvolution", 3, GENES)
+    # an infinite cap (MR15_GA's std_max) is no reason to refuse
+    make_algorithm("MR15_GA", POP, GENES)
     # LM_MA_ES's path rates c_c = population / (4^i genes) must stay below 2
     with pytest.raises(ValueError, match="c_c"):
         make_algorithm("LM_MA_ES", POP, GENES)

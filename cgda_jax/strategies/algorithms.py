@@ -135,7 +135,14 @@ def make_algorithm(
             "them from population_size / genes), which turns its state NaN at the "
             "first update: use population_size < 2 x genes, set algorithm_params "
             "c_c, or another algorithm (MA_ES, CMA_ES)")
-    finite = [np.all(np.isfinite(np.asarray(x, float))) for x in jax.tree.leaves(params)]
+    # NaN or -inf from a population too small; +inf is a legitimate "no cap" of the
+    # *_max fields (MR15_GA's std_max)
+    finite = []
+    for k in params.__dataclass_fields__:
+        for x in jax.tree.leaves(getattr(params, k)):
+            x = np.asarray(x, float)
+            ok = np.isfinite(x) | ((x == np.inf) if k.endswith("_max") else False)
+            finite.append(bool(np.all(ok)))
     if not all(finite):
         raise ValueError(
             f"population_size={population_size} is too small for {name} with "
@@ -167,6 +174,8 @@ def default_kwargs(name: str) -> dict[str, Any]:
     """
     cls = ALGORITHMS.get(name)
     if cls is None or "std_schedule" not in inspect.signature(cls.__init__).parameters:
+        return {}
+    if name == "GuidedES":  # without a surrogate gradient its search needs the width
         return {}
     import optax
 
