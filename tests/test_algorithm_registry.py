@@ -7,9 +7,8 @@ generation budget; "converges": its best error ends far below the start, see
 ends with a non-finite state (invalid candidates are told the finite
 `INVALID_PENALTY`).
 
-The fast part checks the registry's bookkeeping and the convergence of a few
-algorithms of each family; the whole registry's convergence is slow-marked (one
-compile per algorithm: minutes on 2 cores).
+One small compile per algorithm: the whole registry takes about 70 s on the 2-core
+machine (60 generations of 16 candidates each).
 """
 
 import jax
@@ -145,13 +144,6 @@ def test_too_small_population_is_refused_clearly():
     make_algorithm("LM_MA_ES", POP, 10)
 
 
-@pytest.mark.parametrize("name", ["CMA_ES", "SNES", "Open_ES", "SimpleGA", "PSO",
-                                  "SV_CMA_ES", "LM_MA_ES", "RandomSearch"])
-def test_a_few_algorithms_converge_on_the_tiny_arm(arm, name):
-    _, _, fitness = arm
-    _converges(name, fitness)
-
-
 def test_run_ie_accepts_name_class_and_instance_of_another_algorithm(arm):
     from evosax.algorithms import Open_ES
 
@@ -169,7 +161,6 @@ def test_run_ie_accepts_name_class_and_instance_of_another_algorithm(arm):
     assert by_name.point_errors.max() < 0.1
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(ALGORITHMS))
 def test_every_registry_algorithm_converges_on_the_tiny_arm(arm, name):
     _, _, fitness = arm
