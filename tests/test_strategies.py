@@ -348,7 +348,10 @@ def test_population_goes_through_the_simulators_map_population(sim, goal, run):
         kw["stagnation"] = 3
     got = run(sliced, goal[:2], **kw)
     want = run(sim, goal[:2], **kw)
-    assert sliced.mapped and set(sliced.mapped) == {8}
+    # (IE's restart samples are one batched call of RESTART_SAMPLES postures)
+    from cgda_jax.strategies.ie import RESTART_SAMPLES
+
+    assert 8 in sliced.mapped and set(sliced.mapped) <= {8, RESTART_SAMPLES}
     np.testing.assert_allclose(got.point_errors, want.point_errors, rtol=1e-5, atol=1e-6)
 
 

@@ -6,6 +6,7 @@ References:
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import jax
@@ -42,7 +43,8 @@ def make_algorithm(
             (e.g. ``evosax.algorithms.CMA_ES``, built here), or a configured instance
             (``CMA_ES(population_size=32, solution=jnp.zeros(3), ...)``, used as it
             is: its population size and solution size must match).
-        population_size: individuals per generation.
+        population_size: individuals per generation (with ``num_populations``, the
+            Stein variational ESs' groups, of all groups together: it must divide).
         n_genes: genes per individual (D).
         algorithm_kwargs: extra constructor arguments (e.g. ``std_schedule`` of SimpleGA).
         algorithm_params: fields of the algorithm's ``default_params`` to override
@@ -70,11 +72,17 @@ def make_algorithm(
         raise ValueError(f"algorithm {name!r} is not an evosax algorithm class")
     try:
         if isinstance(cls, type):
-            algo = cls(
-                population_size=int(population_size),
-                solution=jnp.zeros((n_genes,)),
-                **(algorithm_kwargs or {}),
-            )
+            kwargs = dict(algorithm_kwargs or {})
+            size = int(population_size)
+            if "num_populations" in kwargs:  # Stein variational ESs: size per group
+                groups = int(kwargs["num_populations"])
+                if groups < 1 or size % groups:
+                    raise ValueError(
+                        f"population_size={population_size} is not a multiple of "
+                        f"num_populations={kwargs['num_populations']} for {name} "
+                        "(population_size counts the individuals of all groups)")
+                size //= groups
+            algo = cls(population_size=size, solution=jnp.zeros((n_genes,)), **kwargs)
         else:  # a configured instance
             algo = cls
             if not (hasattr(algo, "ask") and hasattr(algo, "default_params")):
@@ -83,7 +91,8 @@ def make_algorithm(
             if algorithm_kwargs:
                 raise ValueError(f"algorithm_kwargs {sorted(algorithm_kwargs)} given "
                                  f"with an already built {name}; configure it instead")
-            size, dims = int(algo.population_size), int(getattr(algo, "num_dims", -1))
+            size = int(algo.population_size) * int(getattr(algo, "num_populations", 1))
+            dims = int(getattr(algo, "num_dims", -1))
             if size != int(population_size) or dims != int(n_genes):
                 raise ValueError(
                     f"the {name} instance has population_size={size} and "
@@ -95,10 +104,21 @@ def make_algorithm(
             f"population_size={population_size} is not allowed for {name}: {err}"
         ) from None
     except TypeError as err:
+        missing = _missing_arguments(cls, algorithm_kwargs)
+        if missing:
+            raise ValueError(
+                f"{name} needs constructor argument(s) {missing} that cgda_jax "
+                f"cannot choose for it: pass them in algorithm_kwargs, e.g. "
+                f"algorithm_kwargs={{{missing[0]!r}: ...}} (see evosax's {name})"
+            ) from None
         raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
     # evosax computes its default parameters with many small eager ops (each one a
-    # compile on first use); tracing them as ONE program costs one compile instead.
-    params = jax.jit(lambda: algo.default_params)()
+    # compile on first use); tracing them as ONE program costs one compile instead
+    # (a few, e.g. LM_MA_ES, need concrete values: computed eagerly then).
+    try:
+        params = jax.jit(lambda: algo.default_params)()
+    except jax.errors.ConcretizationTypeError:
+        params = algo.default_params
     overrides = dict(algorithm_params or {})
     unknown = sorted(set(overrides) - set(params.__dataclass_fields__))
     if unknown:
@@ -107,7 +127,22 @@ def make_algorithm(
             f"{sorted(params.__dataclass_fields__)}"
         )
     params = params.replace(**{k: jnp.asarray(v) for k, v in overrides.items()})
-    finite = [np.all(np.isfinite(np.asarray(x, float))) for x in jax.tree.leaves(params)]
+    c_c = np.asarray(getattr(params, "c_c", 0.0), float)
+    if np.any(c_c >= 2.0):  # sqrt(c_c (2 - c_c)) of its evolution paths: NaN
+        raise ValueError(
+            f"{name} with population_size={population_size} and {n_genes} genes has "
+            f"evolution-path rates c_c up to {c_c.max():.3g} >= 2 (evosax derives "
+            "them from population_size / genes), which turns its state NaN at the "
+            "first update: use population_size < 2 x genes, set algorithm_params "
+            "c_c, or another algorithm (MA_ES, CMA_ES)")
+    # NaN or -inf from a population too small; +inf is a legitimate "no cap" of the
+    # *_max fields (MR15_GA's std_max)
+    finite = []
+    for k in params.__dataclass_fields__:
+        for x in jax.tree.leaves(getattr(params, k)):
+            x = np.asarray(x, float)
+            ok = np.isfinite(x) | ((x == np.inf) if k.endswith("_max") else False)
+            finite.append(bool(np.all(ok)))
     if not all(finite):
         raise ValueError(
             f"population_size={population_size} is too small for {name} with "
@@ -116,16 +151,36 @@ def make_algorithm(
     return algo, params
 
 
-def default_kwargs(name: str) -> dict[str, Any]:
-    """Defaults that fit the normalized gene space (see the module docstring)."""
-    if name == "SimpleGA":
-        import optax
+def _missing_arguments(cls: Any, given: dict[str, Any] | None) -> list[str]:
+    """Required constructor arguments of `cls` that neither cgda_jax (population
+    size, solution) nor `given` supplies."""
+    if not isinstance(cls, type):
+        return []
+    sig = inspect.signature(cls.__init__)
+    return [k for k, p in sig.parameters.items()
+            if k not in ("self", "population_size", "solution")
+            and p.default is inspect.Parameter.empty
+            and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)
+            and k not in (given or {})]
 
-        # evosax's SimpleGA mutates with std 1.0 forever: in normalized genes that spans
-        # the whole joint range and never refines; decay it instead.
-        return {
-            "std_schedule": optax.exponential_decay(
-                0.3, transition_steps=1, decay_rate=0.95, end_value=0.003
-            )
-        }
-    return {}
+
+def default_kwargs(name: str) -> dict[str, Any]:
+    """Defaults that fit the normalized gene space (see the module docstring).
+
+    Algorithms with a ``std_schedule`` (SimpleGA, Open_ES, ARS, HillClimbing, ...)
+    sample with std 1.0 forever in evosax: in normalized genes that spans the whole
+    joint range and never refines; they get a decaying schedule instead (0.3, x0.95
+    per generation, down to 0.003).
+    """
+    cls = ALGORITHMS.get(name)
+    if cls is None or "std_schedule" not in inspect.signature(cls.__init__).parameters:
+        return {}
+    if name == "GuidedES":  # without a surrogate gradient its search needs the width
+        return {}
+    import optax
+
+    return {
+        "std_schedule": optax.exponential_decay(
+            0.3, transition_steps=1, decay_rate=0.95, end_value=0.003
+        )
+    }

@@ -168,8 +168,8 @@ class PlanBase:
         self.max_generations = int(max_generations)
         self.max_generations_total = self.max_generations
         kwargs = dict(algorithm_kwargs or {})
-        if isinstance(algorithm, str):
-            kwargs = {**default_kwargs(algorithm), **kwargs}
+        if isinstance(algorithm, (str, type)):  # built here: defaults that fit genes
+            kwargs = {**default_kwargs(algorithm_name(algorithm)), **kwargs}
         self.algo, self.params = make_algorithm(
             algorithm,
             population_size,
@@ -199,11 +199,12 @@ class PlanBase:
         return fitness
 
     def start(
-        self, key: jax.Array, fitness_u: FitnessFn, mean: jax.Array | None = None
+        self, key: jax.Array, fitness_u: FitnessFn, mean: jax.Array | None = None,
+        std_scale: jax.Array | float | None = None,
     ) -> Evolution:
         """`evolution_init` with this plan's algorithm and gene count."""
         return evolution_init(self.algo, self.params, key, self._sharded(fitness_u),
-                              self.n_genes, mean=mean)
+                              self.n_genes, mean=mean, std_scale=std_scale)
 
     def evolve(
         self,

@@ -89,6 +89,7 @@ def evolution_init(
     fitness_u: FitnessFn,
     n_genes: int,
     mean: jax.Array | None = None,
+    std_scale: jax.Array | float | None = None,
 ) -> Evolution:
     """Starts an evolution (jittable, vmappable over `key` and `fitness_u`'s context).
 
@@ -97,6 +98,11 @@ def evolution_init(
     (``best_fitness`` inf, `Evolution.found` False). Population-based ones get a
     uniform initial population in ``[-1, 1]^D`` that is evaluated here (its best valid
     candidate, if any, is the first best).
+
+    `std_scale` (distribution-based algorithms whose state has a ``std``, e.g.
+    CMA_ES, SNES, Open_ES) multiplies the initial search width: a local start around
+    a mean already near a solution (a restart from a sampled or neighbouring
+    posture). Ignored by the others.
     """
     key, k_init, k_pop = jax.random.split(key, 3)
     if isinstance(algo, PopulationBasedAlgorithm):
@@ -109,7 +115,11 @@ def evolution_init(
         best_u, best_f, evals = pop[i], ranked[i], algo.population_size
     else:
         mean = jnp.zeros((n_genes,)) if mean is None else mean
-        state = algo.init(k_init, mean, params)
+        groups = getattr(algo, "num_populations", None)  # (SV_CMA_ES, SV_Open_ES)
+        state = algo.init(k_init, mean if groups is None else
+                          jnp.broadcast_to(mean, (int(groups), n_genes)), params)
+        if std_scale is not None and hasattr(state, "std"):
+            state = state.replace(std=state.std * jnp.asarray(std_scale, state.std.dtype))
         best_u, best_f, evals = mean, jnp.asarray(jnp.inf), 0
         invalid = jnp.zeros((), jnp.int32)
     return Evolution(
@@ -167,7 +177,7 @@ def evolution_step(
         best_fitness=jnp.where(better, ranked[i], evo.best_fitness),
         stall=jnp.where(better, 0, evo.stall + 1),
         generation=evo.generation + 1,
-        evaluations=evo.evaluations + algo.population_size,
+        evaluations=evo.evaluations + pop.shape[0],
         invalid=evo.invalid + invalid,
     )
     new = new.replace(done=stop(new))

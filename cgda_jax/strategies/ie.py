@@ -33,13 +33,18 @@ from cgda_jax.strategies.base import (
     points_independent,
     ragged_rows,
 )
-from cgda_jax.strategies.refine import REFINE, polish, reachability
+from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
 #: Default restarts of a point and generations without improvement that stop a try.
-RESTARTS = 3
+RESTARTS = 9
 STAGNATION = 40
+#: Initial search width of a local restart (from a sampled or a neighbour's
+#: posture), relative to the algorithm's own (distribution-based algorithms).
+LOCAL_STD = 0.15
+#: Postures sampled (one batched kinematics call per run) to seed the restarts.
+RESTART_SAMPLES = 4096
 
 
 def point_keys(key: jax.Array, n_points: int) -> jax.Array:
@@ -54,6 +59,8 @@ class IEState:
     Attributes:
         evo: the current try of each point.
         keys: the point keys; try t > 0 uses ``fold_in(key, t)``.
+        samples: (N, K, D) the K sampled postures nearest each goal point (nearest
+            first; K = 0 without restart samples), restart means.
         tries: tries started per point (1 + restarts used).
         best_u, best_fitness: the best over every try (inf: nothing valid yet).
         done: the point is finished (tolerance met, or out of tries).
@@ -62,6 +69,7 @@ class IEState:
 
     evo: Evolution
     keys: jax.Array
+    samples: jax.Array
     tries: jax.Array
     best_u: jax.Array
     best_fitness: jax.Array
@@ -83,8 +91,10 @@ class IEPlan(PlanBase):
             posture brings within tolerance (`refine.reachability`).
             Both need independent points (kinematic mode, stateless scene).
         restarts: tries of a point that stopped above tolerance are restarted (fresh
-            key; from a solved neighbour's posture, then a random mean, alternately),
-            up to this many times; the best is kept.
+            key; see `_try` for the start means), up to this many times; the best is
+            kept.
+        restart_samples: postures sampled once per run (independent points only)
+            whose nearest to each goal point seed its restarts; 0: none.
         stagnation: a try also stops after this many generations without
             improvement (None: only at `max_generations`).
     """
@@ -92,7 +102,8 @@ class IEPlan(PlanBase):
     name = "ie"
 
     def __init__(self, sim, goal, *, keys=None, refine="none", refine_steps=100,
-                 reach_check=False, restarts=0, stagnation=None, **kwargs):
+                 reach_check=False, restarts=0, stagnation=None,
+                 restart_samples=RESTART_SAMPLES, **kwargs):
         if keys is not None and keys.shape[0] != goal.shape[0]:
             raise ValueError(
                 f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
@@ -114,6 +125,13 @@ class IEPlan(PlanBase):
             raise ValueError(f"restarts must be >= 0 and stagnation >= 1 or None; got "
                              f"{restarts}, {stagnation}")
         self.restarts = int(restarts)
+        if int(restart_samples) < 0:
+            raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
+        # sampled restart means need postures whose features do not depend on the
+        # context (independent points) and at least one restart to use them
+        self.restart_samples = (0 if self.sequential or self.restarts == 0
+                                else int(restart_samples))
+        self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
         self.stagnation = None if stagnation is None else int(stagnation)
         self.max_generations_total = self.max_generations * (1 + self.restarts)
         self.unreachable = np.zeros(self.n_points, bool)
@@ -153,19 +171,40 @@ class IEPlan(PlanBase):
             stop = stop | (evo.stall >= self.stagnation)
         return stop
 
-    def _try(self, key, goal_point, state, t, neighbour_u=None):
-        """Try ``t`` of a point: try 0 from the mid-range mean; restarts with key
-        ``fold_in(key, t)`` alternate between a solved neighbour's best genes (odd
-        tries: the goal curve is continuous, so a neighbour's posture is usually in
-        the right basin) and a random mean (even tries, or no neighbour)."""
+    def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None):
+        """Try ``t`` of a point. Try 0 starts from the mid-range mean with the point
+        key; restart ``t > 0`` uses key ``fold_in(key, t)``. With restart samples,
+        odd restarts start from the sampled postures nearest the goal point in turn
+        (restart t from the (t-1)//2-th nearest: each near the goal, in whichever
+        basin, whatever the previous tries converged to) and even restarts
+        alternate between a solved neighbour's best genes (the goal curve is
+        continuous, so a neighbour's posture is often in the right basin) and a
+        random mean; without samples: neighbour, random, alternately.
+        Without a solved neighbour a random mean replaces it. Sample and neighbour
+        restarts search locally (initial std scaled by `LOCAL_STD`)."""
         k_mean, k_evo = jax.random.split(jax.random.fold_in(key, t))
-        random_mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
-        if neighbour_u is not None:
-            use = (t % 2 == 1) & jnp.all(jnp.isfinite(neighbour_u))
-            random_mean = jnp.where(use, jnp.nan_to_num(neighbour_u), random_mean)
-        mean = jnp.where(t > 0, random_mean, 0.0)
-        return self.start(jnp.where(t > 0, k_evo, key),
-                          self.point_fitness(state, goal_point), mean=mean)
+        mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
+        k = 0 if samples is None else samples.shape[0]
+        restart = t > 0
+        if k:  # odd restarts: the samples in turn; even: neighbour, random, ...
+            use_sample = restart & ((t - 1) % 2 == 0)
+            use_neighbour = restart & ((t - 1) % 4 == 1)
+        else:  # alternate: neighbour, random
+            use_sample, use_neighbour = jnp.bool_(False), restart & ((t - 1) % 2 == 0)
+        if neighbour_u is None:
+            use_neighbour = jnp.bool_(False)
+        else:
+            use_neighbour = use_neighbour & jnp.all(jnp.isfinite(neighbour_u))
+            mean = jnp.where(use_neighbour, jnp.nan_to_num(neighbour_u), mean)
+        if k:
+            mean = jnp.where(use_sample, samples[jnp.clip((t - 1) // 2, 0, k - 1)],
+                             mean)
+        mean = jnp.where(restart, mean, 0.0)
+        # a sampled or neighbouring posture is near a solution: search locally there
+        local = use_sample | use_neighbour
+        return self.start(jnp.where(restart, k_evo, key),
+                          self.point_fitness(state, goal_point), mean=mean,
+                          std_scale=jnp.where(local, LOCAL_STD, 1.0))
 
     def _neighbours(self, best_u, best_fitness):
         """(N, D) the best genes of each point's better-solved neighbour (i-1 or
@@ -184,13 +223,22 @@ class IEPlan(PlanBase):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
         states, _ = self._contexts(jnp.zeros((self.n_points, self.n_dof)))
         zero = jnp.zeros((self.n_points,), jnp.int32)
+        if self.restart_samples:  # one batched kinematics call (points independent)
+            start = self.sim.init_state()
+            samples, _ = nearest_samples(
+                lambda u: self.point_features(start, u), self.goal,
+                jax.random.fold_in(key, 2**31 - 1), self.n_dof, self.restart_samples,
+                self.n_nearest)
+        else:
+            samples = jnp.zeros((self.n_points, 0, self.n_dof))
         evo = jax.vmap(self._try)(keys, self.goal, states, zero)
         # no posture reaches the unreachable points: keep the nearest approach
         off = jnp.asarray(self.unreachable)
         best_u = jnp.where(off[:, None], jnp.asarray(self.reach_genes), evo.best_u)
         best_f = jnp.where(off, jnp.asarray(self.reach_nearest), evo.best_fitness)
         return IEState(
-            evo=evo.replace(done=evo.done | off), keys=keys, tries=zero + 1,
+            evo=evo.replace(done=evo.done | off), keys=keys, samples=samples,
+            tries=zero + 1,
             best_u=best_u, best_fitness=best_f, done=(best_f < self.tolerance) | off,
             generations=zero, evaluations=zero, invalid=zero)
 
@@ -216,8 +264,9 @@ class IEPlan(PlanBase):
         again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
         neighbours = self._neighbours(best_u, best_f)
         fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
-            jnp.any(again), lambda: jax.vmap(self._try)(s.keys, self.goal, states,
-                                                        s.tries, neighbours),
+            jnp.any(again), lambda: jax.vmap(self._try)(
+                s.keys, self.goal, states, s.tries, neighbours,
+                s.samples if self.restart_samples else None),
             lambda: evo)
         s = s.replace(
             generations=s.generations + jnp.where(again, evo.generation, 0),
@@ -289,6 +338,7 @@ def run_ie(
     reach_check: bool = False,
     restarts: int = RESTARTS,
     stagnation: int | None = STAGNATION,
+    restart_samples: int = RESTART_SAMPLES,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
 ) -> ExecutionResult:
@@ -323,9 +373,17 @@ def run_ie(
             stalled) is tried again with a fresh key, up to this many times (inside
             the compiled step), starting alternately from its better-solved
             neighbour's best posture and from a random mean; the best over its tries
-            is kept and ``info["point_tries"]`` says how many it took.
+            is kept and ``info["point_tries"]`` says how many it took. Restart t
+            starts (cycling) from the sampled posture nearest the goal point (see
+            `restart_samples`), a better-solved neighbour's best posture, or a
+            random mean (without samples: neighbour and random alternately).
         stagnation: a try stops after this many generations without improvement
             (None: only at `max_generations`), so a stuck point restarts early.
+        restart_samples: with independent points (kinematic mode, stateless
+            scene) and restarts > 0, this many postures drawn uniformly in the joint
+            limits are evaluated once per run (one batched kinematics call, inside
+            the compiled init) and the nearest to each goal point is a restart mean:
+            a point stuck in a local minimum restarts in the goal's basin. 0: off.
         progress_fn: called with a dict after each chunk.
         devices: None (default: one device, the unsharded program), "all" or a
             device count: each generation's batched simulator call (N points x
@@ -347,7 +405,7 @@ def run_ie(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
-        restarts=restarts, stagnation=stagnation,
+        restarts=restarts, stagnation=stagnation, restart_samples=restart_samples,
         progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -29,14 +29,20 @@ from cgda_jax.strategies.base import (
     PlanBase,
     freeze,
     from_joints,
+    points_independent,
     ragged_rows,
 )
+from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
 #: Default restarts of a point that missed its tolerance, and backtracks per run.
-RESTARTS = 4
+RESTARTS = 6
 BACKTRACKS = 8
+#: Postures sampled once per run to seed restarts (independent points only), and
+#: the initial search width of a restart from one, relative to the algorithm's.
+RESTART_SAMPLES = 4096
+LOCAL_STD = 0.15
 
 
 @struct.dataclass
@@ -64,6 +70,8 @@ class IETState:
         point_invalid: how many of those evaluations were invalid (N,).
         stopped: the run stopped at `point`: none of its evolutions (restarts,
             backtracks) found a valid candidate, so there is no posture to commit.
+        samples: (N, K, D) the sampled postures nearest each goal point (K = 0
+            without restart samples), restart means.
     """
 
     evo: Evolution
@@ -83,6 +91,7 @@ class IETState:
     point_evaluations: jax.Array
     point_invalid: jax.Array
     stopped: jax.Array
+    samples: jax.Array
 
 
 def _at(tree: Any, i: jax.Array) -> Any:
@@ -106,7 +115,12 @@ class IETPlan(PlanBase):
             remaining square only reachable by sweeping across another one).
         warm_start: the first evolution of each point starts at the previous
             point's committed posture (point 0: the start posture) instead of the
-            middle of the joint ranges; restarts still start from random means.
+            middle of the joint ranges.
+        restart_samples: with independent points (kinematic mode, stateless scene)
+            this many postures are sampled once per run (one batched call in the
+            compiled init); restart t = 1..`restarts` of a point starts from its
+            t-th nearest sample with a local search width (`LOCAL_STD`); later
+            tries (revisits after a backtrack) from random means. 0: random means.
 
     A point whose every evolution (restarts and backtracks included) found no valid
     candidate (every simulation diverged) is not committed: the run stops there
@@ -116,8 +130,13 @@ class IETPlan(PlanBase):
     name = "iet"
 
     def __init__(self, sim, goal, *, restarts=0, backtracks=0, warm_start=False,
-                 **kwargs):
+                 restart_samples=RESTART_SAMPLES, **kwargs):
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
+        if int(restart_samples) < 0:
+            raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
+        self.restart_samples = (int(restart_samples) if points_independent(sim)
+                                and int(restarts) > 0 else 0)
+        self.n_nearest = min(self.restart_samples, int(restarts))
         self.restarts = int(restarts)
         self.backtracks = int(backtracks)
         self.warm_start = bool(warm_start)
@@ -157,10 +176,15 @@ class IETPlan(PlanBase):
             jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0),
             first,
         )
+        local = jnp.bool_(False)
+        if self.restart_samples:  # restarts: the nearest samples in turn
+            local = (t > 0) & (t <= self.n_nearest)
+            nearest = s.samples[p, jnp.clip(t - 1, 0, self.n_nearest - 1)]
+            mean = jnp.where(local, nearest, mean)
         prefix_sq = s.prefix_sq[p]
         evo = self.start(
-            k_evo, self._fitness(_at(s.sim_states, p), prefix_sq, point), mean=mean
-        )
+            k_evo, self._fitness(_at(s.sim_states, p), prefix_sq, point), mean=mean,
+            std_scale=jnp.where(local, LOCAL_STD, 1.0))
         # a restart keeps the best of the point's earlier tries (same prefix); a new
         # point or a revisit after a backtrack (new prefix) starts from this try's
         keep = restart > 0
@@ -174,6 +198,13 @@ class IETPlan(PlanBase):
         n, f = self.n_points, self.goal.shape[1]
         state0 = self.sim.init_state()
         zero_i = jnp.zeros((), jnp.int32)
+        if self.restart_samples:
+            samples, _ = nearest_samples(
+                lambda u: self.point_features(state0, u), self.goal,
+                jax.random.fold_in(key, 2**31 - 1), self.n_dof, self.restart_samples,
+                self.n_nearest)
+        else:
+            samples = jnp.zeros((n, 0, self.n_dof))
         s = IETState(
             evo=None, key=key, point=zero_i, tries=jnp.zeros((n,), jnp.int32),
             restart=zero_i, backtracks=zero_i,
@@ -188,7 +219,7 @@ class IETPlan(PlanBase):
             point_generations=jnp.zeros((n,), jnp.int32),
             point_evaluations=jnp.zeros((n,), jnp.int32),
             point_invalid=jnp.zeros((n,), jnp.int32),
-            stopped=jnp.asarray(False),
+            stopped=jnp.asarray(False), samples=samples,
         )
         return self._start(s, zero_i, zero_i)
 
@@ -333,6 +364,7 @@ def run_iet(
     restarts: int = RESTARTS,
     backtracks: int = BACKTRACKS,
     warm_start: bool = False,
+    restart_samples: int = RESTART_SAMPLES,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -351,13 +383,18 @@ def run_iet(
             spend its whole budget).
         max_generations: generation budget of one evolution of a point.
         restarts: a point that missed epsilon after `max_generations` is evolved
-            again with a fresh key from a random start mean, up to this many times.
+            again with a fresh key, up to this many times: from the sampled
+            postures nearest the goal point in turn (see `restart_samples`) or,
+            without samples, a random start mean.
         backtracks: a point that still missed after its restarts makes the run
             re-evolve the previous point (fresh key) and try again, up to this many
             times per run. 0 and 0 give the paper's plain Algorithm 1.
         warm_start: start each point's first evolution at the previous point's
             posture (point 0: the start posture) instead of the middle of the joint
             ranges; for goals reached by small continuous moves (pushing an object).
+        restart_samples: postures sampled once per run (kinematic mode, stateless
+            scene; one batched call inside the compiled init) whose nearest to each
+            goal point seed its restarts with a local search; 0: off.
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
 
@@ -375,6 +412,6 @@ def run_iet(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         restarts=restarts, backtracks=backtracks, warm_start=warm_start,
-        progress_fn=progress_fn, devices=devices,
+        restart_samples=restart_samples, progress_fn=progress_fn, devices=devices,
     )
     return result

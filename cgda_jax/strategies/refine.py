@@ -30,7 +30,8 @@ import optax
 
 from cgda_jax.strategies.base import to_joints
 
-__all__ = ["REFINE", "descend", "polish", "polish_trajectory", "reachability"]
+__all__ = ["REFINE", "descend", "nearest_samples", "polish", "polish_trajectory",
+           "reachability"]
 
 #: Names accepted by ``refine=``.
 REFINE = ("none", "adam", "lbfgs")
@@ -119,6 +120,33 @@ def polish(
     return jax.vmap(one)(best_u, goal)
 
 
+def nearest_samples(
+    features_u: Callable[[jax.Array], jax.Array],
+    goal: jax.Array,
+    key: jax.Array,
+    n_genes: int,
+    n_samples: int,
+    k: int,
+) -> tuple[jax.Array, jax.Array]:
+    """The `k` sampled postures nearest each goal point (traced; jittable, vmappable).
+
+    Draws `n_samples` normalized genes uniformly in ``[-1, 1]^D`` (the joint limits),
+    maps them to features in ONE batched call ``features_u(u (S, D)) -> (S, F)``
+    (the features of each posture stepped to from the start state) and keeps, for
+    each goal point (N, F), the `k` nearest.
+
+    Returns:
+        ``(genes (N, k, D), distances (N, k))``, nearest first; non-finite features
+        (a diverged sample) are never nearest.
+    """
+    u = jax.random.uniform(key, (int(n_samples), int(n_genes)), minval=-1.0,
+                           maxval=1.0)
+    dist = jnp.linalg.norm(goal[:, None, :] - features_u(u)[None], axis=-1)  # (N, S)
+    dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
+    neg, idx = jax.lax.top_k(-dist, int(k))  # (N, k)
+    return u[idx], -neg
+
+
 def reachability(
     sim: Any,
     goal: Any,
@@ -148,19 +176,18 @@ def reachability(
     @jax.jit
     def run(key):
         state = sim.init_state()
-        u = jax.random.uniform(key, (n_samples, sim.n_dof), minval=-1.0, maxval=1.0)
-        feats = jax.vmap(lambda w: sim.step(state, w)[1])(to_joints(u, lower, upper))
-        dist = jnp.linalg.norm(goal[:, None, :] - feats[None], axis=-1)  # (N, S)
-        _, idx = jax.lax.top_k(-dist, n_starts)  # (N, K)
+        starts, _ = nearest_samples(
+            lambda u: jax.vmap(lambda w: sim.step(state, w)[1])(
+                to_joints(u, lower, upper)), goal, key, sim.n_dof, n_samples, n_starts)
 
         def refine(g, starts):
             loss = point_loss(sim, state, g, lower, upper)
             us, sq = jax.vmap(lambda s: descend(loss, s, steps=steps,
-                                                learning_rate=0.05))(u[starts])
+                                                learning_rate=0.05))(starts)
             i = jnp.argmin(sq)
             return us[i], jnp.sqrt(sq[i])
 
-        return jax.vmap(refine)(goal, idx)
+        return jax.vmap(refine)(goal, starts)
 
     genes, nearest = run(jax.random.key(seed))
     nearest = np.asarray(nearest, np.float64)

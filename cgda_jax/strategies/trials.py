@@ -22,9 +22,10 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
                       "init_std": fte.INIT_STD, "refine": "none", "refine_steps": 100,
                       "refine_gamma": fte.REFINE_GAMMA}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
-                    "refine": "none", "reach_check": False}),
+                    "refine": "none", "reach_check": False,
+                    "restart_samples": ie.RESTART_SAMPLES}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
-                      "warm_start": False}),
+                      "warm_start": False, "restart_samples": iet.RESTART_SAMPLES}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
                       "stagnation": None}),
 }
@@ -77,7 +78,8 @@ def run_trials(
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance,
             restarts, min_improvement, init, init_samples, init_std, refine,
             refine_steps, refine_gamma; IE: restarts,
-            stagnation, refine, reach_check; IET: restarts, backtracks, warm_start;
+            stagnation, refine, reach_check, restart_samples; IET: restarts, backtracks,
+            warm_start, restart_samples;
             OET: max_steps, lookahead, restarts, stagnation).
 
     Returns:
