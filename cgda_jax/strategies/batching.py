@@ -233,8 +233,9 @@ def _pool_step(plan: IEPlan, p: _Pool, block: int | None
     ok = jnp.isfinite(jnp.minimum(prev_f, next_f))
     neighbours = jnp.where(ok[:, None], u, jnp.nan)
     fresh = jax.lax.cond(
-        jnp.any(again), lambda: jax.vmap(plan._try)(s.keys, p.goal, states, s.tries,
-                                                    neighbours),
+        jnp.any(again), lambda: jax.vmap(plan._try)(
+            s.keys, p.goal, states, s.tries, neighbours,
+            s.samples if plan.restart_samples else None),
         lambda: evo)
     s = s.replace(
         generations=s.generations + jnp.where(again, evo.generation, 0),
