@@ -9,16 +9,29 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import os
 import pathlib
 import signal
 import sys
-import tempfile
-import threading
 import time
-import traceback
 
+from cgda_jax.cli_errors import (  # noqa: F401  (the exit statuses are public here)
+    EXIT_DIVERGED,
+    EXIT_FAILURE,
+    EXIT_MET,
+    EXIT_NOT_MET,
+    EXIT_SIGNAL,
+    EXIT_USAGE,
+    USER_ERRORS,
+    Interrupted,
+    _diverged,
+    _first_line,
+    _interrupted,
+    _log_warnings,
+    _save_traceback,
+    _Signals,
+    _user_error,
+)
 from cgda_jax.cli_plot import add_plot_parser, cmd_plot
 from cgda_jax.cli_trials import (
     add_trials_arguments,
@@ -26,19 +39,6 @@ from cgda_jax.cli_trials import (
     launch_if_asked,
     run_trials_command,
 )
-
-#: Errors that mean bad input while a config is read and checked (status 2).
-USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
-
-#: Exit statuses: goal met, goal not met, usage or config error (bad key, value or
-#: file; results folder not empty, in use or not writable), any other failure (a
-#: diverged simulation, or an unexpected error whose traceback goes to a log file).
-EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
-#: A simulation diverged (`cgda_jax.SimulationDiverged`): one of the failures.
-EXIT_DIVERGED = EXIT_FAILURE
-#: Interrupted by a signal: 128 + its number.
-EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
-
 
 def _version() -> str:
     from cgda_jax import __version__
@@ -320,99 +320,6 @@ def cmd_demo(args) -> int:
     _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
                f"in {wall:.1f} s -> {rf.path / 'report.md'}")
     return EXIT_MET if success else EXIT_NOT_MET
-
-
-def _diverged(err: BaseException) -> bool:
-    """`err` is a `cgda_jax.SimulationDiverged` (its module is loaded if it is one)."""
-    mod = sys.modules.get("cgda_jax.strategies.result")
-    return mod is not None and isinstance(err, mod.SimulationDiverged)
-
-
-def _log_warnings() -> None:
-    """Library warnings (logger ``cgda_jax``) as ``cgda: warning: ...`` lines."""
-    logger = logging.getLogger("cgda_jax")
-    if not logger.handlers:
-        handler = logging.StreamHandler()  # resolves sys.stderr at each write
-        handler.setFormatter(logging.Formatter("cgda: warning: %(message)s"))
-        logger.addHandler(handler)
-        logger.propagate = False
-
-
-class Interrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM received while ``cgda`` was working."""
-
-    def __init__(self, signum: int):
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-class _Signals:
-    """While active, SIGINT and SIGTERM raise `Interrupted` in the main thread (so
-    the results folder is cleaned up); afterwards they are only remembered."""
-
-    def __init__(self):
-        self.received: int | None = None
-        self.active = False
-        self.old: dict[int, object] = {}
-
-    def _handle(self, signum, frame):
-        self.received = signum
-        if self.active:
-            raise Interrupted(signum)
-
-    def __enter__(self):
-        if threading.current_thread() is threading.main_thread():
-            for sig in EXIT_SIGNAL:
-                self.old[sig] = signal.signal(sig, self._handle)
-        self.active = True
-        return self
-
-    def __exit__(self, *exc):
-        self.active = False
-        for sig, handler in self.old.items():
-            signal.signal(sig, handler)
-
-
-def _save_traceback() -> str:
-    """The current exception's traceback in a temporary log file; its path (or why
-    it could not be written)."""
-    try:
-        fd, path = tempfile.mkstemp(prefix="cgda-error-", suffix=".log")
-        with os.fdopen(fd, "w") as f:
-            f.write(f"cgda {' '.join(sys.argv[1:])}\n\n{traceback.format_exc()}")
-        return f"traceback in {path}"
-    except OSError as err:
-        return f"traceback not saved: {err.strerror or err}"
-
-
-def _first_line(err: BaseException) -> str:
-    text = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
-    return text.strip().splitlines()[0] if text.strip() else type(err).__name__
-
-
-def _interrupted(args, signum: int) -> int:
-    name = signal.Signals(signum).name
-    rf = getattr(args, "run_folder", None)
-    if rf is None:
-        where = ""
-    elif rf.committed:
-        where = f" after the results were written to {rf.path}"
-    else:
-        where = f"; nothing written ({rf.path} left as it was)"
-    print(f"cgda: interrupted ({name}){where}", file=sys.stderr)
-    return EXIT_SIGNAL.get(signum, 128 + signum)
-
-
-def _user_error(args, err: Exception) -> bool:
-    """Bad input (status 2): before the run starts, any of `USER_ERRORS`; once it
-    runs (everything was checked), only config and file errors, the rest is a
-    failure (status 3, with its traceback)."""
-    from cgda_jax.experiment.config import ConfigError
-
-    rf = getattr(args, "run_folder", None)
-    if rf is None or rf.committed:
-        return isinstance(err, USER_ERRORS)
-    return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError))
 
 
 def _dispatch(args, signals: _Signals) -> int:
