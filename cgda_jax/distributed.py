@@ -301,8 +301,8 @@ def distributed_trials(strategy: str, sim: Any, goal: Any, n_trials: int, *,
         wall/compile times are those of that process's batch.
 
     Raises:
-        The first failing process's exception, on every process (so none waits
-        forever), with a note naming that process.
+        Exception: the first failing process's exception, raised on every process
+            (so none waits forever), with a note naming that process.
     """
     import jax
 
