@@ -217,37 +217,24 @@ def _pool_step(plan: IEPlan, p: _Pool, block: int | None
                                    (split(s.evo), split(p.goal), split(states)))
         evo, metrics = jax.tree.map(lambda x: x.reshape((size, *x.shape[2:])),
                                     (evo, metrics))
-    better = evo.best_fitness < s.best_fitness
-    best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
-    best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
-    met = best_f < plan.tolerance
-    again = evo.done & ~met & (s.tries <= plan.restarts) & ~s.done
-    # the neighbours of `IEPlan._neighbours`: in the pool, or frozen outside it
-    prev_f = jnp.where(p.prev_pos >= 0, best_f[jnp.maximum(p.prev_pos, 0)], p.prev_f)
-    next_f = jnp.where(p.next_pos >= 0, best_f[jnp.maximum(p.next_pos, 0)], p.next_f)
-    prev_u = jnp.where((p.prev_pos >= 0)[:, None],
-                       best_u[jnp.maximum(p.prev_pos, 0)], p.prev_u)
-    next_u = jnp.where((p.next_pos >= 0)[:, None],
-                       best_u[jnp.maximum(p.next_pos, 0)], p.next_u)
-    u = jnp.where((prev_f <= next_f)[:, None], prev_u, next_u)
-    ok = jnp.isfinite(jnp.minimum(prev_f, next_f))
-    neighbours = jnp.where(ok[:, None], u, jnp.nan)
-    fresh = jax.lax.cond(
-        jnp.any(again), lambda: jax.vmap(plan._try)(
-            s.keys, p.goal, states, s.tries, neighbours,
-            s.samples if plan.restart_samples else None),
-        lambda: evo)
-    s = s.replace(
-        generations=s.generations + jnp.where(again, evo.generation, 0),
-        evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
-        invalid=s.invalid + jnp.where(again, evo.invalid, 0),
-        evo=jax.tree.map(
-            lambda f, e: jnp.where(again.reshape((-1,) + (1,) * (e.ndim - 1)), f, e),
-            fresh, evo),
-        tries=s.tries + again, best_u=best_u, best_fitness=best_f)
-    s = s.replace(done=met | (evo.done & ~again))
-    return p.replace(s=s), {"best_fitness": best_f, "invalid": metrics["invalid"],
-                            "try": s.tries - 1}
+
+    def neighbours_of(best_u, best_f):
+        # the neighbours of `IEPlan._neighbours`: in the pool, or frozen outside it
+        prev_f = jnp.where(p.prev_pos >= 0, best_f[jnp.maximum(p.prev_pos, 0)],
+                           p.prev_f)
+        next_f = jnp.where(p.next_pos >= 0, best_f[jnp.maximum(p.next_pos, 0)],
+                           p.next_f)
+        prev_u = jnp.where((p.prev_pos >= 0)[:, None],
+                           best_u[jnp.maximum(p.prev_pos, 0)], p.prev_u)
+        next_u = jnp.where((p.next_pos >= 0)[:, None],
+                           best_u[jnp.maximum(p.next_pos, 0)], p.next_u)
+        u = jnp.where((prev_f <= next_f)[:, None], prev_u, next_u)
+        ok = jnp.isfinite(jnp.minimum(prev_f, next_f))
+        return jnp.where(ok[:, None], u, jnp.nan)
+
+    s = plan.settle(s, evo, p.goal, states, neighbours_of)
+    return p.replace(s=s), {"best_fitness": s.best_fitness,
+                            "invalid": metrics["invalid"], "try": s.tries - 1}
 
 
 def _gather_pool(flat: IEState, goal, idx, prev_g, next_g, prev_pos, next_pos):

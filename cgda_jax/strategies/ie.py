@@ -256,16 +256,26 @@ class IEPlan(PlanBase):
         evo, metrics = jax.vmap(
             lambda e, g, st: self.evolve(e, self.point_fitness(st, g), self._stop)
         )(evo, self.goal, states)
+        s = self.settle(s, evo, self.goal, states, self._neighbours)
+        return s, {"best_fitness": s.best_fitness, "invalid": metrics["invalid"],
+                   "try": s.tries - 1}
+
+    def settle(self, s, evo, goal, states, neighbours_of):
+        """After a generation: keep each point's best over its tries, restart the
+        tries that stopped short of the tolerance while tries are left (`_try`,
+        starting from ``neighbours_of(best_u, best_fitness)`` or the sampled
+        postures), and mark the points done. Shared by `step` and the pooled
+        points of `cgda_jax.strategies.batching` (``goal``, ``states``: per point)."""
         better = evo.best_fitness < s.best_fitness
         best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
         best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
         met = best_f < self.tolerance
         # a try that stopped short of the tolerance restarts while tries are left
         again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
-        neighbours = self._neighbours(best_u, best_f)
+        neighbours = neighbours_of(best_u, best_f)
         fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
             jnp.any(again), lambda: jax.vmap(self._try)(
-                s.keys, self.goal, states, s.tries, neighbours,
+                s.keys, goal, states, s.tries, neighbours,
                 s.samples if self.restart_samples else None),
             lambda: evo)
         s = s.replace(
@@ -276,9 +286,7 @@ class IEPlan(PlanBase):
                 lambda f, e: jnp.where(again.reshape((-1,) + (1,) * (e.ndim - 1)),
                                        f, e), fresh, evo),
             tries=s.tries + again, best_u=best_u, best_fitness=best_f)
-        s = s.replace(done=met | (evo.done & ~again))
-        return s, {"best_fitness": best_f, "invalid": metrics["invalid"],
-                   "try": s.tries - 1}
+        return s.replace(done=met | (evo.done & ~again))
 
     def progress(self, s):
         return {
