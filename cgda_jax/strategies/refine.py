@@ -45,6 +45,26 @@ def _optimizer(method: str, learning_rate: float):
     raise ValueError(f"refine={method!r}; expected one of {REFINE}")
 
 
+def _stepper(method: str, learning_rate: float, loss):
+    """``(optimizer, step)``: ``step(u, state) -> (loss(u), next u, next state)``,
+    one optax update of `method` (L-BFGS gets the value and its line search)."""
+    opt = _optimizer(method, learning_rate)
+    value_and_grad = (optax.value_and_grad_from_state(loss) if method == "lbfgs"
+                      else jax.value_and_grad(loss))
+
+    def step(u, state):
+        if method == "lbfgs":
+            value, grad = value_and_grad(u, state=state)
+            updates, state = opt.update(grad, state, u, value=value, grad=grad,
+                                        value_fn=loss)
+        else:
+            value, grad = value_and_grad(u)
+            updates, state = opt.update(grad, state, u)
+        return value, optax.apply_updates(u, updates), state
+
+    return opt, step
+
+
 def descend(
     loss: Callable[[jax.Array], jax.Array],
     u0: jax.Array,
@@ -59,24 +79,15 @@ def descend(
         ``(best u, its loss)``: the best iterate seen, ``u0`` included, so the result
         is never worse than the start. Non-finite losses are never kept.
     """
-    opt = _optimizer(method, learning_rate)
-    value_and_grad = (optax.value_and_grad_from_state(loss) if method == "lbfgs"
-                      else jax.value_and_grad(loss))
+    opt, step = _stepper(method, learning_rate, loss)
 
     def body(carry, _):
         u, state, best_u, best = carry
-        if method == "lbfgs":
-            value, grad = value_and_grad(u, state=state)
-            updates, state = opt.update(grad, state, u, value=value, grad=grad,
-                                        value_fn=loss)
-        else:
-            value, grad = value_and_grad(u)
-            updates, state = opt.update(grad, state, u)
+        value, u_next, state = step(u, state)
         better = jnp.isfinite(value) & (value < best)
         best_u = jnp.where(better, u, best_u)
         best = jnp.where(better, value, best)
-        u = optax.apply_updates(u, updates)
-        return (u, state, best_u, best), None
+        return (u_next, state, best_u, best), None
 
     start = loss(u0)
     start = jnp.where(jnp.isfinite(start), start, jnp.inf)
@@ -253,20 +264,11 @@ def polish_trajectory(
         d = distance(features(u), goal)
         return jnp.where(jnp.isfinite(d), d, jnp.inf)
 
-    opt = _optimizer(method, learning_rate)
-    value_and_grad = (optax.value_and_grad_from_state(loss) if method == "lbfgs"
-                      else jax.value_and_grad(loss))
+    opt, step = _stepper(method, learning_rate, loss)
 
     def body(carry, _):
         u, state, best_u, best = carry
-        if method == "lbfgs":
-            value, grad = value_and_grad(u, state=state)
-            updates, state = opt.update(grad, state, u, value=value, grad=grad,
-                                        value_fn=loss)
-        else:
-            value, grad = value_and_grad(u)
-            updates, state = opt.update(grad, state, u)
-        u = optax.apply_updates(u, updates)
+        _, u, state = step(u, state)
         d = score(u)
         better = d < best
         return (u, state, jnp.where(better, u, best_u),
