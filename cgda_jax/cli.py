@@ -8,7 +8,6 @@ work is done by :mod:`cgda_jax.experiment`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pathlib
 import signal
@@ -39,6 +38,7 @@ from cgda_jax.cli_trials import (
     launch_if_asked,
     run_trials_command,
 )
+
 
 def _version() -> str:
     from cgda_jax import __version__
@@ -184,7 +184,12 @@ def _say(args, text: str) -> None:
 
 def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
     """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``)."""
-    from cgda_jax.experiment import write_run
+    return _start_one(cfg, shown, work, args).finish()
+
+
+def _start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
+    """`_run_one` up to its outputs (`~cgda_jax.experiment.run.Outputs`)."""
+    from cgda_jax.experiment import start_run
     from cgda_jax.progress import ProgressLine
 
     bar = ProgressLine(cfg.name, quiet=args.quiet)
@@ -194,16 +199,17 @@ def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
     _say(args, f"[{cfg.name}] {what} ...")
     work.mkdir(exist_ok=True)
     try:
-        result = write_run(cfg, work, progress_fn=bar)
+        pending = start_run(cfg, work, progress_fn=bar)
     finally:
         bar.close()
+    result = pending.result
     verdict = "ok" if result.get("success") else "NOT met"
     extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
              else f"max point error {result['max_point_error']:.4g}"
              + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     _say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
-    return result
+    return pending
 
 
 def _facts(facts: dict) -> str:
@@ -263,65 +269,6 @@ def cmd_list(args) -> int:
     return EXIT_MET
 
 
-def summary_table(results: dict[str, dict]) -> list[str]:
-    """Markdown rows: experiment, result, key figure, time (demo report head)."""
-    rows = ["| experiment | result | key figure | time |", "|---|---|---|---|"]
-    for name, r in results.items():
-        verdict = "ok" if r.get("success") else "**NOT met**"
-        if r.get("kind") == "recognition":
-            key = (f"accuracy {r['accuracy']:.0%} "
-                   f"({len(r['features'])} features, {r['metric']})")
-        else:
-            u = f" {r['error_unit']}" if r.get("error_unit") else ""
-            key = (f"{r['strategy'].upper()}: max point error {r['max_point_error']:.3g}"
-                   f"{u} (tolerance {r['tolerance']:.3g}{u}), {r['points']} points, "
-                   f"{r['generations']} generations")
-        rows.append(f"| [{name}](#{name}) | {verdict} | {key} | "
-                    f"{r.get('total_time_s', r.get('wall_time_s', 0.0)):.1f} s |")
-    return rows
-
-
-def cmd_demo(args) -> int:
-    from cgda_jax.experiment import RunFolder, check_experiment, demo_configs
-
-    configs = demo_configs(small=args.small)
-    for cfg in configs:
-        check_experiment(cfg)
-    t0 = time.perf_counter()
-    results = {}
-    target = pathlib.Path(args.out or "results/demo").expanduser()
-    with RunFolder(target, overwrite=args.overwrite, fresh=args.out is None) as rf:
-        args.run_folder = rf
-        _say_chosen(args, "demo", rf)
-        out = rf.work
-        for cfg in configs:
-            results[cfg.name] = _run_one(cfg, rf.path / cfg.name, out / cfg.name, args)
-        wall = time.perf_counter() - t0
-        success = all(r.get("success") for r in results.values())
-        keys = ("success", "accuracy", "strategy", "points", "max_point_error",
-                "final_fitness", "evaluations", "generations", "wall_time_s",
-                "compile_time_s", "total_time_s", "render", "plots")
-        summary = {
-            "success": success,
-            "small": args.small,
-            "wall_time_s": wall,
-            "experiments": {n: {k: r[k] for k in keys if k in r}
-                            for n, r in results.items()},
-        }
-        (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
-        report = [f"# cgda demo{' (small)' if args.small else ''}", "",
-                  f"Overall: {'success' if success else 'NOT all goals met'}; "
-                  f"{wall:.1f} s in total.", "", *summary_table(results), ""]
-        for name in results:
-            text = (out / name / "report.md").read_text()
-            text = text.replace("](plots/", f"]({name}/plots/")
-            report.append(text.replace("# ", "## ", 1))
-        (out / "report.md").write_text("\n".join(report))
-    _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
-               f"in {wall:.1f} s -> {rf.path / 'report.md'}")
-    return EXIT_MET if success else EXIT_NOT_MET
-
-
 def _dispatch(args, signals: _Signals) -> int:
     try:
         if args.command == "list":
@@ -333,6 +280,8 @@ def _dispatch(args, signals: _Signals) -> int:
             return cmd_run(args)
         if args.command == "plot":
             return cmd_plot(args)
+        from cgda_jax.cli_demo import cmd_demo
+
         return cmd_demo(args)
     except KeyboardInterrupt as e:
         return _interrupted(args, getattr(e, "signum", signal.SIGINT))

@@ -77,7 +77,7 @@ def test_bad_file_names_the_file(tmp_path, capsys):
 
 
 def test_demo_report_starts_with_a_summary_table():
-    from cgda_jax.cli import summary_table
+    from cgda_jax.cli_demo import summary_table
 
     rows = summary_table({
         "rec": {"kind": "recognition", "success": True, "accuracy": 1.0,

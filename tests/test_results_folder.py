@@ -381,14 +381,14 @@ def _tiny_demo(monkeypatch, fail_second=False):
     configs = [load_config(CLEAN, TINY + [f"name={n}"]) for n in ("a", "b")]
     monkeypatch.setattr(ex, "demo_configs", lambda small=False: configs)
     if fail_second:
-        real = ex.write_run
+        real = ex.start_run
 
-        def write_run(cfg, folder, progress_fn=None):
-            if cfg.name == "b":
+        def start_run(cfg, folder, progress_fn=None):
+            if cfg.name == "b":  # while a's figures may still be drawing
                 raise KeyboardInterrupt
             return real(cfg, folder, progress_fn)
 
-        monkeypatch.setattr(ex, "write_run", write_run)
+        monkeypatch.setattr(ex, "start_run", start_run)
 
 
 def test_demo_follows_the_same_folder_rules(monkeypatch, capsys, tmp_path):
@@ -416,6 +416,73 @@ def test_demo_follows_the_same_folder_rules(monkeypatch, capsys, tmp_path):
     assert snapshot(demo) == before
     folders = sorted(p.name for p in (tmp_path / "results").iterdir())
     assert folders == ["demo", "demo-2"]  # no temporary folder, no lock left
+
+
+def _record_drawing(monkeypatch, fail=None):
+    """Record which thread finishes each demo experiment (and when its compute
+    starts); ``fail``: the experiment whose drawing raises."""
+    import threading
+
+    import cgda_jax.experiment.run as run_mod
+
+    events = []
+    real_finish, real_start = run_mod.Outputs.finish, run_mod.start_run
+
+    def finish(self):
+        events.append(("draw", self.cfg.name, threading.current_thread().name))
+        if self.cfg.name == fail:
+            raise RuntimeError("the figure broke")
+        return real_finish(self)
+
+    def start_run(cfg, folder, progress_fn=None):
+        events.append(("compute", cfg.name, threading.current_thread().name))
+        return real_start(cfg, folder, progress_fn)
+
+    monkeypatch.setattr(run_mod.Outputs, "finish", finish)
+    monkeypatch.setattr("cgda_jax.experiment.start_run", start_run)
+    return events
+
+
+@pytest.mark.parametrize("offscreen_thread", [True, False])
+def test_demo_draws_in_a_second_thread_while_the_next_experiment_computes(
+        monkeypatch, tmp_path, offscreen_thread):
+    import cgda_jax.cli_demo as cli_demo
+
+    _tiny_demo(monkeypatch)
+    monkeypatch.setattr(cli_demo, "_offscreen_thread_ok", lambda: offscreen_thread)
+    events = _record_drawing(monkeypatch)
+    assert main(["demo", "--out", str(tmp_path / "d"), "--quiet"]) in (0, 1)
+    main_thread = [e[2] for e in events if e[0] == "compute"]
+    drawers = {e[1]: e[2] for e in events if e[0] == "draw"}
+    assert set(main_thread) == {"MainThread"} and set(drawers) == {"a", "b"}
+    if offscreen_thread:  # a GLFW context would have to stay on the main thread
+        assert all(t.startswith("cgda-outputs") for t in drawers.values())
+    else:
+        assert set(drawers.values()) == {"MainThread"}
+        # drawn inline: a is finished before b starts computing
+        assert events.index(("draw", "a", "MainThread")) < events.index(
+            ("compute", "b", "MainThread"))
+    for name in ("a", "b"):  # every experiment's result and report are complete
+        result = json.loads((tmp_path / "d" / name / "result.json").read_text())
+        assert result["total_time_s"] > 0 and result["plots"] == []
+        assert (tmp_path / "d" / name / "report.md").is_file()
+    assert json.loads((tmp_path / "d" / "result.json").read_text())[
+        "experiments"].keys() == {"a", "b"}
+
+
+def test_demo_drawing_error_in_the_second_thread_is_one_error_line(
+        monkeypatch, capsys, tmp_path):
+    import cgda_jax.cli_demo as cli_demo
+
+    _tiny_demo(monkeypatch)
+    monkeypatch.setattr(cli_demo, "_offscreen_thread_ok", lambda: True)
+    _record_drawing(monkeypatch, fail="a")
+    out = tmp_path / "d"
+    code = main(["demo", "--out", str(out), "--quiet"])
+    assert code not in (0, 1)
+    assert "the figure broke" in one_error_line(capsys.readouterr().err)
+    assert not out.exists()  # nothing half-written moved into place
+    no_leftovers(out)
 
 
 def test_run_experiment_api_follows_the_same_rules(tmp_path):

@@ -97,11 +97,13 @@ from cgda_jax.experiment.rules import (
     validate_config as validate_config,
 )
 from cgda_jax.experiment.run import (
+    Outputs as Outputs,
     _synthetic as _synthetic,
     default_folder as default_folder,
     run_execution as run_execution,
     run_experiment as run_experiment,
     run_recognition as run_recognition,
+    start_run as start_run,
     write_run as write_run,
 )
 from cgda_jax.experiment.validate import (

@@ -53,7 +53,15 @@ def _synthetic(cfg: ExperimentConfig) -> dict:
 
 
 def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
-    """Generalize, then recognize the held-out repetitions (paper Tables 2-4)."""
+    """Generalize, then recognize the held-out repetitions (paper Tables 2-4); save
+    and plot."""
+    pending = _recognize(cfg, out)
+    pending.draw()
+    return pending.result
+
+
+def _recognize(cfg: ExperimentConfig, out: pathlib.Path) -> Outputs:
+    """`run_recognition` up to its figures (drawn by the returned `Outputs`)."""
     from cgda_jax.generalize import generalize
     from cgda_jax.recognize import ActionLibrary, cost_matrix
 
@@ -97,9 +105,7 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
         arrays[f"knots_{a}"] = np.asarray(library[a].knots)
         arrays.update(_demo_arrays(demos[a][: d.n_train], f"demo_{a}_"))
     np.savez(out / "arrays.npz", **arrays)
-    if cfg.output.plots:
-        draw_figures(run_in_memory(out, cfg, result, arrays), out / "plots")
-    return result
+    return Outputs(cfg, out, result, arrays)
 
 
 def _demo_arrays(demos, prefix: str, scale: float = 1.0) -> dict[str, np.ndarray]:
@@ -138,6 +144,17 @@ def run_execution(
     progress_fn: Callable[[dict], None] | None = None,
 ) -> dict:
     """Build the goal and the simulator, run the strategy, save and plot."""
+    pending = _execute(cfg, out, progress_fn)
+    pending.draw()
+    return pending.result
+
+
+def _execute(
+    cfg: ExperimentConfig, out: pathlib.Path,
+    progress_fn: Callable[[dict], None] | None = None,
+) -> Outputs:
+    """`run_execution` up to its figures and video (drawn by the returned
+    `Outputs`)."""
     goal, demos, gen = build_goal(cfg)
     waypoint_s = default_waypoint_s(demos, len(goal))
     sim = build_simulator(cfg, waypoint_s, goal)
@@ -175,12 +192,66 @@ def run_execution(
     else:
         summary["substeps"] = sim.substeps
     summary["replay"] = replay_check(sim, res)
-    run = run_in_memory(out, cfg, summary, arrays)
-    if cfg.output.plots:
-        draw_figures(run, out / "plots")
-    if cfg.output.render:
-        summary["render"] = render_run(run, out / "plots", sim)
-    return summary
+    return Outputs(cfg, out, summary, arrays, sim)
+
+
+class Outputs:
+    """What is left of a run once its numbers are saved: the figures, the robot's
+    video (execution), ``result.json`` and ``report.md``.
+
+    `start_run` returns one; `finish` writes them (in any thread: ``cgda demo`` draws
+    one experiment's outputs while the next one computes). ``result`` is the result
+    dict, already final except for ``plots``, ``render`` and ``total_time_s``.
+    """
+
+    def __init__(self, cfg: ExperimentConfig, folder: pathlib.Path, result: dict,
+                 arrays: dict[str, np.ndarray], sim=None):
+        self.cfg, self.folder, self.result = cfg, folder, result
+        self.arrays, self.sim = arrays, sim
+        self.compute_s = 0.0
+
+    def draw(self) -> None:
+        """The figures and (execution) the video, into ``folder/plots``."""
+        if not (self.cfg.output.plots or self.cfg.output.render):
+            return
+        run = run_in_memory(self.folder, self.cfg, self.result, self.arrays)
+        if self.cfg.output.plots:
+            draw_figures(run, self.folder / "plots")
+        if self.cfg.output.render and self.sim is not None:
+            self.result["render"] = render_run(run, self.folder / "plots", self.sim)
+
+    def finish(self) -> dict:
+        """`draw`, then write ``result.json`` and ``report.md``; the result dict
+        (``total_time_s``: the run's own time, computing plus outputs)."""
+        t0 = time.perf_counter()
+        self.draw()
+        plots = self.folder / "plots"
+        result = self.result
+        result["plots"] = sorted(
+            str(p.relative_to(self.folder)) for p in plots.glob("*.png")
+        ) if plots.is_dir() else []
+        result["total_time_s"] = self.compute_s + time.perf_counter() - t0
+        _write_json(self.folder / "result.json", result)
+        (self.folder / "report.md").write_text(_report(self.cfg, result))
+        return result
+
+
+def start_run(
+    cfg: ExperimentConfig,
+    folder: pathlib.Path,
+    progress_fn: Callable[[dict], None] | None = None,
+) -> Outputs:
+    """Run ``cfg`` (already checked) into the existing, empty ``folder`` up to its
+    outputs: ``config.toml`` and ``arrays.npz`` are written, the result is known
+    (``.result``); ``.finish()`` draws and writes the rest."""
+    t0 = time.perf_counter()
+    (folder / "config.toml").write_text(dump_config(cfg))
+    if cfg.kind == "recognition":
+        pending = _recognize(cfg, folder)
+    else:
+        pending = _execute(cfg, folder, progress_fn)
+    pending.compute_s = time.perf_counter() - t0
+    return pending
 
 
 def write_run(
@@ -191,19 +262,7 @@ def write_run(
     """Run ``cfg`` (already checked) and write its results into the existing, empty
     ``folder``; return the result dict. `run_experiment` and ``cgda`` call it inside
     a `~cgda_jax.experiment.results.RunFolder`."""
-    t0 = time.perf_counter()
-    (folder / "config.toml").write_text(dump_config(cfg))
-    if cfg.kind == "recognition":
-        result = run_recognition(cfg, folder)
-    else:
-        result = run_execution(cfg, folder, progress_fn)
-    result["plots"] = sorted(
-        str(p.relative_to(folder)) for p in (folder / "plots").glob("*.png")
-    ) if (folder / "plots").is_dir() else []
-    result["total_time_s"] = time.perf_counter() - t0
-    _write_json(folder / "result.json", result)
-    (folder / "report.md").write_text(_report(cfg, result))
-    return result
+    return start_run(cfg, folder, progress_fn).finish()
 
 
 def default_folder(cfg: ExperimentConfig) -> pathlib.Path:

@@ -1,0 +1,99 @@
+"""``cgda demo``: the main job (recognition tables, clean IE and paint IET on TEO)
+in one results folder, with a summary report on top. Each experiment's figures and
+video are drawn in a second thread while the next experiment computes."""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+
+from cgda_jax.cli import _say, _say_chosen, _start_one
+from cgda_jax.cli_errors import EXIT_MET, EXIT_NOT_MET
+
+
+def summary_table(results: dict[str, dict]) -> list[str]:
+    """Markdown rows: experiment, result, key figure, time (demo report head)."""
+    rows = ["| experiment | result | key figure | time |", "|---|---|---|---|"]
+    for name, r in results.items():
+        verdict = "ok" if r.get("success") else "**NOT met**"
+        if r.get("kind") == "recognition":
+            key = (f"accuracy {r['accuracy']:.0%} "
+                   f"({len(r['features'])} features, {r['metric']})")
+        else:
+            u = f" {r['error_unit']}" if r.get("error_unit") else ""
+            key = (f"{r['strategy'].upper()}: max point error {r['max_point_error']:.3g}"
+                   f"{u} (tolerance {r['tolerance']:.3g}{u}), {r['points']} points, "
+                   f"{r['generations']} generations")
+        rows.append(f"| [{name}](#{name}) | {verdict} | {key} | "
+                    f"{r.get('total_time_s', r.get('wall_time_s', 0.0)):.1f} s |")
+    return rows
+
+
+def _offscreen_thread_ok() -> bool:
+    """Whether the robot's video may be rendered outside the main thread: EGL and
+    OSMesa contexts may, GLFW's (a display, macOS) must stay on the main thread."""
+    from cgda_jax.sim._mujoco_env import headless_backends
+
+    gl = os.environ.get("MUJOCO_GL", "").lower()
+    return gl in ("egl", "osmesa") or (not gl and bool(headless_backends()))
+
+
+def _done(value) -> Future:
+    future: Future = Future()
+    future.set_result(value)
+    return future
+
+
+def cmd_demo(args) -> int:
+    from cgda_jax.experiment import RunFolder, check_experiment, demo_configs
+
+    configs = demo_configs(small=args.small)
+    for cfg in configs:
+        check_experiment(cfg)
+    t0 = time.perf_counter()
+    results = {}
+    target = pathlib.Path(args.out or "results/demo").expanduser()
+    with RunFolder(target, overwrite=args.overwrite, fresh=args.out is None) as rf:
+        args.run_folder = rf
+        _say_chosen(args, "demo", rf)
+        out = rf.work
+        # one experiment's figures and video are drawn in a second thread while the
+        # next one computes (XLA compiles and runs without the GIL)
+        pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cgda-outputs")
+        try:
+            drawn = []
+            for cfg in configs:
+                pending = _start_one(cfg, rf.path / cfg.name, out / cfg.name, args)
+                drawn.append(pool.submit(pending.finish) if _offscreen_thread_ok()
+                             else _done(pending.finish()))
+            for cfg, future in zip(configs, drawn):
+                results[cfg.name] = future.result()
+        finally:  # on an error or a signal: no drawing left running into the folder
+            pool.shutdown(wait=True, cancel_futures=True)
+        wall = time.perf_counter() - t0
+        success = all(r.get("success") for r in results.values())
+        keys = ("success", "accuracy", "strategy", "points", "max_point_error",
+                "final_fitness", "evaluations", "generations", "wall_time_s",
+                "compile_time_s", "total_time_s", "render", "plots")
+        summary = {
+            "success": success,
+            "small": args.small,
+            "wall_time_s": wall,
+            "experiments": {n: {k: r[k] for k in keys if k in r}
+                            for n, r in results.items()},
+        }
+        (out / "result.json").write_text(json.dumps(summary, indent=2) + "\n")
+        report = [f"# cgda demo{' (small)' if args.small else ''}", "",
+                  (f"Overall: {'success' if success else 'NOT all goals met'}; "
+                   f"{wall:.1f} s in total."), "", *summary_table(results), ""]
+        for name in results:
+            text = (out / name / "report.md").read_text()
+            text = text.replace("](plots/", f"]({name}/plots/")
+            report.append(text.replace("# ", "## ", 1))
+        (out / "report.md").write_text("\n".join(report))
+    _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
+               f"in {wall:.1f} s -> {rf.path / 'report.md'}")
+    return EXIT_MET if success else EXIT_NOT_MET
