@@ -19,7 +19,7 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
 
 ``--quick`` lowers the generation budgets and trial count (a smoke test only).
 Targets (2-core CPU): clean IE >= 30x faster than the peer (steady state); cold
-start incl. compile < 3 s; paint IET >= 10x faster than the peer; 30 batched trials
+start incl. compile < 2 s (issue 14; it was 3 s); paint IET >= 10x faster than the peer; 30 batched trials
 >= 10x the throughput of 30 sequential runs.
 """
 
@@ -59,6 +59,10 @@ def strategy_kwargs(cfg) -> dict:
         chunk_size=s.chunk_size,
         **s.options,
     )
+
+
+#: Clean IE cold start in this process (trace + compile + run), issue 14.
+COLD_TARGET_S = 2.0
 
 
 def run_ours(cfg, goal, sim, repeats: int) -> dict:
@@ -223,7 +227,8 @@ def main() -> None:
             )
     c = payload.get("cold_start_s")
     report_target(
-        "clean IE cold start incl. compile < 3 s (s)", c, c is not None and c < 3
+        f"clean IE cold start incl. compile < {COLD_TARGET_S:g} s (s)", c,
+        c is not None and c < COLD_TARGET_S,
     )
     if "trials" in args.only:
         print(f"trials ({n_trials}) ...", flush=True)
