@@ -8,7 +8,10 @@ import warnings
 
 import numpy as np
 
-__all__ = ["caption", "write_video"]
+__all__ = ["caption", "gif_palette", "write_video"]
+
+#: Frames sampled for the GIF's shared palette.
+GIF_PALETTE_SAMPLES = 12
 
 
 def write_video(images, out_path: str | pathlib.Path, fps: int = 12
@@ -16,8 +19,10 @@ def write_video(images, out_path: str | pathlib.Path, fps: int = 12
     """Write (H, W, 3) uint8 ``images``.
 
     ``out_path`` ending in ``.mp4``: an H.264 video (yuv420p, plays in browsers;
-    sizes are padded to multiples of 16 by ffmpeg if needed); ``.gif``: an animated
-    GIF looping forever; anything else: a folder of ``frame_0000.png``, ...
+    sizes are padded to multiples of 16 by ffmpeg if needed; x264 preset
+    ``veryfast``); ``.gif``: an animated GIF looping forever, every frame in one
+    shared palette of at most 255 colours (`gif_palette`); anything else: a folder
+    of ``frame_0000.png``, ...
 
     Returns:
         The files written.
@@ -45,13 +50,13 @@ def write_video(images, out_path: str | pathlib.Path, fps: int = 12
             warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called")
             with iio2.get_writer(out_path, format="FFMPEG", mode="I", fps=fps,
                                  codec="libx264", pixelformat="yuv420p", quality=8,
-                                 macro_block_size=16) as writer:
+                                 macro_block_size=16,
+                                 output_params=["-preset", "veryfast"]) as writer:
                 for img in images:
                     writer.append_data(img)
         return [out_path]
     if suffix == ".gif":
-        iio.imwrite(out_path, np.stack(images), extension=".gif", plugin="pillow",
-                    duration=int(1000 / fps), loop=0)
+        _write_gif(images, out_path, fps)
         return [out_path]
     folder = out_path.with_suffix("") if out_path.suffix else out_path
     folder.mkdir(parents=True, exist_ok=True)
@@ -61,6 +66,31 @@ def write_video(images, out_path: str | pathlib.Path, fps: int = 12
         iio.imwrite(path, img)
         written.append(path)
     return written
+
+
+def gif_palette(images, samples: int = GIF_PALETTE_SAMPLES):
+    """One palette (a Pillow "P" image of at most 255 colours, median cut) for all
+    ``images``: computed from ``samples`` of them spread evenly, the first and the
+    last included (a paint wall turns red towards the end)."""
+    from PIL import Image
+
+    pick = np.unique(np.linspace(0, len(images) - 1, min(samples, len(images)))
+                     .round().astype(int))
+    return Image.fromarray(np.concatenate([images[k] for k in pick])).quantize(
+        255, method=Image.Quantize.MEDIANCUT)
+
+
+def _write_gif(images, out_path: pathlib.Path, fps: int) -> None:
+    """Every frame mapped onto one shared palette (no dithering): ~6x faster than
+    Pillow's own median cut per frame, and a smaller file."""
+    from PIL import Image
+
+    palette = gif_palette(images)
+    frames = [Image.fromarray(img).quantize(palette=palette,
+                                            dither=Image.Dither.NONE)
+              for img in images]
+    frames[0].save(out_path, format="GIF", save_all=True, append_images=frames[1:],
+                   duration=int(1000 / fps), loop=0)
 
 
 def caption(image: np.ndarray, text: str) -> np.ndarray:
