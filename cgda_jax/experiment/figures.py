@@ -182,9 +182,9 @@ def frames_per_waypoint(sim) -> int:
 def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
                size: tuple[int, int] = VIDEO_SIZE) -> dict:
     """The robot executing the run's best joints: ``execution.mp4``,
-    ``execution.gif`` (``size`` pixels, 1 + `frames_per_waypoint` frames per
-    goal point, the GIF in one shared palette) and the frame strip ``frames.png``
-    in ``out``.
+    ``execution.gif`` (``size`` pixels; the start, then `frames_per_waypoint`
+    frames per goal point; the GIF in one shared palette) and the frame strip
+    ``frames.png`` in ``out``.
 
     The goal is drawn in: the marker scene's goal points as spheres (the one being
     reached in yellow), the object scenes' goal path, and a caption with the point

@@ -30,7 +30,8 @@ def finish(fig: Figure, path: str | os.PathLike | None, *, tight: bool = True) -
         fig.tight_layout()
     if path is not None:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-        fig.savefig(path, dpi=DPI)
+        # zlib level 3: half the time of the default 6, files no larger here
+        fig.savefig(path, dpi=DPI, pil_kwargs={"compress_level": 3})
     return fig
 
 
