@@ -35,6 +35,17 @@ def finish(fig: Figure, path: str | os.PathLike | None, *, tight: bool = True) -
     return fig
 
 
+def title_margins(fig: Figure, title: str | None, pad_in: float = 0.15) -> None:
+    """Margins of a figure whose one axes keeps its labels inside its area (a 3-D
+    plot from `equal_3d`): ``pad_in`` inches around, and room for the suptitle's
+    lines at the top, as `Figure.tight_layout` places them, without its layout pass.
+    """
+    w, h = fig.get_size_inches()
+    top = pad_in + (0.09 + 0.23 * len(title.splitlines()) if title else 0.0)
+    fig.subplots_adjust(left=pad_in / w, right=1 - pad_in / w, bottom=pad_in / h,
+                        top=1 - top / h)
+
+
 def tight_above(fig: Figure, bottom_in: float) -> None:
     """`Figure.tight_layout` leaving ``bottom_in`` inches free at the bottom (for a
     figure legend), in one layout pass.

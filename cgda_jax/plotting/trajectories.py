@@ -24,6 +24,7 @@ from cgda_jax.plotting._base import (
     point_numbers,
     select,
     tight_above,
+    title_margins,
 )
 
 __all__ = ["plot_demonstrations", "plot_goal_vs_executed"]
@@ -151,9 +152,11 @@ def plot_demonstrations(
         if title:
             fig.suptitle(title)
         tight_above(fig, 0.35)
-    if title and len(cols) == 3:
-        fig.suptitle(title)
-    return finish(fig, path, tight=len(cols) == 3)
+    if len(cols) == 3:
+        if title:
+            fig.suptitle(title)
+        title_margins(fig, title)
+    return finish(fig, path, tight=False)
 
 
 def plot_goal_vs_executed(
