@@ -86,3 +86,25 @@ def test_knot_curve_is_the_generalized_action_between_its_knots():
         kt = np.asarray(gen.knot_times)
         assert t[0] == kt.min() and t[-1] == kt.max() and kt.min() > 0
         np.testing.assert_allclose(curve, np.asarray(gen(t)), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("title", [None, "one line", "two\nlines"])
+def test_fast_layouts_match_tight_layout(title):
+    """The layouts set without `tight_layout`'s pass are the ones it computes: a 3-D
+    plot's pads and title room; the panel grid's room for the legend below."""
+    demos = clean_circle_demos(n=2, seed=1)
+
+    def margins(fig) -> np.ndarray:
+        p, (w, h) = fig.subplotpars, fig.get_size_inches()
+        return np.array([p.left * w, (1 - p.right) * w, p.bottom * h, (1 - p.top) * h,
+                         p.wspace, p.hspace])
+
+    fig = plotting.plot_demonstrations(demos, title=title)
+    fast = margins(fig)
+    fig.tight_layout()
+    np.testing.assert_allclose(fast, margins(fig), atol=0.03)
+    paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
+    fig = plotting.plot_demonstrations(paint, title=title)  # 8 panels in 2 rows
+    fast = margins(fig)
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # two passes
+    np.testing.assert_allclose(fast, margins(fig), atol=0.03)
