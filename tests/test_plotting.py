@@ -108,3 +108,17 @@ def test_fast_layouts_match_tight_layout(title):
     fast = margins(fig)
     fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # two passes
     np.testing.assert_allclose(fast, margins(fig), atol=0.03)
+
+
+def test_frame_strip_draws_large_frames_reduced_to_its_cells():
+    """640x480 frames fill ~300-pixel cells: drawn from a half-size box-filtered copy
+    (the same picture at the strip's size); small or float frames as given."""
+    frame = np.zeros((480, 640, 3), np.uint8)
+    frame[:240] = 200  # top half bright: the halving averages 2x2 blocks
+    fig = plotting.plot_frames([frame, frame[:60, :80]])
+    big, small = (ax.images[0].get_array() for ax in fig.axes[:2])
+    assert big.shape == (240, 320, 3) and small.shape == (60, 80, 3)
+    assert big[:120].min() == 200 and big[120:].max() == 0
+    floats = np.zeros((480, 640, 3))
+    assert plotting.plot_frames([floats]).axes[0].images[0].get_array().shape == (
+        480, 640, 3)
