@@ -110,6 +110,31 @@ def test_fast_layouts_match_tight_layout(title):
     np.testing.assert_allclose(fast, margins(fig), atol=0.03)
 
 
+def test_panel_grid_fixed_margins_checked_once_drawn(tmp_path):
+    """Saved, a panel grid keeps its fixed margins where every label fits (checked
+    on the drawn figure) and falls back to tight_layout's where one does not."""
+    from cgda_jax.plotting._layout import GRID_SIDE_IN, _texts_fit
+
+    paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
+    names = list(paint[0].feature_names)
+    fig = plotting.plot_demonstrations(paint, names=names, title="a title",
+                                       path=tmp_path / "a.png")
+    assert fig.subplotpars.left * fig.get_figwidth() == pytest.approx(GRID_SIDE_IN)
+    grid = np.array(fig.axes).reshape(2, 4)
+    assert _texts_fit(fig, grid)
+    # a y label of four lines does not fit in the fixed room left of its panel
+    names[5] = "a\nlong\nfeature\nname"
+    fig = plotting.plot_demonstrations(paint, names=names, title="a title",
+                                       path=tmp_path / "b.png")
+    p, width = fig.subplotpars, fig.get_figwidth()
+    saved = p.left, p.wspace
+    axes_w = (p.right - p.left) * width / (4 + 3 * p.wspace)
+    assert p.wspace * axes_w > GRID_SIDE_IN + 0.1  # more room than the fixed layout
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
+    np.testing.assert_allclose(saved, (fig.subplotpars.left, fig.subplotpars.wspace),
+                               atol=0.005)
+
+
 def test_frame_strip_draws_large_frames_reduced_to_its_cells():
     """640x480 frames fill ~300-pixel cells: drawn from a half-size box-filtered copy
     (the same picture at the strip's size); small or float frames as given."""

@@ -35,39 +35,6 @@ def finish(fig: Figure, path: str | os.PathLike | None, *, tight: bool = True) -
     return fig
 
 
-def title_margins(fig: Figure, title: str | None, pad_in: float = 0.15) -> None:
-    """Margins of a figure whose one axes keeps its labels inside its area (a 3-D
-    plot from `equal_3d`): ``pad_in`` inches around, and room for the suptitle's
-    lines at the top, as `Figure.tight_layout` places them, without its layout pass.
-    """
-    w, h = fig.get_size_inches()
-    top = pad_in + (0.09 + 0.23 * len(title.splitlines()) if title else 0.0)
-    fig.subplots_adjust(left=pad_in / w, right=1 - pad_in / w, bottom=pad_in / h,
-                        top=1 - top / h)
-
-
-def tight_above(fig: Figure, bottom_in: float) -> None:
-    """`Figure.tight_layout` leaving ``bottom_in`` inches free at the bottom (for a
-    figure legend), in one layout pass.
-
-    The same subplot parameters as ``tight_layout(rect=(0, bottom_in / height, 1,
-    1))``, which measures every axes twice (its second pass sees the same axes
-    again); here the first pass's bottom margin is raised and the row spacing kept
-    in inches.
-    """
-    fig.set_dpi(DPI)
-    fig.tight_layout()
-    p = fig.subplotpars
-    rows = fig.axes[0].get_subplotspec().get_gridspec().nrows if fig.axes else 1
-    bottom = p.bottom + bottom_in / fig.get_figheight()
-    if rows > 1:
-        gap = p.hspace * (p.top - p.bottom) / (rows + p.hspace * (rows - 1))
-        axes_h = (p.top - bottom - gap * (rows - 1)) / rows
-        fig.subplots_adjust(bottom=bottom, hspace=gap / axes_h)
-    else:
-        fig.subplots_adjust(bottom=bottom)
-
-
 def as_curve(x) -> np.ndarray:
     """(T, F) host array from an array (a (T,) array is one feature)."""
     x = np.asarray(x, dtype=float)

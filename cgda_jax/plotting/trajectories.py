@@ -23,14 +23,14 @@ from cgda_jax.plotting._base import (
     plt,
     point_numbers,
     select,
-    tight_above,
-    title_margins,
 )
+from cgda_jax.plotting._layout import grid_margins, save_grid, title_margins
 
 __all__ = ["plot_demonstrations", "plot_goal_vs_executed"]
 
 TIME_AXIS = "normalized time (0 = start, 1 = end)"
 TIME_TICKS = np.linspace(0.0, 1.0, 6)
+LEGEND_IN = 0.35  # below the panels: the figure legend
 
 
 def _normalized(times) -> np.ndarray:
@@ -151,11 +151,11 @@ def plot_demonstrations(
                    frameon=False)
         if title:
             fig.suptitle(title)
-        tight_above(fig, 0.35)
-    if len(cols) == 3:
-        if title:
-            fig.suptitle(title)
-        title_margins(fig, title)
+        grid_margins(fig, nrow, ncol, title, LEGEND_IN)
+        return save_grid(fig, axes, path, LEGEND_IN)
+    if title:
+        fig.suptitle(title)
+    title_margins(fig, title)
     return finish(fig, path, tight=False)
 
 
