@@ -7,6 +7,12 @@ from cgda_jax import plotting
 from cgda_jax.datasets import clean_circle_demos, synthetic_actions
 
 
+def _close_all() -> None:
+    import matplotlib.pyplot as plt  # after cgda_jax.plotting chose the backend
+
+    plt.close("all")
+
+
 def _png(path):
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 2000
@@ -108,6 +114,7 @@ def test_fast_layouts_match_tight_layout(title):
     fast = margins(fig)
     fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # two passes
     np.testing.assert_allclose(fast, margins(fig), atol=0.03)
+    _close_all()
 
 
 def test_panel_grid_fixed_margins_checked_once_drawn(tmp_path):
@@ -133,6 +140,7 @@ def test_panel_grid_fixed_margins_checked_once_drawn(tmp_path):
     fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
     np.testing.assert_allclose(saved, (fig.subplotpars.left, fig.subplotpars.wspace),
                                atol=0.005)
+    _close_all()
 
 
 def test_frame_strip_draws_large_frames_reduced_to_its_cells():
@@ -147,3 +155,4 @@ def test_frame_strip_draws_large_frames_reduced_to_its_cells():
     floats = np.zeros((480, 640, 3))
     assert plotting.plot_frames([floats]).axes[0].images[0].get_array().shape == (
         480, 640, 3)
+    _close_all()
