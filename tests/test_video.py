@@ -76,3 +76,32 @@ def test_frames_per_waypoint_of_the_videos():
     assert frames_per_waypoint(sim(wall, substeps=2)) == 2
     assert frames_per_waypoint(sim(wall, mode="dynamic")) == 3
     assert frames_per_waypoint(sim(types.SimpleNamespace())) == 3  # marker scene
+
+
+@pytest.mark.parametrize(("shape", "text"), [
+    ((480, 640, 3), "paint_iet: point 3 of 17\ntarget 12.5 %, painted 6.2 %"),
+    ((180, 240, 3), "start"),
+    ((40, 300, 3), "a\nbox\ntaller\nthan the image"),
+])
+def test_caption_equals_drawing_into_the_whole_frame(shape, text):
+    """The caption drawn into the rows its box covers equals drawing it into the
+    whole frame (Pillow, as the caption was first written)."""
+    from PIL import ImageDraw, ImageFont
+
+    from cgda_jax.sim.video import caption
+
+    image = np.random.default_rng(1).integers(0, 255, shape, dtype=np.uint8)
+    im = Image.fromarray(image)
+    try:
+        font = ImageFont.load_default(size=max(10, shape[0] // 22))
+    except TypeError:  # Pillow < 10.1
+        font = ImageFont.load_default()
+    draw = ImageDraw.Draw(im, "RGBA")
+    x0, y0, x1, y1 = draw.multiline_textbbox((8, 6), text, font=font, spacing=4)
+    draw.rectangle((x0 - 5, y0 - 4, x1 + 5, y1 + 4), fill=(0, 0, 0, 170))
+    draw.multiline_text((8, 6), text, font=font, fill=(255, 255, 255, 255), spacing=4)
+    got = caption(image, text)
+    np.testing.assert_array_equal(got, np.asarray(im))
+    assert not np.array_equal(got, image)  # something was drawn
+    np.testing.assert_array_equal(image, np.random.default_rng(1).integers(
+        0, 255, shape, dtype=np.uint8))  # the input is left as it was
