@@ -98,6 +98,7 @@ def test_knot_curve_is_the_generalized_action_between_its_knots():
 def test_fast_layouts_match_tight_layout(title):
     """The layouts set without `tight_layout`'s pass are the ones it computes: a 3-D
     plot's pads and title room; the panel grid's room for the legend below."""
+    _close_all()  # those the tests before left open
     demos = clean_circle_demos(n=2, seed=1)
 
     def margins(fig) -> np.ndarray:
