@@ -75,7 +75,11 @@ def test_demonstrations_panels_stay_between_the_knots(tmp_path):
     knots = np.asarray(gen.knots)
     for f, ax in enumerate(axes):
         assert UNIT.search(ax.get_ylabel()), ax.get_ylabel()
-        assert "normalized time" in ax.get_xlabel()
+        # one time axis per column: labelled on the bottom row, bare above it
+        bottom = f + 4 >= len(axes)
+        assert ("normalized time" in ax.get_xlabel()) == bottom
+        assert ax.xaxis.get_tick_params()["labelbottom"] == bottom
+        assert ax.get_xlim() == axes[f % 4].get_xlim()
         t, y = ax.lines[3].get_data()  # the generalization, after 3 demonstrations
         assert t.min() == pytest.approx(kt.min()) and t.max() == pytest.approx(kt.max())
         # within the knots' range: no spike beyond the first and last knot

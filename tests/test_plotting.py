@@ -7,6 +7,12 @@ from cgda_jax import plotting
 from cgda_jax.datasets import clean_circle_demos, synthetic_actions
 
 
+def _close_all() -> None:
+    import matplotlib.pyplot as plt  # after cgda_jax.plotting chose the backend
+
+    plt.close("all")
+
+
 def _png(path):
     data = path.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 2000
@@ -86,3 +92,68 @@ def test_knot_curve_is_the_generalized_action_between_its_knots():
         kt = np.asarray(gen.knot_times)
         assert t[0] == kt.min() and t[-1] == kt.max() and kt.min() > 0
         np.testing.assert_allclose(curve, np.asarray(gen(t)), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("title", [None, "one line", "two\nlines"])
+def test_fast_layouts_match_tight_layout(title):
+    """The layouts set without `tight_layout`'s pass are the ones it computes: a 3-D
+    plot's pads and title room; the panel grid's room for the legend below."""
+    _close_all()  # those the tests before left open
+    demos = clean_circle_demos(n=2, seed=1)
+
+    def margins(fig) -> np.ndarray:
+        p, (w, h) = fig.subplotpars, fig.get_size_inches()
+        return np.array([p.left * w, (1 - p.right) * w, p.bottom * h, (1 - p.top) * h,
+                         p.wspace, p.hspace])
+
+    fig = plotting.plot_demonstrations(demos, title=title)
+    fast = margins(fig)
+    fig.tight_layout()
+    np.testing.assert_allclose(fast, margins(fig), atol=0.03)
+    paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
+    fig = plotting.plot_demonstrations(paint, title=title)  # 8 panels in 2 rows
+    fast = margins(fig)
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))  # two passes
+    np.testing.assert_allclose(fast, margins(fig), atol=0.03)
+    _close_all()
+
+
+def test_panel_grid_fixed_margins_checked_once_drawn(tmp_path):
+    """Saved, a panel grid keeps its fixed margins where every label fits (checked
+    on the drawn figure) and falls back to tight_layout's where one does not."""
+    from cgda_jax.plotting._layout import GRID_SIDE_IN, _texts_fit
+
+    paint = synthetic_actions(n_repetitions=2, seed=0)["PAINT"]
+    names = list(paint[0].feature_names)
+    fig = plotting.plot_demonstrations(paint, names=names, title="a title",
+                                       path=tmp_path / "a.png")
+    assert fig.subplotpars.left * fig.get_figwidth() == pytest.approx(GRID_SIDE_IN)
+    grid = np.array(fig.axes).reshape(2, 4)
+    assert _texts_fit(fig, grid)
+    # a y label of four lines does not fit in the fixed room left of its panel
+    names[5] = "a\nlong\nfeature\nname"
+    fig = plotting.plot_demonstrations(paint, names=names, title="a title",
+                                       path=tmp_path / "b.png")
+    p, width = fig.subplotpars, fig.get_figwidth()
+    saved = p.left, p.wspace
+    axes_w = (p.right - p.left) * width / (4 + 3 * p.wspace)
+    assert p.wspace * axes_w > GRID_SIDE_IN + 0.1  # more room than the fixed layout
+    fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
+    np.testing.assert_allclose(saved, (fig.subplotpars.left, fig.subplotpars.wspace),
+                               atol=0.005)
+    _close_all()
+
+
+def test_frame_strip_draws_large_frames_reduced_to_its_cells():
+    """640x480 frames fill ~300-pixel cells: drawn from a half-size box-filtered copy
+    (the same picture at the strip's size); small or float frames as given."""
+    frame = np.zeros((480, 640, 3), np.uint8)
+    frame[:240] = 200  # top half bright: the halving averages 2x2 blocks
+    fig = plotting.plot_frames([frame, frame[:60, :80]])
+    big, small = (ax.images[0].get_array() for ax in fig.axes[:2])
+    assert big.shape == (240, 320, 3) and small.shape == (60, 80, 3)
+    assert big[:120].min() == 200 and big[120:].max() == 0
+    floats = np.zeros((480, 640, 3))
+    assert plotting.plot_frames([floats]).axes[0].images[0].get_array().shape == (
+        480, 640, 3)
+    _close_all()

@@ -16,7 +16,7 @@ SCRIPT = r"""
 import math, sys
 import numpy as np
 import cgda_jax as c
-from cgda_jax.sim.render import render_trajectory
+from cgda_jax.sim.render import render_frames, render_trajectory
 out = sys.argv[1]
 robot = c.Robot.from_mjcf(c.model_path("teo.xml"),
     ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"], "marker",
@@ -28,6 +28,9 @@ render_trajectory(sim, wps, out + "/run.gif", width=240, height=180,
                   frames_per_waypoint=3)
 render_trajectory(sim, wps, out + "/frames", width=240, height=180,
                   frames_per_waypoint=3)
+lit = [render_frames(sim, wps[:1], frames_per_waypoint=1, width=240, height=180,
+                     shadows=s).images for s in (True, False)]
+print("SHADOWS_SAME", all(np.array_equal(a, b) for a, b in zip(*lit)))
 """
 
 
@@ -74,6 +77,8 @@ def test_render_gif_and_frames_show_the_painting(tmp_path):
     assert _red(first) < 20 and _red(last) > _red(first) + 100
     gif = Image.open(tmp_path / "run.gif")
     assert gif.n_frames == len(frames)
+    # shadows are off by default: the scene renders to the same pixels with them
+    assert "SHADOWS_SAME True" in stdout
 
 
 def test_host_paint_states_match_the_scene_update_per_frame():

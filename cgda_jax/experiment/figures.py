@@ -162,10 +162,29 @@ def _captions(run: Run, sim):
     return text
 
 
+#: Frames per waypoint of the robot's video: a kinematic paint run shows the arm
+#: sweeping (the wall is painted from every simulated sub-step whatever the frames,
+#: `cgda_jax.sim.render`), the others move straight from point to point.
+PAINT_FRAMES_PER_WAYPOINT = 4
+FRAMES_PER_WAYPOINT = 3
+
+
+def frames_per_waypoint(sim) -> int:
+    """Frames per waypoint in `render_run`'s video of ``sim``: at most
+    `PAINT_FRAMES_PER_WAYPOINT` (and the sub-steps) for a kinematic paint run,
+    else `FRAMES_PER_WAYPOINT`; the video plays ``max(4, 2 * fpw)`` frames a second
+    (2 waypoints a second where ``fpw >= 2``)."""
+    if getattr(sim.scene, "centres", None) is not None and sim.mode == "kinematic":
+        return min(int(sim.substeps), PAINT_FRAMES_PER_WAYPOINT)
+    return FRAMES_PER_WAYPOINT
+
+
 def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
                size: tuple[int, int] = VIDEO_SIZE) -> dict:
     """The robot executing the run's best joints: ``execution.mp4``,
-    ``execution.gif`` (``size`` pixels) and the frame strip ``frames.png`` in ``out``.
+    ``execution.gif`` (``size`` pixels; the start, then `frames_per_waypoint`
+    frames per goal point; the GIF in one shared palette) and the frame strip
+    ``frames.png`` in ``out``.
 
     The goal is drawn in: the marker scene's goal points as spheres (the one being
     reached in yellow), the object scenes' goal path, and a caption with the point
@@ -185,9 +204,7 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
 
         sim = sim if sim is not None else run.simulator()
         joints = np.asarray(run.arrays["joints"], np.float32)
-        paint = getattr(sim.scene, "centres", None) is not None
-        # the paint wall sees every sub-step whatever the frames (render._postures)
-        fpw = min(int(sim.substeps), 8) if paint and sim.mode == "kinematic" else 3
+        fpw = frames_per_waypoint(sim)
         marker = type(sim.scene).__name__ == "MarkerScene"
         goal = np.asarray(run.arrays["goal"], float)
         camera = _camera(sim)

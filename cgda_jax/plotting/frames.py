@@ -8,9 +8,21 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.figure import Figure
 
-from cgda_jax.plotting._base import FIRST_POINT, finish, plt
+from cgda_jax.plotting._base import DPI, FIRST_POINT, finish, plt
 
 __all__ = ["plot_frames"]
+
+
+def _shrunk(frame: np.ndarray, width_px: float) -> np.ndarray:
+    """A uint8 frame at least twice as wide as ``width_px`` reduced by a whole
+    factor (box filter) to at least ``width_px``: what the PNG shows, for less
+    resampling in the figure."""
+    k = int(frame.shape[1] // max(width_px, 1.0))
+    if k < 2 or frame.dtype != np.uint8 or frame.ndim != 3:
+        return frame
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(frame).reduce(k))
 
 
 def plot_frames(
@@ -42,10 +54,11 @@ def plot_frames(
     top = 1 - ((0.4 if title else 0.0) + 0.25) / height
     fig.subplots_adjust(left=0.1 / width, right=1 - 0.1 / width, bottom=0.05 / height,
                         top=top, wspace=0.06, hspace=0.15)
+    cell_px = 2.8 * DPI  # a frame's width in the PNG, at most
     for k, ax in enumerate(axes.flat):
         ax.axis("off")
         if k < len(frames):
-            ax.imshow(frames[k])
+            ax.imshow(_shrunk(frames[k], cell_px))
             # a plain text, not set_title: no per-axes title layout pass
             ax.text(0.5, 1.02, labels[k], fontsize=8, ha="center", va="bottom",
                     transform=ax.transAxes)

@@ -24,10 +24,13 @@ from cgda_jax.plotting._base import (
     point_numbers,
     select,
 )
+from cgda_jax.plotting._layout import grid_margins, save_grid, title_margins
 
 __all__ = ["plot_demonstrations", "plot_goal_vs_executed"]
 
 TIME_AXIS = "normalized time (0 = start, 1 = end)"
+TIME_TICKS = np.linspace(0.0, 1.0, 6)
+LEGEND_IN = 0.35  # below the panels: the figure legend
 
 
 def _normalized(times) -> np.ndarray:
@@ -134,9 +137,13 @@ def plot_demonstrations(
             if ex is not None:
                 ax.plot(ex_t, ex[:, i], "s", color=EXEC, ms=3.5, label="executed")
             ax.set_ylabel(labels[c], fontsize=8)
-            ax.set_xlabel(TIME_AXIS, fontsize=8)
             ax.set_xlim(-0.02, 1.02)
+            ax.set_xticks(TIME_TICKS)
             ax.tick_params(labelsize=7)
+            if i + ncol < n:  # the panel below shows the same time axis
+                ax.tick_params(labelbottom=False)
+            else:
+                ax.set_xlabel(TIME_AXIS, fontsize=8)
         for ax in list(axes.flat)[n:]:
             ax.set_visible(False)
         handles, texts = axes.flat[0].get_legend_handles_labels()
@@ -144,10 +151,12 @@ def plot_demonstrations(
                    frameon=False)
         if title:
             fig.suptitle(title)
-        fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
-    if title and len(cols) == 3:
+        grid_margins(fig, nrow, ncol, title, LEGEND_IN)
+        return save_grid(fig, axes, path, LEGEND_IN)
+    if title:
         fig.suptitle(title)
-    return finish(fig, path, tight=len(cols) == 3)
+    title_margins(fig, title)
+    return finish(fig, path, tight=False)
 
 
 def plot_goal_vs_executed(

@@ -8,7 +8,10 @@ driver's), else OSMesa (software: apt-get install libosmesa6); see
 `cgda_jax.sim._mujoco_env.make_renderer`.  ``MUJOCO_GL=egl`` or ``osmesa`` set
 before the first ``import mujoco`` of the process is used as given, and so is
 GLFW where a display exists.  The scene's decorations (the
-paint wall's squares, red once painted) are drawn into each frame.
+paint wall's squares, red once painted) are drawn into each frame.  Shadows are off
+by default: the built-in scenes (marker, paint wall, table and objects) render to
+the same pixels without them, and the 4096-pixel shadow map costs about half of a
+frame's time in software OpenGL.
 
 Frames follow the simulator: in kinematic mode the joint-space interpolation from
 each posture to the next waypoint (``frames_per_waypoint`` frames, the last at the
@@ -207,6 +210,7 @@ def render_frames(
     elevation: float = -20.0,
     goal_points=None,
     captions: Callable[[int, object], str] | None = None,
+    shadows: bool = False,
 ) -> Frames:
     """Render the robot executing ``waypoints`` offscreen, in memory.
 
@@ -223,6 +227,7 @@ def render_frames(
             of the marker scene); the one being reached is highlighted.
         captions: optional ``captions(point, scene_state) -> str`` written in the
             image's top left corner (point: 0 at the start, j towards waypoint j).
+        shadows: draw the lights' shadows (off: see the module doc).
 
     Raises:
         ValueError: waypoints of the wrong shape.
@@ -240,6 +245,7 @@ def render_frames(
     states = _scene_states(scene, [trail for _, trail, _ in postures])
     images, points = [], []
     renderer = _renderer(model, height, width)
+    renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
     try:
         for (qpos, _, k), state in zip(postures, states):
             data.qpos[:] = qpos
@@ -274,6 +280,7 @@ def render_trajectory(
     elevation: float = -20.0,
     goal_points=None,
     captions: Callable[[int, object], str] | None = None,
+    shadows: bool = False,
 ) -> list[pathlib.Path]:
     """Render the robot executing ``waypoints`` offscreen into a file or folder.
 
@@ -294,5 +301,6 @@ def render_trajectory(
         sim, waypoints, frames_per_waypoint=frames_per_waypoint, width=width,
         height=height, lookat=lookat, distance=distance, azimuth=azimuth,
         elevation=elevation, goal_points=goal_points, captions=captions,
+        shadows=shadows,
     )
     return write_video(frames.images, pathlib.Path(out_path).expanduser(), fps)
