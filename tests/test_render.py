@@ -77,7 +77,7 @@ def test_render_gif_and_frames_show_the_painting(tmp_path):
     assert _red(first) < 20 and _red(last) > _red(first) + 100
     gif = Image.open(tmp_path / "run.gif")
     assert gif.n_frames == len(frames)
-    # shadows are off by default: the scene renders to the same pixels with them
+    # shadows off (as results folders render) changes no pixel of this scene
     assert "SHADOWS_SAME True" in stdout
 
 

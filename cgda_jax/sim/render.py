@@ -8,10 +8,11 @@ driver's), else OSMesa (software: apt-get install libosmesa6); see
 `cgda_jax.sim._mujoco_env.make_renderer`.  ``MUJOCO_GL=egl`` or ``osmesa`` set
 before the first ``import mujoco`` of the process is used as given, and so is
 GLFW where a display exists.  The scene's decorations (the
-paint wall's squares, red once painted) are drawn into each frame.  Shadows are off
-by default: the built-in scenes (marker, paint wall, table and objects) render to
-the same pixels without them, and the 4096-pixel shadow map costs about half of a
-frame's time in software OpenGL.
+paint wall's squares, red once painted) are drawn into each frame.  ``shadows=False``
+halves a frame's time in software OpenGL (the 4096-pixel shadow map) and changes no
+pixel of the built-in scenes (marker, paint wall, table and objects): the results
+folders' videos (`cgda_jax.experiment.figures.render_run`) are drawn without them; a
+model of your own with a floor keeps its shadows by default.
 
 Frames follow the simulator: in kinematic mode the joint-space interpolation from
 each posture to the next waypoint (``frames_per_waypoint`` frames, the last at the
@@ -210,7 +211,7 @@ def render_frames(
     elevation: float = -20.0,
     goal_points=None,
     captions: Callable[[int, object], str] | None = None,
-    shadows: bool = False,
+    shadows: bool = True,
 ) -> Frames:
     """Render the robot executing ``waypoints`` offscreen, in memory.
 
@@ -227,7 +228,7 @@ def render_frames(
             of the marker scene); the one being reached is highlighted.
         captions: optional ``captions(point, scene_state) -> str`` written in the
             image's top left corner (point: 0 at the start, j towards waypoint j).
-        shadows: draw the lights' shadows (off: see the module doc).
+        shadows: draw the lights' shadows (off: faster, see the module doc).
 
     Raises:
         ValueError: waypoints of the wrong shape.
@@ -280,7 +281,7 @@ def render_trajectory(
     elevation: float = -20.0,
     goal_points=None,
     captions: Callable[[int, object], str] | None = None,
-    shadows: bool = False,
+    shadows: bool = True,
 ) -> list[pathlib.Path]:
     """Render the robot executing ``waypoints`` offscreen into a file or folder.
 
