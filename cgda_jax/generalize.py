@@ -24,6 +24,7 @@ References:
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
 import jax
@@ -93,13 +94,20 @@ def rbf_weights(knot_times: jax.Array, knots: jax.Array) -> jax.Array:
     knots = _check_knots(knot_times, knots)
     _check_knot_times(knot_times, knots.dtype, "rbf_weights")
     check_finite(knots, "knots", where="rbf_weights")
+    return _solve_weights(knot_times, knots)
+
+
+@jax.jit
+def _solve_weights(knot_times: jax.Array, knots: jax.Array) -> jax.Array:
+    """The weights of `rbf_weights` (checked inputs): one program per shape."""
     t = jnp.asarray(knot_times, knots.dtype)
     w = jnp.linalg.solve(jnp.abs(t[:, None] - t[None, :]), knots)
     return jnp.where(_repeated(jnp.sort(t)), jnp.nan, w)
 
 
+@jax.jit
 def _evaluate(
-    knot_times: jax.Array, knots: jax.Array, weight_sum: jax.Array, t: jax.Array
+    knot_times: jax.Array, knots: jax.Array, weights: jax.Array, t: jax.Array
 ) -> jax.Array:
     """Evaluate ``sum_i w_i |t - t_i|`` in a cancellation-free form.
 
@@ -109,7 +117,11 @@ def _evaluate(
     is mathematically identical to the weighted sum but does not lose float32
     precision to large alternating weights.  Knots are sorted by time first (the RBF
     does not depend on their order); repeated knot times give NaN.
+
+    Jitted: one program per shape in eager calls (not one per operation), inlined
+    when called under a trace.
     """
+    weight_sum = jnp.sum(weights, axis=0)
     t = jnp.asarray(t, knots.dtype)
     kt = jnp.asarray(knot_times, knots.dtype)
     order = jnp.argsort(kt)
@@ -156,8 +168,7 @@ def rbf_interpolate(knot_times: jax.Array, knots: jax.Array, t: jax.Array) -> ja
     _check_knot_times(knot_times, knots.dtype, "rbf_interpolate")
     check_finite(knots, "knots", where="rbf_interpolate")
     check_finite(t, "t", where="rbf_interpolate")
-    w = rbf_weights(knot_times, knots)
-    return _evaluate(knot_times, knots, jnp.sum(w, axis=0), t)
+    return _evaluate(knot_times, knots, rbf_weights(knot_times, knots), t)
 
 
 @jax.tree_util.register_dataclass
@@ -201,15 +212,23 @@ class GeneralizedAction:
         t = jnp.asarray(t)
         if t.ndim != 1:
             raise ValueError(f"t must be 1-D (T,), got shape {t.shape}")
-        return _evaluate(
-            self.knot_times, self.knots, jnp.sum(self.weights, axis=0), t
-        )
+        return _evaluate(self.knot_times, self.knots, self.weights, t)
 
     def sample(self, n: int) -> jax.Array:
         """(n, F) values at ``n`` equally spaced normalized times in [0, 1]."""
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
-        return self(jnp.linspace(0.0, 1.0, n, dtype=self.knots.dtype))
+        return _sample(self.knot_times, self.knots, self.weights, int(n))
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _sample(
+    knot_times: jax.Array, knots: jax.Array, weights: jax.Array, n: int
+) -> jax.Array:
+    """`GeneralizedAction.sample` as one program per (knots, n) shape (arrays, not
+    the action: its static name would make one program per action)."""
+    t = jnp.linspace(0.0, 1.0, n, dtype=knots.dtype)
+    return _evaluate(knot_times, knots, weights, t)
 
 
 def _bin_means(
@@ -315,10 +334,11 @@ def generalize(
     weights = np.linalg.solve(np.abs(knot_times[:, None] - knot_times[None, :]), means)
     _check_float32_result(means, "knot (interval mean)", demos[0].feature_names)
     _check_float32_result(weights, "RBF weight", demos[0].feature_names)
+    # float32 on the host, then one transfer each (no conversion program per shape)
     return GeneralizedAction(
-        knot_times=jnp.asarray(knot_times, jnp.float32),
-        knots=jnp.asarray(means, jnp.float32),
-        weights=jnp.asarray(weights, jnp.float32),
+        knot_times=jax.device_put(knot_times.astype(np.float32)),
+        knots=jax.device_put(means.astype(np.float32)),
+        weights=jax.device_put(weights.astype(np.float32)),
         feature_names=demos[0].feature_names,
         name=name,
     )
