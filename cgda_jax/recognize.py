@@ -111,7 +111,7 @@ class ActionLibrary(Mapping[str, GeneralizedAction]):
         """(A, n, F) every action at ``n`` equally spaced normalized times."""
         if not self._actions:
             raise ValueError("the action library is empty")
-        return jnp.stack([a.sample(n) for a in self._actions.values()])
+        return _sample_all(tuple(self._actions.values()), int(n))
 
 
 def _query_array(
@@ -130,10 +130,11 @@ def _query_array(
         t = np.linspace(0.0, 1.0, n)
         tq = q.normalized_times
         cols = [np.interp(t, tq, q.features[:, f]) for f in range(q.n_features)]
-        return jnp.asarray(np.stack(cols, axis=1), jnp.float32)
+        return np.stack(cols, axis=1).astype(np.float32)
     # NaN, inf or beyond float32 (inf once cast), named with its index
     check_float32(q, f"query {k}", where="cost_matrix")
-    arr = jnp.asarray(q, jnp.float32)
+    # float32 and resampled in `_pairwise` (one program, not a few per query)
+    arr = q if isinstance(q, jax.Array) else np.asarray(q, np.float32)
     if arr.ndim == 1:
         arr = arr[:, None]
     if arr.ndim != 2 or arr.shape[0] < 2:
@@ -146,7 +147,7 @@ def _query_array(
             f"query {k} has {arr.shape[1]} features but the library has "
             f"{len(feature_names)} {feature_names}"
         )
-    return resample(arr, n)
+    return arr
 
 
 def cost_matrix(
@@ -179,16 +180,29 @@ def cost_matrix(
     if n_samples < 2:
         raise ValueError(f"n_samples must be >= 2, got {n_samples}")
     names = library.feature_names
-    q = jnp.stack(
-        [_query_array(x, k, n_samples, names) for k, x in enumerate(queries)]
-    )
-    return _pairwise(METRICS[metric], q, library.sample(n_samples))
+    q = tuple(_query_array(x, k, n_samples, names) for k, x in enumerate(queries))
+    return _pairwise(METRICS[metric], n_samples, q, tuple(library.values()))
 
 
-@functools.partial(jax.jit, static_argnums=0)
-def _pairwise(metric, queries: jax.Array, refs: jax.Array) -> jax.Array:
+@functools.partial(jax.jit, static_argnums=1)
+def _sample_all(actions: tuple[GeneralizedAction, ...], n: int) -> jax.Array:
+    """(A, n, F) every action sampled at ``n`` times, as one program."""
+    return jnp.stack([a.sample(n) for a in actions])
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _pairwise(
+    metric,
+    n_samples: int,
+    queries: tuple[jax.Array, ...],
+    actions: tuple[GeneralizedAction, ...],
+) -> jax.Array:
+    """(Q, A) costs: the queries ((T_k, F) each) resampled to ``n_samples`` and the
+    actions sampled there, all in the one program of the metric."""
+    q = jnp.stack([resample(jnp.asarray(x, jnp.float32), n_samples) for x in queries])
+    refs = _sample_all(actions, n_samples)
     per_query = jax.vmap(metric, in_axes=(None, 0))
-    return jax.vmap(per_query, in_axes=(0, None))(queries, refs)
+    return jax.vmap(per_query, in_axes=(0, None))(q, refs)
 
 
 class Recognition(NamedTuple):
