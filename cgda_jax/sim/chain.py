@@ -34,6 +34,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
@@ -262,7 +263,9 @@ def build_chain_fk(
                 p = p * c + jnp.cross(k, p) * s + k * (jnp.dot(k, p) * (1 - c))
         return p
 
-    return fk
+    # one program where it is called eagerly (not one per operation); inlined in
+    # traces
+    return jax.jit(fk)
 
 
 def hinge_reach(ops: Sequence[ChainOp], travel: Sequence[float]) -> float:

@@ -185,6 +185,9 @@ class Simulator:
                            if mode == "dynamic" else None)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
+        # eager set-up and replays: one program each, not one per operation
+        self._init_state = jax.jit(self._start)
+        self._rollout = jax.jit(self._rollout_checked)
 
     def finer(self, factor: int = 4, physics: str = "mujoco") -> Simulator:
         """The same simulator with ``factor`` times finer steps: kinematic mode
@@ -220,8 +223,13 @@ class Simulator:
             genes0: (DoF,) start values of the evolved joints, or None.
         """
         if genes0 is None:
-            genes0 = jnp.asarray(self.robot.start_genes)
+            genes0 = self.robot.start_genes
         self.robot.check_genes(genes0, "genes0")
+        return self._init_state(genes0)
+
+    def _start(self, genes0: Array) -> SimState:
+        """`init_state` of checked ``genes0`` (jitted per simulator in ``__init__``:
+        one program where it is called eagerly, inlined under a trace)."""
         genes0 = self.robot.clip(jnp.asarray(genes0, jnp.float32))
         data = None
         if self.mode == "dynamic":
@@ -315,8 +323,14 @@ class Simulator:
             (features (N, F), final state).
         """
         self._check_waypoints(waypoints)
+        return self._rollout(waypoints, state)
+
+    def _rollout_checked(
+        self, waypoints: Array, state: SimState | None
+    ) -> tuple[Array, SimState]:
+        """`rollout` of checked waypoints (jitted per simulator in ``__init__``)."""
         if state is None:
-            state = self.init_state()
+            state = self._start(self.robot.start_genes)
         state, features = jax.lax.scan(
             self.step, state, jnp.asarray(waypoints, jnp.float32)
         )

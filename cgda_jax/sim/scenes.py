@@ -29,7 +29,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import Array
@@ -175,31 +177,24 @@ class PaintWall:
         return 1
 
     def init_state(self) -> Array:
-        return jnp.zeros(self.n_squares, dtype=bool)
+        return jax.device_put(np.zeros(self.n_squares, dtype=bool))
 
     def near(self, marker_pos: Array) -> Array:
         """(S,) bool: squares within ``radius`` of the marker."""
-        d2 = jnp.sum((jnp.asarray(self.centres) - marker_pos) ** 2, axis=-1)
-        return d2 <= self.radius**2
+        return _near(self.centres, marker_pos, self.radius)
 
     def near_segment(self, start: Array, end: Array) -> Array:
         """(..., S) bool: squares within ``radius`` of the segment ``start -> end``
         (``(3,)`` each, or batched ``(..., 3)``)."""
-        start = jnp.asarray(start, jnp.float32)
-        end = jnp.asarray(end, jnp.float32)
-        d2 = segment_distance2(jnp.asarray(self.centres), start, end)
-        return d2 <= self.radius**2
+        return _near_segment(self.centres, start, end, self.radius)
 
     def update(self, state: Array, marker_pos: Array) -> Array:
-        return state | self.near(marker_pos)
+        return _paint(state, self.centres, marker_pos, self.radius)
 
     def sweep(self, state: Array, path: Array) -> Array:
         """Paint along the polyline ``path`` (K + 1, 3): the K straight segments
         between consecutive positions (all at once; one position paints at it)."""
-        path = jnp.asarray(path, jnp.float32)
-        if path.shape[0] == 1:
-            return self.update(state, path[0])
-        return state | jnp.any(self.near_segment(path[:-1], path[1:]), axis=0)
+        return _sweep(state, self.centres, path, self.radius)
 
     def features(self, state: Array, marker_pos: Array) -> Array:
         del marker_pos
@@ -216,6 +211,35 @@ class PaintWall:
             rgba = (0.85, 0.1, 0.1, 1.0) if p else (0.85, 0.85, 0.85, 1.0)
             out.append(("box", half, np.asarray(c, np.float64), rgba))
         return out
+
+
+# PaintWall's geometry as jitted functions of its centres (the radius static): one
+# program per shape where they are called eagerly (set-up, renders), not one per
+# operation; inlined in the simulator's traces.
+@partial(jax.jit, static_argnums=2)
+def _near(centres: Array, marker_pos: Array, radius: float) -> Array:
+    d2 = jnp.sum((jnp.asarray(centres) - marker_pos) ** 2, axis=-1)
+    return d2 <= radius**2
+
+
+@partial(jax.jit, static_argnums=3)
+def _near_segment(centres: Array, start: Array, end: Array, radius: float) -> Array:
+    start = jnp.asarray(start, jnp.float32)
+    end = jnp.asarray(end, jnp.float32)
+    return segment_distance2(jnp.asarray(centres), start, end) <= radius**2
+
+
+@partial(jax.jit, static_argnums=3)
+def _paint(state: Array, centres: Array, marker_pos: Array, radius: float) -> Array:
+    return state | _near(centres, marker_pos, radius)
+
+
+@partial(jax.jit, static_argnums=3)
+def _sweep(state: Array, centres: Array, path: Array, radius: float) -> Array:
+    path = jnp.asarray(path, jnp.float32)
+    if path.shape[0] == 1:
+        return _paint(state, centres, path[0], radius)
+    return state | jnp.any(_near_segment(centres, path[:-1], path[1:], radius), axis=0)
 
 
 @dataclass(frozen=True, eq=False)
