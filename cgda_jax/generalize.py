@@ -34,7 +34,13 @@ import numpy as np
 from cgda_jax.checks import FLOAT32_MAX, check_finite, is_traced
 from cgda_jax.data import Demonstration, validate_demonstrations
 
-__all__ = ["GeneralizedAction", "generalize", "rbf_interpolate", "rbf_weights"]
+__all__ = [
+    "GeneralizedAction",
+    "generalize",
+    "rbf_interpolate",
+    "rbf_weights",
+    "sample_actions",
+]
 
 
 def _check_knots(knot_times: jax.Array, knots: jax.Array) -> jax.Array:
@@ -127,7 +133,10 @@ def _evaluate(
     order = jnp.argsort(kt)
     kt, knots = kt[order], knots[order]
     n = kt.shape[0]
-    seg = jnp.clip(jnp.searchsorted(kt, t, side="right") - 1, 0, n - 2)
+    # "compare_all": a (T, N) comparison, compiled in a fraction of the default
+    # loop's time (N is small); the same indices
+    seg = jnp.searchsorted(kt, t, side="right", method="compare_all")
+    seg = jnp.clip(seg - 1, 0, n - 2)
     t0, t1 = kt[seg], kt[seg + 1]
     frac = jnp.clip((t - t0) / (t1 - t0), 0.0, 1.0)[:, None]
     inner = knots[seg] * (1 - frac) + knots[seg + 1] * frac
@@ -219,6 +228,45 @@ class GeneralizedAction:
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
         return _sample(self.knot_times, self.knots, self.weights, int(n))
+
+
+def sample_actions(actions: Sequence[GeneralizedAction], n: int) -> jax.Array:
+    """(A, n, F) several actions (same F, any knot counts) at ``n`` equally spaced
+    normalized times: `GeneralizedAction.sample` of each, stacked, as one program
+    (not one per knot count).
+
+    Raises:
+        ValueError: no actions, ``n < 1``, or different feature counts.
+    """
+    actions = tuple(actions)
+    if not actions:
+        raise ValueError("sample_actions: no actions given")
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    counts = {a.n_features for a in actions}
+    if len(counts) > 1:
+        raise ValueError(
+            f"sample_actions: the actions have different feature counts {counts}"
+        )
+    return _sample_all(actions, int(n))
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _sample_all(actions: tuple[GeneralizedAction, ...], n: int) -> jax.Array:
+    # one vmapped evaluation per knot count (not one per action: compile time)
+    groups: dict[int, list[int]] = {}
+    for i, a in enumerate(actions):
+        groups.setdefault(a.n_knots, []).append(i)
+    out: list = [None] * len(actions)
+    for idx in groups.values():
+        kt, kn, w = (
+            jnp.stack([getattr(actions[i], f) for i in idx])
+            for f in ("knot_times", "knots", "weights")
+        )
+        values = jax.vmap(lambda a, b, c: _sample(a, b, c, n))(kt, kn, w)
+        for j, i in enumerate(idx):
+            out[i] = values[j]
+    return jnp.stack(out)
 
 
 @functools.partial(jax.jit, static_argnums=3)

@@ -24,7 +24,7 @@ import numpy as np
 from cgda_jax.checks import check_float32
 from cgda_jax.data import Demonstration
 from cgda_jax.distance import dtw, dtw_multi, euclidean, resample
-from cgda_jax.generalize import GeneralizedAction, generalize
+from cgda_jax.generalize import GeneralizedAction, generalize, sample_actions
 
 __all__ = ["ActionLibrary", "Recognition", "cost_matrix", "recognize", "METRICS"]
 
@@ -111,7 +111,7 @@ class ActionLibrary(Mapping[str, GeneralizedAction]):
         """(A, n, F) every action at ``n`` equally spaced normalized times."""
         if not self._actions:
             raise ValueError("the action library is empty")
-        return _sample_all(tuple(self._actions.values()), int(n))
+        return sample_actions(tuple(self._actions.values()), n)
 
 
 def _query_array(
@@ -184,12 +184,6 @@ def cost_matrix(
     return _pairwise(METRICS[metric], n_samples, q, tuple(library.values()))
 
 
-@functools.partial(jax.jit, static_argnums=1)
-def _sample_all(actions: tuple[GeneralizedAction, ...], n: int) -> jax.Array:
-    """(A, n, F) every action sampled at ``n`` times, as one program."""
-    return jnp.stack([a.sample(n) for a in actions])
-
-
 @functools.partial(jax.jit, static_argnums=(0, 1))
 def _pairwise(
     metric,
@@ -200,7 +194,7 @@ def _pairwise(
     """(Q, A) costs: the queries ((T_k, F) each) resampled to ``n_samples`` and the
     actions sampled there, all in the one program of the metric."""
     q = jnp.stack([resample(jnp.asarray(x, jnp.float32), n_samples) for x in queries])
-    refs = _sample_all(actions, n_samples)
+    refs = sample_actions(actions, n_samples)
     per_query = jax.vmap(metric, in_axes=(None, 0))
     return jax.vmap(per_query, in_axes=(0, None))(q, refs)
 

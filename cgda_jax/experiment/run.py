@@ -62,7 +62,7 @@ def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
 
 def _recognize(cfg: ExperimentConfig, out: pathlib.Path) -> Outputs:
     """`run_recognition` up to its figures (drawn by the returned `Outputs`)."""
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalize import generalize, sample_actions
     from cgda_jax.recognize import ActionLibrary, cost_matrix
 
     d, r = cfg.data, cfg.recognition
@@ -74,10 +74,8 @@ def _recognize(cfg: ExperimentConfig, out: pathlib.Path) -> Outputs:
     names = list(library.names)
     tests = [(a, t) for a, v in demos.items() for t in v[d.n_train:]]
     if r.query == "reduced":
-        queries = [
-            np.asarray(generalize([t], d.interval_s, d.method).sample(r.n_samples))
-            for _, t in tests
-        ]
+        reduced = [generalize([t], d.interval_s, d.method) for _, t in tests]
+        queries = list(np.asarray(sample_actions(reduced, r.n_samples)))
     else:
         queries = [t for _, t in tests]
     costs = np.asarray(cost_matrix(queries, library, r.metric, r.n_samples), float)
