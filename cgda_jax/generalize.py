@@ -66,7 +66,7 @@ def _check_knot_times(knot_times: jax.Array, dtype, where: str) -> None:
     if is_traced(knot_times):
         return
     check_finite(knot_times, "knot_times", where=where)
-    kt = np.asarray(jnp.asarray(knot_times, dtype))  # the values actually used
+    kt = np.asarray(knot_times).astype(dtype)  # the values actually used
     order = np.argsort(kt, kind="stable")
     same = np.flatnonzero(np.diff(kt[order]) == 0)
     if same.size:
@@ -218,7 +218,8 @@ class GeneralizedAction:
         Returns:
             (T, F) feature values.
         """
-        t = jnp.asarray(t)
+        if not isinstance(t, jax.Array):  # host data: no transfer program
+            t = np.asarray(t)
         if t.ndim != 1:
             raise ValueError(f"t must be 1-D (T,), got shape {t.shape}")
         return _evaluate(self.knot_times, self.knots, self.weights, t)
