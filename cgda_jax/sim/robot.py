@@ -219,8 +219,9 @@ class Robot:
                 raise ValueError(f"slide joint {name!r} in {source} has no range")
             lower.append(lo)
             upper.append(hi)
-        self.lower = jnp.asarray(lower, dtype=jnp.float32)
-        self.upper = jnp.asarray(upper, dtype=jnp.float32)
+        # float32 on the host, one transfer each (no conversion program per shape)
+        self.lower = jax.device_put(np.asarray(lower, dtype=np.float32))
+        self.upper = jax.device_put(np.asarray(upper, dtype=np.float32))
         self.qpos_adr = np.asarray(mj_model.jnt_qposadr[self.joint_ids], dtype=np.int32)
 
         if keyframe is None:
@@ -262,7 +263,7 @@ class Robot:
         self.source = source
         self._spec_factory = spec_factory
         self._qpos0_np = qpos0
-        self.qpos0 = jnp.asarray(qpos0, dtype=jnp.float32)
+        self.qpos0 = jax.device_put(np.asarray(qpos0, dtype=np.float32))
 
         self._mjx_model = None  # mjx.put_model on first use (dynamic / "mjx" FK)
         self._data0 = None
