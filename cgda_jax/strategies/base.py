@@ -115,7 +115,7 @@ def check_config(
         raise ValueError(f"tolerance must be > 0; got {tolerance}")
     if max_generations is not None and int(max_generations) < 1:
         raise ValueError(f"max_generations must be >= 1; got {max_generations}")
-    return jnp.asarray(g)
+    return jax.device_put(g)  # a transfer (jnp.asarray compiles a copy program)
 
 
 # --------------------------------------------------------------------------- plans
