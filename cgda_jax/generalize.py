@@ -234,7 +234,7 @@ class GeneralizedAction:
 def sample_actions(actions: Sequence[GeneralizedAction], n: int) -> jax.Array:
     """(A, n, F) several actions (same F, any knot counts) at ``n`` equally spaced
     normalized times: `GeneralizedAction.sample` of each, stacked, as one program
-    (not one per knot count).
+    (not one per action shape).
 
     Raises:
         ValueError: no actions, ``n < 1``, or different feature counts.
@@ -254,20 +254,9 @@ def sample_actions(actions: Sequence[GeneralizedAction], n: int) -> jax.Array:
 
 @functools.partial(jax.jit, static_argnums=1)
 def _sample_all(actions: tuple[GeneralizedAction, ...], n: int) -> jax.Array:
-    # one vmapped evaluation per knot count (not one per action: compile time)
-    groups: dict[int, list[int]] = {}
-    for i, a in enumerate(actions):
-        groups.setdefault(a.n_knots, []).append(i)
-    out: list = [None] * len(actions)
-    for idx in groups.values():
-        kt, kn, w = (
-            jnp.stack([getattr(actions[i], f) for i in idx])
-            for f in ("knot_times", "knots", "weights")
-        )
-        values = jax.vmap(lambda a, b, c: _sample(a, b, c, n))(kt, kn, w)
-        for j, i in enumerate(idx):
-            out[i] = values[j]
-    return jnp.stack(out)
+    # one evaluation per action (vmapping the actions of one knot count compiled
+    # slower, not faster)
+    return jnp.stack([_sample(a.knot_times, a.knots, a.weights, n) for a in actions])
 
 
 @functools.partial(jax.jit, static_argnums=3)
