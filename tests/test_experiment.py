@@ -119,10 +119,13 @@ def test_render_switch_writes_gif_and_frame_strip_or_nothing(tmp_path):
     gif = iio.imread(tmp_path / "on/plots/execution.gif", index=None)
     mp4 = np.stack(list(iio.imiter(tmp_path / "on/plots/execution.mp4")))
     assert gif.shape[1:] == mp4.shape[1:] == (480, 640, 3)
-    # start + a frame per kinematic sub-step (at most 8) per waypoint, 3 goal points;
-    # the paint wall raises the 2 sub-steps asked for to bound the swept path
+    # start + a frame per kinematic sub-step (at most 4 for paint) per waypoint, 3
+    # goal points; the paint wall raises the 2 sub-steps asked for to bound the path
+    from cgda_jax.experiment.figures import PAINT_FRAMES_PER_WAYPOINT
+
     substeps = json.loads((tmp_path / "on/result.json").read_text())["substeps"]
-    assert substeps >= 2 and len(mp4) == 1 + 3 * min(substeps, 8)
+    assert PAINT_FRAMES_PER_WAYPOINT == 4
+    assert substeps >= 2 and len(mp4) == 1 + 3 * min(substeps, 4)
     off = run_experiment(load_config(None, TINY_RUN + ["output.plots=false",
                                                        "output.render=false"]), tmp_path / "off")
     assert "render" not in off and not (tmp_path / "off/plots").exists()
