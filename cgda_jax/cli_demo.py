@@ -63,11 +63,12 @@ def cmd_demo(args) -> int:
         # one experiment's figures and video are drawn in a second thread while the
         # next one computes (XLA compiles and runs without the GIL)
         pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cgda-outputs")
+        in_thread = _offscreen_thread_ok()  # (looks for the GL libraries: once)
         try:
             drawn = []
             for cfg in configs:
                 pending = _start_one(cfg, rf.path / cfg.name, out / cfg.name, args)
-                drawn.append(pool.submit(pending.finish) if _offscreen_thread_ok()
+                drawn.append(pool.submit(pending.finish) if in_thread
                              else _done(pending.finish()))
             for cfg, future in zip(configs, drawn):
                 results[cfg.name] = future.result()
