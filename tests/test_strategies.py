@@ -18,6 +18,7 @@ from cgda_jax.strategies import (
     to_joints,
 )
 from cgda_jax.strategies import runner
+from cgda_jax.strategies.ie import IEPlan
 
 JOINTS = ["yaw", "shoulder", "elbow"]
 
@@ -98,6 +99,32 @@ def test_ie_batched_equals_each_point_alone(sim, goal):
         g = alone.info["point_generations"][0]
         np.testing.assert_allclose(alone.fitness_history[0, :g],
                                    batched.fitness_history[i, :g], rtol=1e-4, atol=1e-6)
+
+
+def test_ie_without_restarts_traces_no_restart_branch(sim, goal):
+    """restarts=0: the chunk has no restart branch (a smaller program to compile),
+    and each point runs the same first try as a run that may restart."""
+    goal = goal[:2]
+    kw = dict(population_size=8, tolerance=0.01, max_generations=40)
+    traced = {}
+    for restarts in (0, 2):
+        plan = IEPlan(sim, goal, algorithm="CMA_ES", restarts=restarts, **kw)
+        carry = jax.eval_shape(jax.vmap(plan.init), runner.seed_keys([0]))
+        calls, try_ = [], plan._try
+        plan._try = lambda *a, **k: (calls.append(1), try_(*a, **k))[1]
+        jax.jit(jax.vmap(plan.step)).lower(carry)
+        traced[restarts] = len(calls)
+    assert traced == {0: 0, 2: 1}  # the restart start is traced only where it may run
+    alone = run_ie(sim, goal, restarts=0, seed=4, **kw)
+    again = run_ie(sim, goal, restarts=2, seed=4, **kw)
+    assert alone.info["point_tries"] == [1, 1]
+    for i, tries in enumerate(again.info["point_tries"]):
+        g = alone.info["point_generations"][i]
+        if tries == 1:  # met in its first try: the same evolution
+            assert again.info["point_generations"][i] == g
+            np.testing.assert_allclose(alone.joints[i], again.joints[i], atol=1e-6)
+        np.testing.assert_allclose(again.fitness_history[i, :g],
+                                   alone.fitness_history[i, :g], rtol=1e-6)
 
 
 def test_fte_dtw_converges(sim, goal):

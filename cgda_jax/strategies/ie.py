@@ -272,12 +272,15 @@ class IEPlan(PlanBase):
         met = best_f < self.tolerance
         # a try that stopped short of the tolerance restarts while tries are left
         again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
-        neighbours = neighbours_of(best_u, best_f)
-        fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
-            jnp.any(again), lambda: jax.vmap(self._try)(
-                s.keys, goal, states, s.tries, neighbours,
-                s.samples if self.restart_samples else None),
-            lambda: evo)
+        if self.restarts == 0:  # never restarts (tries >= 1): nothing to trace
+            fresh = evo
+        else:
+            neighbours = neighbours_of(best_u, best_f)
+            fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
+                jnp.any(again), lambda: jax.vmap(self._try)(
+                    s.keys, goal, states, s.tries, neighbours,
+                    s.samples if self.restart_samples else None),
+                lambda: evo)
         s = s.replace(
             generations=s.generations + jnp.where(again, evo.generation, 0),
             evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
