@@ -97,8 +97,10 @@ def test_ie_batched_equals_each_point_alone(sim, goal):
         assert alone.info["point_generations"][0] == batched.info["point_generations"][i]
         np.testing.assert_allclose(alone.joints[0], batched.joints[i], atol=1e-4)
         g = alone.info["point_generations"][0]
+        # float32: the 1- and 2-point programs round differently, and CMA-ES
+        # amplifies it over the generations (4e-4 relative seen at generation 40)
         np.testing.assert_allclose(alone.fitness_history[0, :g],
-                                   batched.fitness_history[i, :g], rtol=1e-4, atol=1e-6)
+                                   batched.fitness_history[i, :g], rtol=1e-3, atol=1e-6)
 
 
 def test_ie_without_restarts_traces_no_restart_branch(sim, goal):

@@ -57,6 +57,25 @@ def _replicated(sharding: NamedSharding) -> NamedSharding:
     return NamedSharding(sharding.mesh, PartitionSpec())
 
 
+def _over_trials(n_trials: int, sharding: NamedSharding | None) -> Callable:
+    """How a plan function is applied over the trials axis (R, ...) of its inputs:
+    `jax.vmap`, or for a single unsharded trial a call on the trial itself (its
+    outputs given back a leading axis of 1). Under `vmap` a `lax.cond` whose
+    predicate differs per trial runs both branches every time (a select); a single
+    trial keeps the plans' conditionals (a restart, a point's end, a re-execution)
+    real, run only when taken."""
+    if n_trials != 1 or sharding is not None:
+        return jax.vmap
+
+    def single(fn: Callable) -> Callable:
+        def one(x):
+            out = fn(jax.tree.map(lambda a: a[0], x))
+            return jax.tree.map(lambda a: jnp.expand_dims(a, 0), out)
+        return one
+
+    return single
+
+
 def compile_plan(
     plan: Any,
     keys: jax.Array,
@@ -73,16 +92,18 @@ def compile_plan(
     splits the population keeps its keys and carry replicated over that mesh.
     """
 
+    over_trials = _over_trials(int(keys.shape[0]), sharding)
+
     def chunk(carry):
         TRACE_COUNTS[plan.name] = TRACE_COUNTS.get(plan.name, 0) + 1
         return jax.lax.scan(
-            lambda c, _: jax.vmap(plan.step)(c), carry, None, length=chunk_size
+            lambda c, _: over_trials(plan.step)(c), carry, None, length=chunk_size
         )
 
     def all_done(carry):
-        return jnp.all(jax.vmap(plan.done)(carry))
+        return jnp.all(over_trials(plan.done)(carry))
 
-    carry_shape = jax.eval_shape(jax.vmap(plan.init), keys)
+    carry_shape = jax.eval_shape(over_trials(plan.init), keys)
     init_kw: dict[str, Any] = {}
     chunk_kw: dict[str, Any] = {}
     carry_kw: dict[str, Any] = {}
@@ -97,10 +118,10 @@ def compile_plan(
         chunk_kw = {"in_shardings": (cs,), "out_shardings": (cs, ms)}
         carry_kw = {"in_shardings": (cs,)}
     return (
-        jax.jit(jax.vmap(plan.init), **init_kw).lower(keys).compile(),
+        jax.jit(over_trials(plan.init), **init_kw).lower(keys).compile(),
         jax.jit(chunk, **chunk_kw).lower(carry_shape).compile(),
         jax.jit(all_done, **carry_kw).lower(carry_shape).compile(),
-        jax.jit(jax.vmap(plan.finish), **carry_kw).lower(carry_shape).compile(),
+        jax.jit(over_trials(plan.finish), **carry_kw).lower(carry_shape).compile(),
     )
 
 
