@@ -18,7 +18,8 @@ common settings, builds the plan and drives it for a list of seeds.
 (`compile_plan`, timed apart with ``jit(...).lower(...).compile()``), then calls the
 compiled chunk until ``done``; between chunks it syncs one boolean and calls
 ``progress_fn``. With several keys the whole plan is vmapped over them (independent
-trials in one batched call).
+trials in one batched call); with one, it runs on that trial directly, so that its
+``lax.cond`` branches stay real (see `over_trials_fn`).
 
 Several devices (``devices=`` of the ``run_*`` functions and `run_trials`, see
 `cgda_jax.sharding`): `run_trials` splits the trials axis over them (`drive` with a
@@ -57,7 +58,7 @@ def _replicated(sharding: NamedSharding) -> NamedSharding:
     return NamedSharding(sharding.mesh, PartitionSpec())
 
 
-def _over_trials(n_trials: int, sharding: NamedSharding | None) -> Callable:
+def over_trials_fn(n_trials: int, sharding: NamedSharding | None) -> Callable:
     """How a plan function is applied over the trials axis (R, ...) of its inputs:
     `jax.vmap`, or for a single unsharded trial a call on the trial itself (its
     outputs given back a leading axis of 1). Under `vmap` a `lax.cond` whose
@@ -92,7 +93,7 @@ def compile_plan(
     splits the population keeps its keys and carry replicated over that mesh.
     """
 
-    over_trials = _over_trials(int(keys.shape[0]), sharding)
+    over_trials = over_trials_fn(int(keys.shape[0]), sharding)
 
     def chunk(carry):
         TRACE_COUNTS[plan.name] = TRACE_COUNTS.get(plan.name, 0) + 1

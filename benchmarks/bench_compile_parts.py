@@ -1,0 +1,114 @@
+"""Where the compile time of a clean-IE cold start goes (issue 14, target < 2 s).
+
+Traces, lowers and compiles the programs `cgda_jax.strategies.runner.compile_plan`
+builds for experiments/clean_ie.toml (one trial), each timed apart, with JAX's
+persistent compilation cache off and its in-memory caches cleared before every
+repeat; then, to split the generation chunk into its parts, the same chunk with
+``restarts=0`` (no restart branch traced) and evosax's CMA-ES evolution step alone
+(`cgda_jax.strategies.evolution.evolution_step` vmapped over the 9 points with a
+trivial fitness, no kinematics). Reports the median of ``--repeats`` for each, and
+the number of XLA fusions (roughly, kernels LLVM compiles) in each program.
+
+    python benchmarks/bench_compile_parts.py [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+from _common import print_table, write_json
+
+from cgda_jax.experiment import load_config
+from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
+from cgda_jax.strategies.base import check_config, make_algorithm
+from cgda_jax.strategies.evolution import evolution_init, evolution_step
+from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.runner import over_trials_fn, seed_keys
+
+
+def timed_compile(fn, *args) -> dict:
+    """Lower then compile ``jax.jit(fn)`` for ``args`` (caches cleared first)."""
+    jax.clear_caches()
+    t0 = time.perf_counter()
+    lowered = jax.jit(fn).lower(*args)
+    t1 = time.perf_counter()
+    compiled = lowered.compile()
+    t2 = time.perf_counter()
+    fusions = len(re.findall(r"= \S+ fusion\(", compiled.as_text()))
+    return {"lower_s": t1 - t0, "compile_s": t2 - t1, "fusions": fusions}
+
+
+def programs(sim, goal, s) -> dict:
+    """name -> (function, argument) of every program timed."""
+    kw = dict(algorithm=s.algorithm, population_size=s.population_size,
+              tolerance=s.tolerance, max_generations=s.max_generations, **s.options)
+    keys = seed_keys([s.seed])
+    one = over_trials_fn(1, None)  # a single trial, as compile_plan applies the plan
+    out = {}
+    for label, extra in (("", {}), (", restarts=0", {"restarts": 0})):
+        plan = IEPlan(sim, goal, **kw, **extra)
+        carry = jax.eval_shape(one(plan.init), keys)
+
+        def chunk(c, plan=plan):
+            return jax.lax.scan(lambda c, _: one(plan.step)(c), c, None,
+                                length=s.chunk_size)
+
+        if not extra:
+            out["IE init (4,096 sampled restart postures)"] = (one(plan.init), keys)
+        out[f"IE generation chunk{label}"] = (chunk, carry)
+        if not extra:
+            out["IE finish (execution of the result)"] = (one(plan.finish), carry)
+
+    algo, params = make_algorithm(s.algorithm, s.population_size, int(sim.n_dof))
+    n = goal.shape[0]
+
+    def fitness(pop):
+        return jnp.sum(pop**2, axis=-1)
+
+    def stop(evo):
+        return evo.best_fitness < s.tolerance
+
+    evo = jax.eval_shape(jax.vmap(lambda k: evolution_init(
+        algo, params, k, fitness, int(sim.n_dof))), jax.random.split(jax.random.key(0), n))
+
+    def cma_chunk(e):
+        return jax.lax.scan(lambda c, _: jax.vmap(
+            lambda x: evolution_step(algo, params, x, fitness, stop))(c), e, None,
+            length=s.chunk_size)
+
+    out[f"{s.algorithm} step alone ({n} points, trivial fitness)"] = (cma_chunk, evo)
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    jax.config.update("jax_enable_compilation_cache", False)
+    cfg = load_config("experiments/clean_ie.toml")
+    goal, demos, _ = build_goal(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    s = cfg.strategy
+    goal = check_config(sim, goal, tolerance=s.tolerance,
+                        max_generations=s.max_generations)
+    rows = []
+    for name, (fn, arg) in programs(sim, goal, s).items():
+        runs = [timed_compile(fn, arg) for _ in range(args.repeats)]
+        rows.append({
+            "program": name,
+            "lower_s": statistics.median(r["lower_s"] for r in runs),
+            "compile_s": statistics.median(r["compile_s"] for r in runs),
+            "fusions": runs[-1]["fusions"],
+        })
+    print_table(rows, ["program", "lower_s", "compile_s", "fusions"])
+    write_json("bench_compile_parts", {"config": "experiments/clean_ie.toml",
+                                       "repeats": args.repeats, "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
