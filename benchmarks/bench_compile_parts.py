@@ -27,7 +27,7 @@ from cgda_jax.experiment import load_config
 from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
 from cgda_jax.strategies.base import check_config, make_algorithm
 from cgda_jax.strategies.evolution import evolution_init, evolution_step
-from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.ie import RESTARTS, STAGNATION, IEPlan
 from cgda_jax.strategies.runner import over_trials_fn, seed_keys
 
 
@@ -46,12 +46,14 @@ def timed_compile(fn, *args) -> dict:
 def programs(sim, goal, s) -> dict:
     """name -> (function, argument) of every program timed."""
     kw = dict(algorithm=s.algorithm, population_size=s.population_size,
-              tolerance=s.tolerance, max_generations=s.max_generations, **s.options)
+              tolerance=s.tolerance, max_generations=s.max_generations,
+              restarts=RESTARTS, stagnation=STAGNATION)  # run_ie's defaults
+    kw.update(s.options)
     keys = seed_keys([s.seed])
     one = over_trials_fn(1, None)  # a single trial, as compile_plan applies the plan
     out = {}
     for label, extra in (("", {}), (", restarts=0", {"restarts": 0})):
-        plan = IEPlan(sim, goal, **kw, **extra)
+        plan = IEPlan(sim, goal, **{**kw, **extra})
         carry = jax.eval_shape(one(plan.init), keys)
 
         def chunk(c, plan=plan):
