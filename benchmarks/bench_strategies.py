@@ -5,9 +5,13 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
 - ours: the strategy as ``cgda run`` calls it; cold = the first call in this process
   (trace + compile + run), steady = ``wall_time_s`` (run only, compile apart) as the
   median of ``--repeats`` calls;
-- peer: the same search written with pycma's ask/tell and MuJoCo's C
+- same search: ours again with the settings of the peer's search (`SAME_SEARCH`: the
+  paper's strategies, without the restarts, stagnation stops, backtracks and sampled
+  FTE start the defaults add); the speed ratio is the peer's time over this one's;
+- peer: that search written with pycma's ask/tell and MuJoCo's C
   ``mj_kinematics``, one candidate at a time (benchmarks/peers.py: same gene space,
-  start, step size, population size, fitness, stopping rule and success test);
+  start, step size, population size, fitness, stopping rule and success test;
+  pycma's own termination criteria off);
 - IET time per point: ours measured with one generation per chunk (a host sync per
   generation, so a little slower than the real run), the peer's per point;
   "flat" = mean of the last 3 points within 1.5x of the first 3;
@@ -19,8 +23,9 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
 
 ``--quick`` lowers the generation budgets and trial count (a smoke test only).
 Targets (2-core CPU): clean IE >= 30x faster than the peer (steady state); cold
-start incl. compile < 2 s (issue 14; it was 3 s); paint IET >= 10x faster than the peer; 30 batched trials
->= 10x the throughput of 30 sequential runs.
+start incl. compile < 2 s (issue 14; it was 3 s); paint IET >= 10x faster than the
+peer; 30 batched trials >= 3x the run-time throughput of 30 sequential runs (>= 10x on
+a GPU).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import statistics
 import tempfile
 import time
 
+import jax
 import numpy as np
 import peers
 from _common import print_table, report_target, write_json
@@ -63,11 +69,24 @@ def strategy_kwargs(cfg) -> dict:
 
 #: Clean IE cold start in this process (trace + compile + run), issue 14.
 COLD_TARGET_S = 2.0
+#: Batched trials' run-time throughput over sequential runs (issue 14): on a CPU, on
+#: a GPU.
+TRIALS_TARGET_X = (3.0, 10.0)
 
 
-def run_ours(cfg, goal, sim, repeats: int) -> dict:
+#: Our strategies' settings for the comparison with the peer: the search the peer runs
+#: (the paper's), without what the defaults add (restarts, stagnation stops of IE,
+#: backtracks, FTE's sampled start).
+SAME_SEARCH = {
+    "ie": {"restarts": 0, "stagnation": None},
+    "iet": {"restarts": 0, "backtracks": 0},
+    "fte": {"restarts": 0, "min_improvement": 0.0, "init": "middle"},
+}
+
+
+def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
     fn = ex.strategy_function(cfg.strategy.name)
-    kw = strategy_kwargs(cfg)
+    kw = {**strategy_kwargs(cfg), **settings}
     t0 = time.perf_counter()
     res = fn(sim, goal, **kw)
     cold = time.perf_counter() - t0
@@ -105,8 +124,8 @@ def run_peer(cfg, goal, sim) -> dict:
 
 
 def iet_point_times(cfg, goal, sim) -> list[float]:
-    """Our IET's wall time per point, from one-generation chunks."""
-    kw = {**strategy_kwargs(cfg), "chunk_size": 1}
+    """Our IET's wall time per point, from one-generation chunks (the peer's search)."""
+    kw = {**strategy_kwargs(cfg), **SAME_SEARCH["iet"], "chunk_size": 1}
     stamps: list[tuple[float, int]] = []
 
     def progress(info):
@@ -180,19 +199,24 @@ def main() -> None:
     for name in [n for n in args.only if n != "trials"]:
         print(f"{name} ...", flush=True)
         cfg, goal, sim = setup(name, overrides)
-        ours = run_ours(cfg, goal, sim, args.repeats)
+        ours = run_ours(cfg, goal, sim, args.repeats)  # as `cgda run` runs it
+        same = run_ours(cfg, goal, sim, args.repeats,
+                        **SAME_SEARCH[cfg.strategy.name])
         peer = run_peer(cfg, goal, sim)
-        ratio = peer["time_s"] / ours["steady_s"]
+        ratio = peer["time_s"] / same["steady_s"]
         target = TARGETS[cfg.strategy.name]
         rows.append(
             {
                 "experiment": name,
                 "points": goal.shape[0],
-                "ours_steady_s": ours["steady_s"],
-                "ours_compile_s": ours["compile_s"],
                 "ours_cold_s": ours["cold_s"],
+                "ours_compile_s": ours["compile_s"],
+                "ours_steady_s": ours["steady_s"],
                 "ours_evals": ours["evaluations"],
                 "ours_ok": ours["success"],
+                "same_steady_s": same["steady_s"],
+                "same_evals": same["evaluations"],
+                "same_ok": same["success"],
                 "peer_s": peer["time_s"],
                 "peer_evals": peer["evaluations"],
                 "peer_ok": peer["success"],
@@ -201,7 +225,7 @@ def main() -> None:
                 "met": "" if target is None else ratio >= target,
             }
         )
-        payload[name] = {"ours": ours, "peer": _plain(peer)}
+        payload[name] = {"ours": ours, "same_search": same, "peer": _plain(peer)}
         if cfg.strategy.name == "iet":
             ours_pt = iet_point_times(cfg, goal, sim)
             payload[name]["ours_point_times_s"] = ours_pt
@@ -237,10 +261,12 @@ def main() -> None:
         payload["trials"] = tr
         print_table([tr], list(tr))
         ratio = tr["throughput_ratio_run"]
+        need = TRIALS_TARGET_X[jax.default_backend() == "gpu"]
         report_target(
-            f"{n_trials} trials batched >= 10x sequential throughput (run only)",
+            f"{n_trials} trials batched >= {need:g}x sequential throughput (run only, "
+            f"{jax.default_backend()})",
             ratio,
-            ratio >= 10,
+            ratio >= need,
         )
     payload["rows"] = rows
     write_json("bench_strategies", payload)

@@ -250,6 +250,14 @@ def _cma(n_genes: int, popsize: int, sigma0: float, seed: int, max_gens: int):
         "verbose": -9,
         "maxiter": max_gens,
         "CMA_diagonal": False,
+        # stop by the caller's rule only, as cgda_jax does: none of pycma's own
+        # flat-fitness / small-change stops (a paint score is flat over large regions)
+        "tolflatfitness": max_gens + 1,
+        "tolfun": 0,
+        "tolfunhist": 0,
+        "tolx": 0,
+        "tolstagnation": max_gens + 1,
+        "tolxstagnation": False,
     }
     return cma.CMAEvolutionStrategy(np.zeros(n_genes), sigma0, opts)
 
