@@ -84,7 +84,8 @@ def compile_plan(
     chunk_size: int = 10,
     sharding: NamedSharding | None = None,
 ) -> tuple[Any, Any, Any, Any]:
-    """Compiled ``(init, chunk, done, finish)`` of `plan` vmapped over `keys` (R,).
+    """Compiled ``(init, chunk, done, finish)`` of `plan` over `keys` (R,): vmapped,
+    or for one unsharded key run on that trial directly (`over_trials_fn`).
 
     With `sharding` (see `cgda_jax.sharding.population_sharding`) the trials axis of
     the keys, the carry (R, ...) and the chunk's metrics (G, R, ...) is split over its
