@@ -28,8 +28,10 @@ cylinder, which sample the cylinder's side at 32 angles (overestimate by at most
 0.098 x its radius, ~0.005 x in the usual face-to-side case; `Collider.error_bounds`).
 Penetration values are minus the depth of the deepest point of one shape's core
 (segment / point, or box edges, cylinder generators) inside the other, plus radii:
-negative exactly when the shapes overlap, equal to MuJoCo's depth for shallow
-contacts between round geoms and boxes, smaller in magnitude for deep ones.
+negative exactly when the shapes overlap (MuJoCo's pair functions measure depth
+their own way: signs agree in the tests, magnitudes may differ by centimetres for deep
+overlaps; MuJoCo's capsule-box even reports a separation for a thin capsule that
+pierces right through a box, where this module is negative).
 
 Example:
     >>> import jax.numpy as jnp
@@ -39,8 +41,9 @@ Example:
     >>> col = Collider(robot)
     >>> col.pair_names
     (('link1', 'base'), ('link2', 'base'))
-    >>> round(float(col.min_distance(jnp.zeros(3))[0]), 3)
-    0.03
+    >>> d, k = col.min_distance(jnp.zeros(3))  # link1's end cap sits in the base
+    >>> round(float(d), 3), col.pair_names[int(k)]
+    (-0.015, ('link1', 'base'))
 """
 
 from __future__ import annotations
@@ -145,6 +148,7 @@ class Collider:
         error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms.
         n_pairs: number of pairs.
         skipped: names of geoms left out for an unsupported type.
+        geom_names: (G,) names of the rows of `geom_frames`.
 
     Raises:
         KeyError: an ``exclude`` name that is neither a geom nor an obstacle.
@@ -275,7 +279,8 @@ class Collider:
             self._body_plan.append((b, r, ops))
         slot = {b: k for k, b in enumerate(self._bodies)}
         used = sorted({a for a, _ in pairs} | {b for _, b in pairs if b < n_mov})
-        self._mov_used = np.asarray(used, np.int32)
+        self.geom_names = (tuple(table_names[a] for a in used)
+                           + tuple(table_names[n_mov:]))
         self._mov_body = np.asarray([slot[int(m.geom_bodyid[mov[a]])] for a in used],
                                     np.int32)
         self._mov_pos = np.asarray([m.geom_pos[mov[a]] for a in used], np.float32)

@@ -27,9 +27,9 @@ Methods, by pair (`pair_distance`; "round" = sphere or capsule, a point or segme
   other shape (not MuJoCo's penetration depth, which is the shortest separating
   translation): negative whenever the shapes overlap.
 
-For round pairs and round vs box/cylinder in penetration the value is likewise the
-deepest core point's depth plus the radius; it equals MuJoCo's depth for shallow
-contacts and is smaller in magnitude when a core passes right through a shape.
+For round pairs and round vs box/cylinder in penetration the value is likewise
+minus (the deepest core point's depth + the radius): never more negative than the
+true penetration depth (the shortest separating translation).
 """
 
 from __future__ import annotations
@@ -131,6 +131,7 @@ def segment_segment(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
     t = jnp.where(e > eps, (b * s + f) / safe_e, 0.0)
     s = jnp.where(t < 0.0, jnp.clip(-c / safe_a, 0.0, 1.0),
                   jnp.where(t > 1.0, jnp.clip((b - c) / safe_a, 0.0, 1.0), s))
+    s = jnp.where(e > eps, s, jnp.clip(-c / safe_a, 0.0, 1.0))  # b is a point
     s = jnp.where(a > eps, s, 0.0)
     t = jnp.clip(t, 0.0, 1.0)
     return jnp.linalg.norm((p1 + s * d1) - (p2 + t * d2))
