@@ -40,7 +40,15 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["ChainOp", "build_chain_fk", "chain_ops", "hinge_reach", "path_substeps"]
+__all__ = [
+    "ChainOp",
+    "body_chain_ops",
+    "build_chain_fk",
+    "chain_ops",
+    "gene_map",
+    "hinge_reach",
+    "path_substeps",
+]
 
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
@@ -109,28 +117,19 @@ def _resolve(mj_model: mujoco.MjModel, kind: mujoco.mjtObj, ref: int | str, what
     return idx
 
 
-def chain_ops(
-    mj_model: mujoco.MjModel,
-    qpos0: np.ndarray,
-    joint_ids: Sequence[int | str],
-    site_id: int | str,
-) -> list[ChainOp]:
-    """The folded chain from the world (first op) down to the site's point (last op).
+def gene_map(
+    mj_model: mujoco.MjModel, qpos0: np.ndarray, joint_ids: Sequence[int | str]
+) -> tuple[np.ndarray, dict[int, int]]:
+    """Check ``qpos0`` and the evolved joints; ``(qpos0 as float64, joint id -> gene)``.
 
     Args:
         mj_model: the compiled model.
         qpos0: (nq,) posture that every joint not in ``joint_ids`` keeps.
         joint_ids: (DoF,) evolved joints (ids or names); hinge or slide only.
-        site_id: the site (id or name) whose world position is computed.
-
-    Returns:
-        Ops such that ``site_xpos = op_0(op_1(...op_k(0)))``; consecutive constant
-        transforms are merged.
 
     Raises:
-        ValueError: unknown joint/site, repeated joint, an evolved joint that is not a
-            hinge or slide, a ``qpos0`` of the wrong size, or a zero or non-finite
-            quaternion of a ball/free joint on the chain in ``qpos0`` (named).
+        ValueError: unknown or repeated joint, a joint that is not a hinge or slide,
+            or a ``qpos0`` of the wrong size.
     """
     qpos0 = np.asarray(qpos0, dtype=np.float64)
     if qpos0.shape != (mj_model.nq,):
@@ -150,11 +149,55 @@ def chain_ops(
                 "hinge and slide joints can be evolved"
             )
         gene_of[jid] = gene
-    sid = _resolve(mj_model, mujoco.mjtObj.mjOBJ_SITE, site_id, "site")
+    return qpos0, gene_of
 
-    bodies = []  # site body up to (excluding) the world body
-    b = int(mj_model.site_bodyid[sid])
-    while b != 0:
+
+def _merge(ops: Sequence[ChainOp]) -> list[ChainOp]:
+    merged: list[ChainOp] = []
+    for op in ops:
+        if op.kind == "const" and merged and merged[-1].kind == "const":
+            last = merged[-1]
+            merged[-1] = _const(last.rot @ op.rot, last.rot @ op.vec + last.vec)
+        else:
+            merged.append(op)
+    return merged
+
+
+def body_chain_ops(
+    mj_model: mujoco.MjModel,
+    qpos0: np.ndarray,
+    joint_ids: Sequence[int | str],
+    body_id: int,
+    root: int = 0,
+) -> list[ChainOp]:
+    """The folded chain from the frame of body ``root`` down to body ``body_id``'s.
+
+    Composed in order (``T = op_0 o op_1 o ... o op_k``) onto ``root``'s frame, the
+    ops give the body's frame as ``mj_kinematics`` computes it (``xpos``, ``xmat``).
+
+    Args:
+        mj_model: the compiled model.
+        qpos0: (nq,) posture that every joint not in ``joint_ids`` keeps.
+        joint_ids: (DoF,) evolved joints (ids or names); hinge or slide only.
+        body_id: the body whose frame is computed.
+        root: an ancestor of ``body_id`` (0, the world, by default) whose frame the
+            ops start from.
+
+    Returns:
+        The ops, consecutive constant transforms merged (empty when
+        ``body_id == root``).
+
+    Raises:
+        ValueError: as `gene_map`; ``root`` not an ancestor of the body; a free
+            joint between ``root`` (not the world) and the body; a zero or
+            non-finite quaternion of a ball/free joint in ``qpos0`` (named).
+    """
+    qpos0, gene_of = gene_map(mj_model, qpos0, joint_ids)
+    bodies = []  # the body up to (excluding) root
+    b = int(body_id)
+    while b != root:
+        if b == 0:
+            raise ValueError(f"body {root} is not an ancestor of body {body_id}")
         bodies.append(b)
         b = int(mj_model.body_parentid[b])
 
@@ -163,6 +206,8 @@ def chain_ops(
         adr, num = int(mj_model.body_jntadr[b]), int(mj_model.body_jntnum[b])
         jnts = range(adr, adr + num) if num > 0 else range(0)
         if num == 1 and int(mj_model.jnt_type[adr]) == _FREE:
+            if root != 0:
+                raise ValueError(f"body {b} has a free joint below body {root}")
             # A free joint replaces the body's pose by qpos (world-frame, top level).
             q = qpos0[mj_model.jnt_qposadr[adr] :][:7]
             what = f"free joint {_name(mj_model, adr)} in qpos0"
@@ -197,16 +242,36 @@ def chain_ops(
                 ops.append(_const(np.eye(3), anchor))
                 ops.append(_const(rot, np.zeros(3)))
                 ops.append(_const(np.eye(3), -anchor))
-    ops.append(_const(np.eye(3), mj_model.site_pos[sid]))
+    return _merge(ops)
 
-    merged: list[ChainOp] = []
-    for op in ops:
-        if op.kind == "const" and merged and merged[-1].kind == "const":
-            last = merged[-1]
-            merged[-1] = _const(last.rot @ op.rot, last.rot @ op.vec + last.vec)
-        else:
-            merged.append(op)
-    return merged
+
+def chain_ops(
+    mj_model: mujoco.MjModel,
+    qpos0: np.ndarray,
+    joint_ids: Sequence[int | str],
+    site_id: int | str,
+) -> list[ChainOp]:
+    """The folded chain from the world (first op) down to the site's point (last op).
+
+    Args:
+        mj_model: the compiled model.
+        qpos0: (nq,) posture that every joint not in ``joint_ids`` keeps.
+        joint_ids: (DoF,) evolved joints (ids or names); hinge or slide only.
+        site_id: the site (id or name) whose world position is computed.
+
+    Returns:
+        Ops such that ``site_xpos = op_0(op_1(...op_k(0)))``; consecutive constant
+        transforms are merged.
+
+    Raises:
+        ValueError: unknown joint/site, repeated joint, an evolved joint that is not a
+            hinge or slide, a ``qpos0`` of the wrong size, or a zero or non-finite
+            quaternion of a ball/free joint on the chain in ``qpos0`` (named).
+    """
+    qpos0, _ = gene_map(mj_model, qpos0, joint_ids)
+    sid = _resolve(mj_model, mujoco.mjtObj.mjOBJ_SITE, site_id, "site")
+    ops = body_chain_ops(mj_model, qpos0, joint_ids, int(mj_model.site_bodyid[sid]))
+    return _merge([*ops, _const(np.eye(3), mj_model.site_pos[sid])])
 
 
 def build_chain_fk(

@@ -1,0 +1,397 @@
+"""Signed distances between a robot's geoms and themselves / the world, from genes.
+
+`Collider` picks, once, every pair of geoms whose relative pose depends on the
+evolved joints, and builds pure, jittable, vmappable functions of the genes (DoF,)
+that return each pair's signed distance (metres; negative = penetration), cheap
+enough to run at every kinematic sub-step of every candidate of a population.
+
+Every geom counts whatever its ``contype``/``conaffinity`` (the built-in models set
+collisions off).  The robot's body frames follow `cgda_jax.sim.chain.body_chain_ops`
+(the same folding as the marker's forward kinematics, exact to float32): each needed
+body's frame is computed once per posture, from its nearest moving ancestor's.
+Geoms that do not move with the genes (the world's, objects', the robot's held
+joints') are constants at ``robot.qpos0``'s pose (``mj_kinematics``).
+
+Pairs (`Collider.pairs`): a geom on a moving body (one whose pose depends on a gene)
+against every other geom and every `Obstacle`, if their relative pose depends on the
+genes (some evolved joint lies on the tree path between their bodies), with MuJoCo's
+filters: not two geoms of one weld body, not a parent/child pair of weld bodies
+(``filterparent``; the world is never the parent here) unless the model disables
+that filter.  Left out: ``exclude``d geom/obstacle names, invisible geoms
+(``rgba`` alpha 0), and plane-plane pairs.  Meshes, height fields, ellipsoids and
+SDF geoms are not supported: they are skipped (listed in `Collider.skipped`, with a
+warning), so exclude them or replace them by primitives.
+
+Accuracy (`cgda_jax.sim.distance_fns` has the methods): separated pairs are exact to
+float32 (< 1e-5 m) for every type pair except those of a cylinder against a box or
+cylinder, which sample the cylinder's side at 32 angles (overestimate by at most
+0.098 x its radius, ~0.005 x in the usual face-to-side case; `Collider.error_bounds`).
+Penetration values are minus the depth of the deepest point of one shape's core
+(segment / point, or box edges, cylinder generators) inside the other, plus radii:
+negative exactly when the shapes overlap (MuJoCo's pair functions measure depth
+their own way: signs agree in the tests, magnitudes may differ by centimetres for deep
+overlaps; MuJoCo's capsule-box even reports a separation for a thin capsule that
+pierces right through a box, where this module is negative).
+
+Example:
+    >>> import jax.numpy as jnp
+    >>> from cgda_jax import Robot, model_path
+    >>> robot = Robot.from_mjcf(model_path("tiny_arm.xml"),
+    ...                         ["yaw", "shoulder", "elbow"], "marker")
+    >>> col = Collider(robot)
+    >>> col.pair_names
+    (('link1', 'base'), ('link2', 'base'))
+    >>> d, k = col.min_distance(jnp.zeros(3))  # link1's end cap sits in the base
+    >>> round(float(d), 3), col.pair_names[int(k)]
+    (-0.015, ('link1', 'base'))
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from jax import Array
+
+from cgda_jax.sim.chain import body_chain_ops
+from cgda_jax.sim.distance_fns import KINDS, error_bound, pair_distance, swap_needed
+
+__all__ = ["Collider", "Obstacle"]
+
+_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+_TYPES = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
+_SIZE_LEN = {"sphere": 1, "capsule": 2, "box": 3, "cylinder": 2, "plane": 0}
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """An extra world primitive that is not in the model (e.g. a paint board).
+
+    Attributes:
+        name: its name in `Collider.pair_names` (and for ``exclude``).
+        type: "box", "sphere", "capsule", "cylinder" or "plane".
+        pos: (3,) centre in the robot's world frame (m).
+        size: MuJoCo's size for the type: box half sizes (3,), sphere (r,), capsule
+            and cylinder (r, half length) along the local z axis; plane: ignored
+            (the half-space below its local z = 0).
+        quat: (4,) orientation [w, x, y, z] (normalized here).
+    """
+
+    name: str
+    type: str
+    pos: tuple
+    size: tuple = ()
+    quat: tuple = (1.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        if self.type not in KINDS:
+            raise ValueError(f"obstacle {self.name!r}: type {self.type!r} is not one "
+                             f"of {KINDS}")
+        n = _SIZE_LEN[self.type]
+        size = np.asarray(self.size, float).ravel()
+        if size.size < n or not np.all(np.isfinite(size)) or np.any(size[:n] <= 0):
+            raise ValueError(f"obstacle {self.name!r}: a {self.type} needs {n} "
+                             f"positive size value(s), got {self.size!r}")
+        if np.shape(self.pos) != (3,) or not np.all(np.isfinite(self.pos)):
+            raise ValueError(f"obstacle {self.name!r}: pos must be 3 finite numbers")
+        q = np.asarray(self.quat, float)
+        if q.shape != (4,) or not np.linalg.norm(q) > 0:
+            raise ValueError(f"obstacle {self.name!r}: quat must be 4 numbers, not 0")
+
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rotation (3, 3), centre (3,), size (3,)) as float64."""
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, np.asarray(self.quat, float) / np.linalg.norm(self.quat))
+        size = np.zeros(3)
+        n = np.asarray(self.size, float).ravel()[:3]
+        size[: n.size] = n
+        return R.reshape(3, 3), np.asarray(self.pos, float), size
+
+
+def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
+    """Compose folded chain ops (`cgda_jax.sim.chain.ChainOp`) onto a frame."""
+    for op in ops:
+        if op.kind == "const":
+            p = p + R @ op.vec
+            R = R @ op.rot
+        elif op.kind == "slide":
+            p = p + R @ (op.vec * (genes[op.gene] - op.offset))
+        else:  # hinge: Rodrigues rotation about the unit axis through the origin
+            angle = genes[op.gene] - op.offset
+            k = op.vec
+            K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]],
+                         np.float32)
+            R = R @ (np.eye(3, dtype=np.float32) + jnp.sin(angle) * K
+                     + (1 - jnp.cos(angle)) * (K @ K))
+    return R, p
+
+
+class Collider:
+    """Signed distances between the robot's moving geoms and the rest, from genes.
+
+    Args:
+        robot: a `cgda_jax.sim.robot.Robot` (its model, evolved joints, ``qpos0``).
+        obstacles: extra world primitives (`Obstacle`), checked against every moving
+            geom.
+        self_collision: include pairs of two robot geoms that both move.
+        exclude: geom or obstacle names left out of every pair (e.g. a pushed box).
+
+    Attributes:
+        pairs: (n_pairs, 2) geom-table indices (internal; see `pair_names`).
+        pair_names: (n_pairs,) ``(robot geom, other geom or obstacle)`` names.
+        pair_types: (n_pairs,) their geom types.
+        error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms.
+        n_pairs: number of pairs.
+        skipped: names of geoms left out for an unsupported type.
+        geom_names: (G,) names of the rows of `geom_frames`.
+
+    Raises:
+        KeyError: an ``exclude`` name that is neither a geom nor an obstacle.
+        ValueError: two obstacles with one name, or a name clash with a geom.
+    """
+
+    def __init__(self, robot, obstacles: Sequence[Obstacle] = (), *,
+                 self_collision: bool = True, exclude: Sequence[str] = ()):
+        m = robot.mj_model
+        self.n_dof = int(robot.n_dof)
+        joint_ids = [int(j) for j in robot.joint_ids]
+        qpos0 = np.asarray(robot.qpos0, dtype=np.float64)
+        obstacles = tuple(obstacles)
+        names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom#{g}"
+                 for g in range(m.ngeom)]
+        obs_names = [o.name for o in obstacles]
+        if len(set(obs_names)) != len(obs_names) or set(obs_names) & set(names):
+            raise ValueError(f"obstacle names {obs_names} repeat or clash with geoms")
+        exclude = set([exclude] if isinstance(exclude, str) else exclude)
+        unknown = exclude - set(names) - set(obs_names)
+        if unknown:
+            raise KeyError(f"exclude names {sorted(unknown)} are neither geoms nor "
+                           f"obstacles; geoms: {names}")
+
+        # which bodies move, and which evolved joints lie above each (free resets)
+        evolved = {int(m.jnt_bodyid[j]): set() for j in joint_ids}
+        for j in joint_ids:
+            evolved[int(m.jnt_bodyid[j])].add(j)
+        above: list[frozenset] = [frozenset()] * m.nbody
+        for b in range(1, m.nbody):  # parents have smaller ids
+            free = m.body_jntnum[b] == 1 and m.jnt_type[m.body_jntadr[b]] == _FREE
+            base = frozenset() if free else above[int(m.body_parentid[b])]
+            above[b] = base | frozenset(evolved.get(b, ()))
+        moving = [bool(s) for s in above]
+
+        data = mujoco.MjData(m)
+        data.qpos[:] = qpos0
+        mujoco.mj_kinematics(m, data)
+        usable, self.skipped = [], []
+        for g in range(m.ngeom):
+            if names[g] in exclude or m.geom_rgba[g, 3] == 0:
+                continue
+            if int(m.geom_type[g]) not in _TYPES:
+                self.skipped.append(names[g])
+                continue
+            usable.append(g)
+        if self.skipped:
+            warnings.warn(f"Collider: geoms {self.skipped} have unsupported types "
+                          f"(supported: {KINDS}); they are left out", stacklevel=2)
+
+        # the geom table: moving geoms (frames from genes), then constant ones
+        mov = [g for g in usable if moving[int(m.geom_bodyid[g])]]
+        const = [g for g in usable if not moving[int(m.geom_bodyid[g])]]
+        kept_obs = [o for o in obstacles if o.name not in exclude]
+        table_names = [names[g] for g in mov + const] + [o.name for o in kept_obs]
+        table_types = ([_TYPES[int(m.geom_type[g])] for g in mov + const]
+                       + [o.type for o in kept_obs])
+        sizes = [np.asarray(m.geom_size[g], float) for g in mov + const]
+        c_R = [data.geom_xmat[g].reshape(3, 3).copy() for g in const]
+        c_p = [data.geom_xpos[g].copy() for g in const]
+        for o in kept_obs:
+            R, p, size = o.frame()
+            c_R.append(R)
+            c_p.append(p)
+            sizes.append(size)
+
+        weld = [int(w) for w in m.body_weldid]
+        parent_weld = [weld[int(m.body_parentid[w])] for w in weld]
+        filter_parent = not (m.opt.disableflags
+                             & int(mujoco.mjtDisableBit.mjDSBL_FILTERPARENT))
+
+        def filtered(b1: int, b2: int) -> bool:
+            w1, w2 = weld[b1], weld[b2]
+            if w1 == w2:
+                return True
+            return (filter_parent and w1 != 0 and w2 != 0
+                    and (w1 == parent_weld[w2] or w2 == parent_weld[w1]))
+
+        pairs = []
+        n_mov = len(mov)
+        for i, g1 in enumerate(mov):
+            b1 = int(m.geom_bodyid[g1])
+            for j, g2 in enumerate(mov + const):
+                b2 = int(m.geom_bodyid[g2])
+                if j < n_mov and (j <= i or not self_collision):
+                    continue
+                if above[b1] == above[b2] or filtered(b1, b2):
+                    continue
+                if table_types[i] == table_types[j] == "plane":
+                    continue
+                pairs.append((i, j))
+            for k, o in enumerate(kept_obs):
+                if not table_types[i] == o.type == "plane":
+                    pairs.append((i, len(mov) + len(const) + k))
+        self.pairs = np.asarray(pairs, dtype=np.int32).reshape(-1, 2)
+        self.n_pairs = len(pairs)
+        self.pair_names = tuple((table_names[a], table_names[b]) for a, b in pairs)
+        self.pair_types = tuple((table_types[a], table_types[b]) for a, b in pairs)
+        self.error_bounds = np.array(
+            [error_bound(table_types[a], sizes[a], table_types[b], sizes[b])
+             for a, b in pairs])
+
+        # body frames: each needed body from its nearest moving ancestor
+        def root_of(b: int) -> int:
+            x = int(m.body_parentid[b])
+            while x != 0 and not moving[x]:
+                free = m.body_jntnum[x] == 1 and m.jnt_type[m.body_jntadr[x]] == _FREE
+                if free:
+                    return 0
+                x = int(m.body_parentid[x])
+            return x
+
+        needed, todo = set(), {int(m.geom_bodyid[mov[a]]) for a, _ in pairs}
+        while todo:
+            b = todo.pop()
+            needed.add(b)
+            r = root_of(b)
+            if r != 0 and r not in needed:
+                todo.add(r)
+        self._bodies = sorted(needed)  # parents first
+        self._body_plan = []
+        for b in self._bodies:
+            r = root_of(b)
+            ops = [op._replace(rot=op.rot.astype(np.float32),
+                               vec=op.vec.astype(np.float32),
+                               offset=np.float32(op.offset))
+                   for op in body_chain_ops(m, qpos0, joint_ids, b, root=r)]
+            self._body_plan.append((b, r, ops))
+        slot = {b: k for k, b in enumerate(self._bodies)}
+        used = sorted({a for a, _ in pairs} | {b for _, b in pairs if b < n_mov})
+        self.geom_names = (tuple(table_names[a] for a in used)
+                           + tuple(table_names[n_mov:]))
+        self._mov_body = np.asarray([slot[int(m.geom_bodyid[mov[a]])] for a in used],
+                                    np.int32)
+        self._mov_pos = np.asarray([m.geom_pos[mov[a]] for a in used], np.float32)
+        self._mov_rot = np.asarray(
+            [_quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
+        self._const_R = np.asarray(c_R, np.float32).reshape(-1, 3, 3)
+        self._const_p = np.asarray(c_p, np.float32).reshape(-1, 3)
+
+        # pairs grouped by (type a, type b) in pair_distance's order, table indices
+        # remapped: used moving geoms first, then the constants
+        remap = {a: k for k, a in enumerate(used)}
+        remap.update({n_mov + c: len(used) + c for c in range(len(c_R))})
+        groups: dict[tuple[str, str], list] = {}
+        for n, (a, b) in enumerate(pairs):
+            ta, tb = table_types[a], table_types[b]
+            if swap_needed(ta, tb):
+                a, b, ta, tb = b, a, tb, ta
+            groups.setdefault((ta, tb), []).append((n, remap[a], remap[b],
+                                                    sizes[a], sizes[b]))
+        self._groups = [
+            (ta, tb, np.asarray([e[1] for e in g], np.int32),
+             np.asarray([e[2] for e in g], np.int32),
+             np.asarray([e[3] for e in g], np.float32),
+             np.asarray([e[4] for e in g], np.float32))
+            for (ta, tb), g in groups.items()]
+        order = np.concatenate([[e[0] for e in g] for g in groups.values()] or [[]])
+        self._inverse = np.argsort(order).astype(np.int32)
+
+    def __repr__(self) -> str:
+        return f"Collider(n_pairs={self.n_pairs}, bodies={len(self._bodies)})"
+
+    def geom_frames(self, genes: Array) -> tuple[Array, Array]:
+        """World frames of the geom table (used moving geoms, then constants).
+
+        Args:
+            genes: (DoF,) evolved joint values.
+
+        Returns:
+            (rotations (G, 3, 3), centres (G, 3)), float32.
+        """
+        genes = jnp.asarray(genes, jnp.float32)
+        if genes.shape != (self.n_dof,):
+            raise ValueError(f"genes has shape {genes.shape}, expected ({self.n_dof},)")
+        frames = {0: (jnp.eye(3, dtype=jnp.float32), jnp.zeros(3, jnp.float32))}
+        for b, r, ops in self._body_plan:
+            frames[b] = _frame_apply(ops, genes, *frames[r])
+        if not len(self._bodies):
+            return jnp.asarray(self._const_R), jnp.asarray(self._const_p)
+        bR = jnp.stack([frames[b][0] for b in self._bodies])[self._mov_body]
+        bp = jnp.stack([frames[b][1] for b in self._bodies])[self._mov_body]
+        R = jnp.einsum("gij,gjk->gik", bR, self._mov_rot)
+        p = bp + jnp.einsum("gij,gj->gi", bR, self._mov_pos)
+        return (jnp.concatenate([R, self._const_R]),
+                jnp.concatenate([p, self._const_p]))
+
+    def distances(self, genes: Array) -> Array:
+        """Signed distance of every pair (m; negative = penetration depth).
+
+        Args:
+            genes: (DoF,) evolved joint values (radians / metres).
+
+        Returns:
+            (n_pairs,) float32, in `pair_names` order.
+        """
+        R, p = self.geom_frames(genes)
+        out = []
+        for ta, tb, ia, ib, sa, sb in self._groups:
+            def one(ia, ib, sa, sb, ta=ta, tb=tb):
+                return pair_distance(ta, tb, sa, R[ia], p[ia], sb, R[ib], p[ib])
+
+            out.append(jax.vmap(one)(ia, ib, sa, sb))
+        if not out:
+            return jnp.zeros((0,), jnp.float32)
+        return jnp.concatenate(out)[self._inverse]
+
+    def min_distance(self, genes: Array) -> tuple[Array, Array]:
+        """The worst (smallest) signed distance and its pair's index.
+
+        Args:
+            genes: (DoF,) evolved joint values.
+
+        Returns:
+            (scalar float32, scalar int32); ``(inf, -1)`` without pairs.
+        """
+        return _worst(self.distances(genes)[None])
+
+    def path_min_distance(self, path: Array) -> tuple[Array, Array]:
+        """The worst signed distance over K postures and its pair's index.
+
+        Args:
+            path: (K, DoF) postures (e.g. a move's kinematic sub-steps).
+
+        Returns:
+            (scalar float32, scalar int32); ``(inf, -1)`` without pairs.
+        """
+        path = jnp.asarray(path, jnp.float32)
+        if path.ndim != 2 or path.shape[1] != self.n_dof:
+            raise ValueError(f"path has shape {path.shape}, expected (K, {self.n_dof})")
+        return _worst(jax.vmap(self.distances)(path))
+
+
+def _worst(d: Array) -> tuple[Array, Array]:
+    """(K, n) distances -> (min over all, its pair index)."""
+    if d.shape[-1] == 0:
+        return jnp.float32(jnp.inf), jnp.int32(-1)
+    per_pair = jnp.min(d, axis=0)
+    i = jnp.argmin(per_pair).astype(jnp.int32)
+    return per_pair[i], i
+
+
+def _quat_mat(q) -> np.ndarray:
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, np.asarray(q, float))
+    return R.reshape(3, 3)
