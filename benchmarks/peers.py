@@ -137,6 +137,8 @@ class MujocoMarker:
         paint_centres: (S, 3) square centres for a paint scene (feature = painted
             percent); None for the marker scene (features = marker x, y, z).
         paint_radius: a square is painted when the marker is this close or closer.
+        paint_front: (3,) unit normal of the wall's painted side: only the part of
+            the path on that side paints (None: any side).
     """
 
     def __init__(
@@ -150,6 +152,7 @@ class MujocoMarker:
         substeps: int = 8,
         paint_centres: np.ndarray | None = None,
         paint_radius: float = 0.12,
+        paint_front: np.ndarray | None = None,
     ):
         self.model = model
         self.data = mujoco.MjData(model)
@@ -162,6 +165,7 @@ class MujocoMarker:
         self.alphas = np.arange(1, substeps + 1) / substeps
         self.centres = None if paint_centres is None else np.asarray(paint_centres)
         self.radius = paint_radius
+        self.front = None if paint_front is None else np.asarray(paint_front, float)
 
     @classmethod
     def from_simulator(cls, sim) -> MujocoMarker:
@@ -178,6 +182,7 @@ class MujocoMarker:
             substeps=sim.substeps,
             paint_centres=None if centres is None else np.asarray(centres),
             paint_radius=float(getattr(scene, "radius", 0.12)),
+            paint_front=getattr(scene, "front", None),
         )
 
     def marker(self, genes: np.ndarray) -> np.ndarray:
@@ -201,11 +206,23 @@ class MujocoMarker:
         """Paint along the segment start -> end (as ``PaintWall.sweep``)."""
         if painted is None:
             return
-        d = end - start
-        dd = float(d @ d)
-        t = np.clip((self.centres - start) @ d / dd, 0, 1) if dd > 0 else 0.0
-        closest = start + np.multiply.outer(t, d)
-        painted |= np.sum((self.centres - closest) ** 2, axis=1) <= self.radius**2
+        c = self.centres  # (S, 3)
+        a = np.broadcast_to(start, c.shape).astype(float)
+        b = np.broadcast_to(end, c.shape).astype(float)
+        keep = np.ones(len(c), bool)
+        if self.front is not None:  # keep the part of a -> b in front of each c
+            sa, sb = (a - c) @ self.front, (b - c) @ self.front
+            keep = (sa >= 0) | (sb >= 0)
+            cross = (sa < 0) != (sb < 0)
+            w = np.where(cross, sa / np.where(cross, sa - sb, 1.0), 0.0)[:, None]
+            cut = a + (b - a) * w
+            a = np.where((cross & (sa < 0))[:, None], cut, a)
+            b = np.where((cross & (sb < 0))[:, None], cut, b)
+        d = b - a
+        dd = np.sum(d * d, axis=1)
+        t = np.clip(np.sum((c - a) * d, axis=1) / np.where(dd > 0, dd, 1.0), 0, 1)
+        near = np.sum((c - a - t[:, None] * d) ** 2, axis=1) <= self.radius**2
+        painted |= keep & near
 
     def step(self, state: tuple, waypoint: np.ndarray) -> tuple[tuple, np.ndarray]:
         """Move to one (DoF,) waypoint: (new state, features (F,))."""

@@ -140,6 +140,8 @@ class Collider:
             geom.
         self_collision: include pairs of two robot geoms that both move.
         exclude: geom or obstacle names left out of every pair (e.g. a pushed box).
+        only: keep just these ``(robot geom, other)`` pairs (names as in
+            `pair_names`; None: every pair).
 
     Attributes:
         pairs: (n_pairs, 2) geom-table indices (internal; see `pair_names`).
@@ -149,6 +151,12 @@ class Collider:
         n_pairs: number of pairs.
         skipped: names of geoms left out for an unsupported type.
         geom_names: (G,) names of the rows of `geom_frames`.
+        pair_reach: (n_pairs, DoF) numpy: how far (m) any point of either geom of
+            a pair can move per unit change of each gene (radian / metre), an upper
+            bound over every posture (the chain's lengths from the joint to the
+            geom's farthest point; 0 for a geom that does not move): a change
+            ``dq`` moves the pair's geoms relative to each other by at most
+            ``pair_reach @ |dq|``, so their signed distance changes by at most that.
 
     Raises:
         KeyError: an ``exclude`` name that is neither a geom nor an obstacle.
@@ -156,7 +164,8 @@ class Collider:
     """
 
     def __init__(self, robot, obstacles: Sequence[Obstacle] = (), *,
-                 self_collision: bool = True, exclude: Sequence[str] = ()):
+                 self_collision: bool = True, exclude: Sequence[str] = (),
+                 only: Sequence[tuple[str, str]] | None = None):
         m = robot.mj_model
         self.n_dof = int(robot.n_dof)
         joint_ids = [int(j) for j in robot.joint_ids]
@@ -243,6 +252,15 @@ class Collider:
             for k, o in enumerate(kept_obs):
                 if not table_types[i] == o.type == "plane":
                     pairs.append((i, len(mov) + len(const) + k))
+        if only is not None:
+            wanted = {tuple(x) for x in only}
+            pairs = [(a, b) for a, b in pairs
+                     if (table_names[a], table_names[b]) in wanted]
+        reach = np.zeros((len(table_names), self.n_dof))
+        for i, g in enumerate(mov):
+            reach[i] = geom_reach(m, qpos0, joint_ids, g)
+        self.pair_reach = np.asarray([reach[a] + reach[b] for a, b in pairs],
+                                     np.float64).reshape(-1, self.n_dof)
         self.pairs = np.asarray(pairs, dtype=np.int32).reshape(-1, 2)
         self.n_pairs = len(pairs)
         self.pair_names = tuple((table_names[a], table_names[b]) for a, b in pairs)
@@ -261,7 +279,9 @@ class Collider:
                 x = int(m.body_parentid[x])
             return x
 
-        needed, todo = set(), {int(m.geom_bodyid[mov[a]]) for a, _ in pairs}
+        needed = set()
+        todo = {int(m.geom_bodyid[mov[g]]) for pair in pairs for g in pair
+                if g < n_mov}  # both sides of a self pair move
         while todo:
             b = todo.pop()
             needed.add(b)
@@ -389,6 +409,43 @@ def _worst(d: Array) -> tuple[Array, Array]:
     per_pair = jnp.min(d, axis=0)
     i = jnp.argmin(per_pair).astype(jnp.int32)
     return per_pair[i], i
+
+
+def geom_radius(kind: int, size: np.ndarray) -> float:
+    """Radius (m) of a ball about a geom's centre that holds the geom."""
+    kind = _TYPES.get(int(kind), "")
+    size = np.asarray(size, float)
+    if kind == "sphere":
+        return float(size[0])
+    if kind == "capsule":
+        return float(size[0] + size[1])
+    if kind in ("box", "cylinder"):
+        return float(np.linalg.norm(size[:3] if kind == "box" else size[:2]))
+    return 0.0
+
+
+def geom_reach(m: mujoco.MjModel, qpos0: np.ndarray, joint_ids: Sequence[int],
+               geom: int) -> np.ndarray:
+    """(DoF,) how far (m) any point of ``geom`` moves per unit change of each gene,
+    bounded over every posture: for a hinge, the sum of the chain's translation
+    lengths from the joint to the geom's centre plus the geom's radius (a bound on
+    the point's distance from the axis); for a slide, 1 (and its travel adds to
+    the hinges above it)."""
+    ops = body_chain_ops(m, qpos0, joint_ids, int(m.geom_bodyid[geom]))
+    bound = float(np.linalg.norm(m.geom_pos[geom])) + geom_radius(
+        m.geom_type[geom], m.geom_size[geom])
+    lo = m.jnt_range[np.asarray(joint_ids)]
+    travel = np.maximum(np.abs(lo[:, 0]), np.abs(lo[:, 1]))
+    out = np.zeros(len(joint_ids))
+    for op in reversed(ops):
+        if op.kind == "const":
+            bound += float(np.linalg.norm(op.vec))
+        elif op.kind == "hinge":
+            out[op.gene] = max(out[op.gene], bound)
+        else:  # slide: unit motion per metre; its travel lengthens what is above
+            out[op.gene] = max(out[op.gene], 1.0)
+            bound += float(travel[op.gene] + abs(op.offset))
+    return out
 
 
 def _quat_mat(q) -> np.ndarray:

@@ -26,6 +26,14 @@ Modes:
 
 Waypoints outside the joint limits are clipped into them (the robot cannot go there).
 
+Feasibility (``feasibility``, `cgda_jax.sim.feasibility`): each move is also judged
+as a motion: its sub-step postures (kinematic mode) or its commanded reference at
+``substeps`` points (dynamic mode) against collisions, and its minimum-jerk timing
+(``move_fraction * waypoint_s`` seconds in both modes; the first move from the
+start posture, the approach, over `Feasibility.approach_s` in kinematic mode)
+against the joint speed and acceleration limits.  The state carries the move's
+violation and their sum over the execution (0 = feasible).
+
 Example:
     >>> import jax.numpy as jnp
     >>> from cgda_jax import MarkerScene, Robot, Simulator, model_path
@@ -48,9 +56,16 @@ from jax import Array
 
 from cgda_jax.sim.robot import Robot
 
-__all__ = ["MODES", "SimState", "Simulator"]
+__all__ = ["MODES", "SimState", "Simulator", "scene_obstacles"]
 
 MODES = ("kinematic", "dynamic")
+
+
+def scene_obstacles(scene) -> list[dict]:
+    """The obstacles a scene adds to the world (the paint board), as
+    `cgda_jax.sim.collision.Obstacle` dicts; [] for scenes without."""
+    board = getattr(scene, "board", None)
+    return [] if board is None else [board]
 
 
 @struct.dataclass
@@ -65,12 +80,19 @@ class SimState:
             model (see `cgda_jax.sim.physics.Physics`); ``None`` in kinematic mode.
         marker: (3,) the marker's last position, where the next move's swept path
             starts (None: recomputed from ``genes``).
+        violation: with feasibility: the summed violation of every move so far
+            (scalar, 0 = feasible); None without.
+        move_violation: with feasibility: the last move's violation; None without.
+        first: with feasibility: True until the first move (the approach) is made.
     """
 
     genes: Array
     scene: Any
     data: Any = None
     marker: Any = None
+    violation: Any = None
+    move_violation: Any = None
+    first: Any = None
 
 
 class Simulator:
@@ -104,6 +126,10 @@ class Simulator:
             large batches over the intra-op thread pool and can deadlock in it
             (P >= 512 on 2 cores hangs with every thread idle); slices of 256 run.
             None: the whole population in one ``vmap`` (fine on a GPU).
+        feasibility: a `cgda_jax.sim.feasibility.Feasibility` that judges every
+            move (collisions, joint limits; see the module doc); True: one with the
+            model's limits and the scene's ``obstacles`` (the paint board); None
+            (default): moves are not judged (the paper's unconstrained execution).
 
     Attributes:
         n_dof, n_features, feature_names, lower, upper: the robot's and the scene's
@@ -124,6 +150,7 @@ class Simulator:
         physics: str = "auto",
         reduce: bool = True,
         batch_size: int | None = 256,
+        feasibility: Any = None,
     ):
         if mode not in MODES:
             raise ValueError(f"mode={mode!r}; expected one of {MODES}")
@@ -183,6 +210,17 @@ class Simulator:
             robot.make_data()  # mujoco.mjx and the device model, outside any trace
         self.waypoint_s = (self.physics_steps * self.physics.timestep
                            if mode == "dynamic" else None)
+        self.move_s = float(move_fraction) * (
+            self.waypoint_s if mode == "dynamic" else float(waypoint_s))
+        self._waypoint_s_arg = float(waypoint_s)
+        if feasibility is True:
+            from cgda_jax.sim.feasibility import Feasibility
+
+            feasibility = Feasibility(robot, obstacles=scene_obstacles(scene))
+        self.feasibility = feasibility or None
+        self.approach_s = self.move_s
+        if self.feasibility is not None and mode == "kinematic":
+            self.approach_s = self.feasibility.approach_s(robot, self.move_s)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
         # eager set-up and replays: one program each, not one per operation
@@ -195,11 +233,15 @@ class Simulator:
         and reference), by default on MuJoCo C.  For replaying a result: an
         optimiser may exploit the resolution it was evaluated at."""
         if self.mode != "dynamic":
-            return Simulator(self.robot, self.scene, substeps=self.substeps * factor)
+            return Simulator(self.robot, self.scene, substeps=self.substeps * factor,
+                             waypoint_s=self._waypoint_s_arg,
+                             move_fraction=self.move_fraction,
+                             feasibility=self.feasibility)
         return Simulator(
             self.robot, self.scene, mode="dynamic", physics=physics,
             timestep=self.physics.timestep / factor,
             physics_steps=self.physics_steps * factor, **self._dynamic_args,
+            feasibility=self.feasibility,
         )
 
     def __repr__(self) -> str:
@@ -236,7 +278,22 @@ class Simulator:
             data = self.physics.start_state(genes0)  # at rest
         marker = self.robot.marker_position(genes0)  # welded joints sit at qpos0
         scene = self.scene.update(self.scene.init_state(), marker)
-        return SimState(genes=genes0, scene=scene, data=data, marker=marker)
+        state = SimState(genes=genes0, scene=scene, data=data, marker=marker)
+        if self.feasibility is not None:
+            zero = jnp.float32(0.0)
+            state = state.replace(violation=zero, move_violation=zero,
+                                  first=jnp.bool_(True))
+        return state
+
+    def _judge(self, state: SimState, new: SimState) -> SimState:
+        """``new`` with the violation of the move from ``state`` to it (unchanged
+        without feasibility)."""
+        if self.feasibility is None:
+            return new
+        duration = jnp.where(state.first, self.approach_s, self.move_s)
+        v = self.feasibility.move(state.genes, new.genes - state.genes, duration)
+        return new.replace(violation=state.violation + v, move_violation=v,
+                           first=jnp.bool_(False))
 
     def step(self, state: SimState, waypoint: Array) -> tuple[SimState, Array]:
         """Move to one waypoint.
@@ -264,8 +321,8 @@ class Simulator:
             features = self._fset.from_data(data)
         else:
             features = self.scene.features(scene_state, markers[-1])
-        return state.replace(genes=target, scene=scene_state,
-                             marker=markers[-1]), features
+        new = state.replace(genes=target, scene=scene_state, marker=markers[-1])
+        return self._judge(state, new), features
 
     def _paint(self, state: SimState, markers: Array):
         """The scene state after the marker moved from ``state.marker`` through
@@ -297,8 +354,11 @@ class Simulator:
             features = self._fset.from_sensordata(sens[-1])
         else:
             features = self.scene.features(scene_state, path[-1])
-        return SimState(genes=target, scene=scene_state, data=data,
-                        marker=path[-1]), features
+        new = state.replace(genes=target, scene=scene_state, data=data,
+                            marker=path[-1])
+        # judged on the commanded reference (the physics path's joints are not
+        # read back; the motion report replays them on MuJoCo C)
+        return self._judge(state, new), features
 
     def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:
         shape = tuple(jnp.shape(waypoints))
@@ -335,6 +395,12 @@ class Simulator:
             self.step, state, jnp.asarray(waypoints, jnp.float32)
         )
         return features, state
+
+    def violation(self, waypoints: Array, state: SimState | None = None) -> Array:
+        """Summed violation (scalar) of executing (N, DoF) waypoints from ``state``
+        (0 = feasible; 0 without feasibility)."""
+        final = self.rollout(waypoints, state)[1]
+        return jnp.float32(0.0) if final.violation is None else final.violation
 
     def execute(self, waypoints: Array, state: SimState | None = None) -> Array:
         """Features (N, F) of executing (N, DoF) waypoints from ``state`` (default:

@@ -231,6 +231,31 @@ class PlanBase:
         q = self.joints(pop_u)
         return self.map_population(lambda w: self.sim.step(state, w)[1], q)
 
+    @property
+    def feasibility(self) -> Any:
+        """The simulator's `cgda_jax.sim.feasibility.Feasibility`, or None."""
+        return getattr(self.sim, "feasibility", None)
+
+    def penalize(self, fitness: jax.Array, violation: Any) -> jax.Array:
+        """``fitness`` with the feasibility penalty of ``violation`` added (as is
+        without feasibility)."""
+        if self.feasibility is None or violation is None:
+            return fitness
+        from cgda_jax.sim.feasibility import penalized
+
+        return penalized(fitness, violation, self.feasibility.penalty)
+
+    def point_outcome(self, state: Any, pop_u: jax.Array) -> tuple[jax.Array, Any]:
+        """Features (P, F) and the move's violation (P,) (None without
+        feasibility) after one step from `state` to each posture of `pop_u`."""
+        q = self.joints(pop_u)
+
+        def one(w):
+            new, feats = self.sim.step(state, w)
+            return feats, getattr(new, "move_violation", None)
+
+        return self.map_population(one, q)
+
     def map_population(self, fn: Callable, xs: Any) -> Any:
         """``vmap(fn)(xs)`` over the population, through the simulator's
         ``map_population`` when it has one (dynamic MJX mode slices large populations
@@ -248,10 +273,12 @@ class PlanBase:
         """
 
         def fitness_u(pop):
-            feats = self.point_features(state, pop)
+            feats, violation = self.point_outcome(state, pop)
             if prefix_sq is None:
-                return jnp.linalg.norm(feats - goal_point, axis=-1)
-            return jnp.sqrt(prefix_sq + jnp.sum((feats - goal_point) ** 2, axis=-1))
+                f = jnp.linalg.norm(feats - goal_point, axis=-1)
+            else:
+                f = jnp.sqrt(prefix_sq + jnp.sum((feats - goal_point) ** 2, axis=-1))
+            return self.penalize(f, violation)
 
         return fitness_u
 
@@ -267,9 +294,13 @@ class PlanBase:
         return jnp.all(carry.done)
 
     def execution(self, joints: jax.Array) -> dict[str, jax.Array]:
-        """``joints`` (N, DoF) and their ``features`` (N, F) executed from the start."""
-        features, _ = self.sim.rollout(joints, self.sim.init_state())
-        return {"joints": joints, "features": features}
+        """``joints`` (N, DoF) and their ``features`` (N, F) executed from the start
+        (with feasibility also its summed ``violation``, 0 = feasible)."""
+        features, final = self.sim.rollout(joints, self.sim.init_state())
+        out = {"joints": joints, "features": features}
+        if getattr(final, "violation", None) is not None:
+            out["violation"] = final.violation
+        return out
 
     def result(
         self,
@@ -287,11 +318,12 @@ class PlanBase:
     ) -> ExecutionResult:
         """The `ExecutionResult` of a finished run (host arrays).
 
-        ``final`` holds ``joints`` and ``features``; `point_errors` defaults to each
-        executed point's Euclidean error to its goal point (inf where not finite),
-        `final_fitness` to the largest of them; success = `complete` and every error
-        < tolerance. `invalid_evaluations` counts the diverged evaluations. `info`
-        extends the plan's settings.
+        ``final`` holds ``joints`` and ``features`` (and ``violation`` with
+        feasibility); `point_errors` defaults to each executed point's Euclidean
+        error to its goal point (inf where not finite), `final_fitness` to the
+        largest of them; success = `complete`, every error < tolerance and (with
+        feasibility) a feasible execution (violation 0). `invalid_evaluations`
+        counts the diverged evaluations. `info` extends the plan's settings.
         """
         goal = np.asarray(self.goal)
         if point_errors is None:
@@ -301,6 +333,11 @@ class PlanBase:
             final_fitness = point_errors.max()
         if np.isnan(final_fitness):  # an execution without finite features
             final_fitness = np.inf
+        feasible = True
+        if "violation" in final:
+            violation = float(np.asarray(final["violation"]))
+            feasible = violation == 0.0
+            info = {"feasible": feasible, "violation": violation, **info}
         return ExecutionResult(
             strategy=self.name,
             joints=final["joints"],
@@ -312,7 +349,8 @@ class PlanBase:
             generations=int(generations),
             wall_time_s=timing["wall_time_s"],
             compile_time_s=timing["compile_time_s"],
-            success=bool(complete and np.all(point_errors < self.tolerance)),
+            success=bool(complete and feasible
+                         and np.all(point_errors < self.tolerance)),
             tolerance=self.tolerance,
             final_fitness=float(final_fitness),
             info={**self.info, "trials_in_batch": timing["trials_in_batch"], **info},

@@ -211,10 +211,9 @@ class FTEPlan(PlanBase):
         return self.joints(u_flat.reshape(self.n_points, self.n_dof))
 
     def _fitness(self, pop):
-        feats = self.map_population(
-            lambda u: self.execution(self._trajectory(u))["features"], pop
-        )
-        return jax.vmap(lambda f: self.distance(f, self.goal))(feats)
+        out = self.map_population(lambda u: self.execution(self._trajectory(u)), pop)
+        f = jax.vmap(lambda f: self.distance(f, self.goal))(out["features"])
+        return self.penalize(f, out.get("violation"))
 
     def _errors(self, u_flat):
         """(N,) pointwise errors of executing `u_flat` (inf where not finite)."""
@@ -231,8 +230,9 @@ class FTEPlan(PlanBase):
         if mean is None:
             return evo
         # one execution, not a population (no batched simulator call)
-        f = self.distance(self.execution(self._trajectory(mean))["features"],
-                          self.goal)
+        out = self.execution(self._trajectory(mean))
+        f = self.penalize(self.distance(out["features"], self.goal),
+                          out.get("violation"))
         take = jnp.isfinite(f) & (f < evo.best_fitness)
         return evo.replace(
             best_u=jnp.where(take, mean, evo.best_u),

@@ -110,8 +110,11 @@ class IEPlan(PlanBase):
             )
         if refine not in REFINE:
             raise ValueError(f"refine={refine!r}; expected one of {REFINE}")
-        self.sequential = not points_independent(sim)
-        if self.sequential and (refine != "none" or reach_check):
+        # with feasibility the moves between points count: point i is evolved from
+        # where points 0..i-1 leave the arm, like the final execution
+        feasible_moves = getattr(sim, "feasibility", None) is not None
+        self.sequential = not points_independent(sim) or feasible_moves
+        if not points_independent(sim) and (refine != "none" or reach_check):
             raise ValueError(
                 "refine and reach_check need independent points: kinematic mode and a "
                 "scene without state (e.g. the marker); this simulator is "
@@ -128,8 +131,9 @@ class IEPlan(PlanBase):
         if int(restart_samples) < 0:
             raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
         # sampled restart means need postures whose features do not depend on the
-        # context (independent points) and at least one restart to use them
-        self.restart_samples = (0 if self.sequential or self.restarts == 0
+        # context (independent features; with feasibility the move to them is still
+        # judged in context) and at least one restart to use them
+        self.restart_samples = (0 if not points_independent(sim) or self.restarts == 0
                                 else int(restart_samples))
         self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
         self.stagnation = None if stagnation is None else int(stagnation)
@@ -158,10 +162,11 @@ class IEPlan(PlanBase):
 
         def body(state, w):
             new, feats = self.sim.step(state, w)
-            return new, (state, feats)
+            return new, (state, feats, new.move_violation)
 
-        _, (states, feats) = jax.lax.scan(body, start, self.joints(best_u))
-        errors = jnp.linalg.norm(feats - self.goal, axis=-1)
+        _, (states, feats, violation) = jax.lax.scan(body, start,
+                                                     self.joints(best_u))
+        errors = self.penalize(jnp.linalg.norm(feats - self.goal, axis=-1), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
     def _stop(self, evo: Evolution) -> jax.Array:
@@ -300,12 +305,19 @@ class IEPlan(PlanBase):
     def finish(self, s):
         found = jnp.isfinite(s.best_fitness)
         joints = jnp.where(found[:, None], self.joints(s.best_u), jnp.nan)
+        executed = self.execution(joints)
         if self.refine != "none":
             u, _ = polish(self.sim, s.best_u, self.goal, method=self.refine,
                           steps=self.refine_steps)
-            joints = jnp.where(found[:, None], self.joints(u), joints)
+            polished = self.execution(jnp.where(found[:, None], self.joints(u),
+                                                joints))
+            if "violation" in executed:  # kept only if the motion stays as feasible
+                better = polished["violation"] <= executed["violation"]
+                polished = jax.tree.map(lambda a, b: jnp.where(better, a, b),
+                                        polished, executed)
+            executed = polished
         return {
-            **self.execution(joints),
+            **executed,
             "generation": s.generations + s.evo.generation,
             "evaluations": s.evaluations + s.evo.evaluations,
             "invalid": s.invalid + s.evo.invalid,

@@ -268,11 +268,14 @@ class OETPlan(PlanBase):
         return {"k": np.asarray(s.k).tolist(), "steps": np.asarray(s.steps).tolist()}
 
     def finish(self, s):
-        return {"joints": s.joints, "features": s.features, "targets": s.targets,
-                "steps": s.steps, "k": s.k, "step_generations": s.step_generations,
-                "evaluations": s.evaluations, "invalid": s.invalid,
-                "step_invalid": s.step_invalid, "stuck": s.stuck,
-                "step_tries": s.step_tries}
+        out = {"joints": s.joints, "features": s.features, "targets": s.targets,
+               "steps": s.steps, "k": s.k, "step_generations": s.step_generations,
+               "evaluations": s.evaluations, "invalid": s.invalid,
+               "step_invalid": s.step_invalid, "stuck": s.stuck,
+               "step_tries": s.step_tries}
+        if s.sim_state.violation is not None:  # the executed steps, summed
+            out["violation"] = s.sim_state.violation
+        return out
 
     def to_result(self, final, history, timing):
         goal = np.asarray(self.goal)
@@ -281,8 +284,11 @@ class OETPlan(PlanBase):
         dist = np.linalg.norm(goal[:, None, :] - feats[None, :, :], axis=-1)
         stuck = bool(final["stuck"])
         gens = final["step_generations"][:n + stuck]  # the stuck evolution ran too
+        executed = {"joints": final["joints"][:n], "features": feats}
+        if "violation" in final:
+            executed["violation"] = final["violation"]
         return self.result(
-            {"joints": final["joints"][:n], "features": feats}, timing,
+            executed, timing,
             point_errors=ordered_point_errors(dist, self.tolerance),
             fitness_history=ragged_rows(
                 [history["best_fitness"][history["step"] == i] for i in range(n)]

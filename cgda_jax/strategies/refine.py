@@ -98,12 +98,27 @@ def descend(
     return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
 
 
+def feasibility_penalty(sim: Any, violation: Any) -> jax.Array:
+    """The fitness penalty of ``violation`` on ``sim`` (0 without feasibility):
+    added to a polish's loss and score, so that a polished candidate that leaves
+    the feasible region is never kept."""
+    feas = getattr(sim, "feasibility", None)
+    if feas is None or violation is None:
+        return jnp.float32(0.0)
+    from cgda_jax.sim.feasibility import penalized
+
+    return penalized(jnp.float32(0.0), violation, feas.penalty)
+
+
 def point_loss(sim: Any, state: Any, goal_point: jax.Array, lower, upper):
-    """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``."""
+    """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``
+    (plus the feasibility penalty of the move; no gradient flows through it)."""
 
     def loss(u):
-        feats = sim.step(state, to_joints(u, lower, upper))[1]
-        return jnp.sum((feats - goal_point) ** 2)
+        new, feats = sim.step(state, to_joints(u, lower, upper))
+        violation = getattr(new, "move_violation", None)
+        pen = jax.lax.stop_gradient(feasibility_penalty(sim, violation))
+        return jnp.sum((feats - goal_point) ** 2) + pen
 
     return loss
 
@@ -253,15 +268,17 @@ def polish_trajectory(
     n_points = goal.shape[0]
     state0 = sim.init_state()
 
-    def features(u):
+    def rollout(u):
         q = to_joints(u.reshape(n_points, -1), lower, upper)
-        return sim.rollout(q, state0)[0]
+        return sim.rollout(q, state0)
 
     def loss(u):
-        return soft_dtw(features(u), goal, gamma, multi=multi)
+        return soft_dtw(rollout(u)[0], goal, gamma, multi=multi)
 
     def score(u):
-        d = distance(features(u), goal)
+        feats, final = rollout(u)
+        d = distance(feats, goal) + feasibility_penalty(
+            sim, getattr(final, "violation", None))
         return jnp.where(jnp.isfinite(d), d, jnp.inf)
 
     opt, step = _stepper(method, learning_rate, loss)

@@ -1,0 +1,269 @@
+"""Feasible motions: no penetration, joint speeds and accelerations within limits.
+
+A success must be a motion the robot could perform (DESIGN 3, "Feasible motions").
+`Feasibility` judges one move of the simulator, from posture ``q0`` to ``q1`` along
+the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
+``duration`` seconds:
+
+- **penetration**: the worst signed distance between the robot's collision geoms
+  and themselves / the world / the scene's obstacles (the paint board) along the
+  move (`cgda_jax.sim.collision.Collider`), against ``penetration`` (default 5 mm).
+  The distances are taken at ``samples + 1`` postures equally spaced along the
+  move (both ends included); between two samples ``k``, ``k + 1`` a pair's
+  distance changes at most at the rate ``L = Collider.pair_reach @ |dq|`` (per
+  unit of the move), so it stays above ``(d_k + d_k+1 - L / samples) / 2``: a lower
+  bound of the distance on the whole continuous move, so nothing passes through
+  between samples (a long move near an obstacle is judged conservatively);
+- **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
+  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`).
+
+The violation of a move is a finite, dimensionless number, 0 when feasible:
+``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
+penetration)``.  The strategies add ``penalty * (1 + violation)`` to an infeasible
+candidate's fitness (`penalized`), so evolution is pushed back into the feasible
+region and an infeasible candidate never meets a tolerance.
+
+Pairs are chosen once (`relevant_pairs`): a pair that already overlaps in the start
+posture is a modelling overlap (links that meet at a joint) and is left out
+(`Feasibility.overlapping`); a pair that cannot come into contact anywhere within
+the joint limits (a lower bound over a grid of postures, bounded between the grid's
+nodes as above) is left out as well.
+
+The approach (the move from the start posture to the first waypoint) is part of the
+execution and judged like every other move, over its own duration
+`approach_s`: long enough for a move from the start to ANY posture within the
+joint limits to respect the speed and acceleration limits
+(`cgda_jax.sim.limits.approach_duration`), and never shorter than a waypoint's move.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from jax import Array
+
+__all__ = ["DEFAULT_PENALTY", "DEFAULT_PENETRATION", "Feasibility", "penalized",
+           "relevant_pairs"]
+
+#: Grid postures `relevant_pairs` looks at (about; per joint: its root).
+GRID_POSTURES = 4096
+
+#: Penetration (m) below which a contact counts as touching, not passing through.
+DEFAULT_PENETRATION = 0.005
+#: Fitness added to an infeasible candidate, times (1 + violation): larger than any
+#: feature error of the experiments here (paint: 100 %, positions: metres).
+DEFAULT_PENALTY = 1e3
+
+
+def penalized(fitness: Array, violation: Array, penalty: float) -> Array:
+    """``fitness + penalty * (1 + violation)`` where ``violation > 0``, else
+    ``fitness`` (shapes broadcast).  Finite for finite inputs."""
+    v = jnp.asarray(violation, jnp.float32)
+    return jnp.where(v > 0, fitness + penalty * (1.0 + v), fitness)
+
+
+class Feasibility:
+    """Judges the simulator's moves: collisions along the path and joint limits.
+
+    Args:
+        robot: the `cgda_jax.sim.robot.Robot`.
+        limits: its `cgda_jax.sim.limits.JointLimits`, or a mapping of overrides
+            for `read_limits` (a config's ``[robot.limits]``); None: from the model.
+        obstacles: extra world primitives (`cgda_jax.sim.collision.Obstacle` or
+            their dict form: a scene's board).
+        penetration: metres of penetration tolerated (touching).
+        penalty: fitness added to an infeasible candidate, times (1 + violation).
+        collisions: check penetration (False: limits only).
+        self_collision: include the robot's own pairs.
+        exclude: geom or obstacle names the collision check leaves out.
+        samples: collision samples per move (plus its start posture).
+
+    Attributes:
+        limits, collider (None without collisions or pairs), penetration, penalty,
+        overlapping: pairs left out because they overlap in the start posture.
+    """
+
+    def __init__(
+        self,
+        robot,
+        limits: Any = None,
+        obstacles: Sequence[Any] = (),
+        *,
+        penetration: float = DEFAULT_PENETRATION,
+        penalty: float = DEFAULT_PENALTY,
+        collisions: bool = True,
+        self_collision: bool = True,
+        exclude: Sequence[str] = (),
+        samples: int = 10,
+    ):
+        from cgda_jax.sim.limits import JointLimits, read_limits
+
+        if not (np.isfinite(penetration) and penetration > 0):
+            raise ValueError(f"feasibility penetration must be > 0 metres, got "
+                             f"{penetration}")
+        if not (np.isfinite(penalty) and penalty > 0):
+            raise ValueError(f"feasibility penalty must be > 0, got {penalty}")
+        if not isinstance(limits, JointLimits):
+            limits = read_limits(robot.mj_model, robot.joint_names, limits)
+        self.limits = limits
+        self.penetration = float(penetration)
+        self.penalty = float(penalty)
+        if int(samples) < 1:
+            raise ValueError(f"feasibility samples must be >= 1, got {samples}")
+        self.samples = int(samples)
+        self.collider = None
+        self.overlapping: list[tuple[str, str]] = []
+        if collisions:
+            from cgda_jax.sim.collision import Collider, Obstacle
+
+            obs = [o if isinstance(o, Obstacle) else Obstacle(**_obstacle_args(o))
+                   for o in obstacles]
+            args = {"self_collision": self_collision, "exclude": tuple(exclude)}
+            full = Collider(robot, obs, **args)
+            keep, self.overlapping = relevant_pairs(full, robot, obs)
+            if keep:
+                self.collider = Collider(robot, obs, only=keep, **args)
+                self._reach = np.asarray(self.collider.pair_reach, np.float32)
+        self._velocity = np.asarray(limits.velocity, np.float32)
+        self._acceleration = np.asarray(limits.acceleration, np.float32)
+
+    def __repr__(self) -> str:
+        pairs = 0 if self.collider is None else self.collider.n_pairs
+        return (f"Feasibility(pairs={pairs}, penetration={self.penetration:g}, "
+                f"limits={self.limits!r})")
+
+    def approach_s(self, robot, floor: float) -> float:
+        """Duration (s) of the approach from the robot's start posture: a min-jerk
+        move to any posture within the joint limits stays within the speed and
+        acceleration limits (at least ``floor``)."""
+        from cgda_jax.sim.limits import approach_duration
+
+        return float(approach_duration(robot.lower, robot.upper, robot.start_genes,
+                                       self.limits, floor))
+
+    def limit_violation(self, dq: Array, duration: Array) -> Array:
+        """Violation (scalar) of a min-jerk move of ``dq`` (DoF,) over ``duration``
+        seconds against the speed and acceleration limits."""
+        from cgda_jax.sim.limits import move_peaks, violation
+
+        speed, acc = move_peaks(dq, duration)
+        return violation(speed, acc, self.limits)
+
+    def depth(self, q0: Array, dq: Array) -> Array:
+        """A bound (m, >= 0) on the deepest penetration of the straight joint-space
+        move from ``q0`` by ``dq`` (DoF,) each (see the module doc)."""
+        if self.collider is None:
+            return jnp.float32(0.0)
+        alphas = jnp.arange(self.samples + 1, dtype=jnp.float32) / self.samples
+        path = q0 + alphas[:, None] * dq  # (S + 1, DoF)
+        d = jax.vmap(self.collider.distances)(path)  # (S + 1, pairs)
+        # between two samples h = 1/S apart the distance changes at most at the
+        # rate L = reach @ |dq| per unit of the move: above (d_k + d_k+1 - L h) / 2
+        rate = jnp.asarray(self._reach) @ jnp.abs(dq)  # (pairs,)
+        low = 0.5 * (d[:-1] + d[1:] - rate / self.samples)  # (S, pairs)
+        return jnp.maximum(-jnp.min(jnp.minimum(low, d[1:])), 0.0)
+
+    def move(self, q0: Array, dq: Array, duration: Array) -> Array:
+        """Violation (scalar, 0 = feasible) of one move from ``q0`` by ``dq``
+        (DoF,) each in ``duration`` seconds."""
+        over = (jnp.maximum(self.depth(q0, dq) - self.penetration, 0.0)
+                / self.penetration)
+        return jnp.maximum(self.limit_violation(dq, duration), over)
+
+
+def _obstacle_args(o: Mapping) -> dict:
+    keys = ("name", "type", "pos", "size", "quat")
+    return {k: (tuple(np.asarray(o[k], float).tolist()) if k in ("pos", "size", "quat")
+                else o[k]) for k in keys if k in o}
+
+
+def _sdf(kind: str, size: np.ndarray, R: np.ndarray, p: np.ndarray, x: np.ndarray):
+    """NumPy signed distance from points ``x`` (..., 3) to a geom (world frame)."""
+    loc = (x - p) @ R  # into the geom's frame
+    if kind == "sphere":
+        return np.linalg.norm(loc, axis=-1) - size[0]
+    if kind == "capsule":
+        z = np.clip(loc[..., 2], -size[1], size[1])
+        loc = loc.copy()
+        loc[..., 2] -= z
+        return np.linalg.norm(loc, axis=-1) - size[0]
+    if kind in ("box", "cylinder"):
+        if kind == "box":
+            q = np.abs(loc) - size[:3]
+        else:
+            q = np.stack([np.linalg.norm(loc[..., :2], axis=-1) - size[0],
+                          np.abs(loc[..., 2]) - size[1]], -1)
+        return (np.linalg.norm(np.maximum(q, 0.0), axis=-1)
+                + np.minimum(q.max(axis=-1), 0.0))
+    return loc[..., 2]  # plane: solid below its z = 0
+
+
+def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
+    """The pairs of ``collider`` worth checking, and those that overlap at start.
+
+    A pair is dropped when (a) it overlaps in the robot's start posture (a
+    modelling overlap), or (b) a lower bound of its distance is positive over the
+    whole joint box: at the nodes of a grid of about `GRID_POSTURES` postures,
+    the distance from the moving geom's bounding sphere (centre from MuJoCo C's
+    ``mj_kinematics``) to the other geom (exact for a constant geom, its bounding
+    sphere for a moving one), less the most the pair can move from a node to any
+    posture of its cell (``pair_reach @ spacing / 2``).
+
+    Returns:
+        (kept pair names, overlapping pair names).
+    """
+    from cgda_jax.sim.collision import geom_radius
+
+    if collider.n_pairs == 0:
+        return [], []
+    m = robot.mj_model
+    d0 = np.asarray(jax.jit(collider.distances)(jnp.asarray(robot.start_genes)))
+    overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
+    gid = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g): g for g in range(m.ngeom)}
+    obs = {o.name: o for o in obstacles}
+    lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
+    n = max(2, int(round(GRID_POSTURES ** (1.0 / robot.n_dof))))
+    axes = [np.linspace(lo, hi, n) for lo, hi in zip(lower, upper)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, robot.n_dof)
+    data = mujoco.MjData(m)
+    qpos0 = np.asarray(robot.qpos0, float)
+    centres = np.empty((len(nodes), m.ngeom, 3))
+    for i, q in enumerate(nodes):
+        data.qpos[:] = qpos0
+        data.qpos[robot.qpos_adr] = q
+        mujoco.mj_kinematics(m, data)
+        centres[i] = data.geom_xpos
+    mujoco.mj_kinematics(m, data)  # leave it at the last node; const geoms below
+    data.qpos[:] = qpos0
+    mujoco.mj_kinematics(m, data)
+    spacing = (upper - lower) / (n - 1)
+    kinds = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k
+             for k in ("sphere", "capsule", "box", "cylinder", "plane")}
+    keep = []
+    for k, (a, b) in enumerate(collider.pair_names):
+        if (a, b) in overlapping:
+            continue
+        slack = float(collider.pair_reach[k] @ spacing) / 2.0
+        ga = gid[a]
+        ra = geom_radius(m.geom_type[ga], m.geom_size[ga])
+        moving_b = b in gid and np.any(np.ptp(centres[:, gid[b]], axis=0) > 1e-9)
+        if moving_b:
+            gb = gid[b]
+            rb = geom_radius(m.geom_type[gb], m.geom_size[gb])
+            lb = np.linalg.norm(centres[:, ga] - centres[:, gb], axis=-1) - ra - rb
+        elif b in gid:
+            gb = gid[b]
+            lb = _sdf(kinds[int(m.geom_type[gb])], m.geom_size[gb],
+                      data.geom_xmat[gb].reshape(3, 3), data.geom_xpos[gb],
+                      centres[:, ga]) - ra
+        else:
+            R, p, size = obs[b].frame()
+            lb = _sdf(obs[b].type, size, R, p, centres[:, ga]) - ra
+        if float(np.min(lb)) - slack <= 0.0:
+            keep.append((a, b))
+    return keep, overlapping

@@ -1,0 +1,261 @@
+"""An executed trajectory looked at as a motion: timing, speeds, efforts, collisions.
+
+`motion_report` is the independent check of a result's joints (issue 21): it does not
+trust the values the optimiser saw.  It
+
+- times the moves as the simulator does (minimum jerk over ``move_s`` per waypoint,
+  the approach from the start posture over ``approach_s``) and reads each joint's
+  peak speed and acceleration from that profile (`motion_profile`);
+- looks for collisions along the joint path ``factor`` times more finely than the
+  simulator did, with every geom of the model colliding
+  (`cgda_jax.sim.collision.Collider`, the scene's obstacles included);
+- in dynamic mode, replays the commanded reference on MuJoCo C at ``timestep /
+  factor`` and reads the joints' measured speeds and the actuators' forces;
+- measures the joint travel (the summed joint motion) and the largest change of a
+  joint between consecutive postures (flailing).
+
+Everything is in host NumPy (float64); the result is a JSON-ready dict.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+__all__ = ["MotionProfile", "motion_profile", "motion_report"]
+
+
+class MotionProfile(NamedTuple):
+    """Joint positions, speeds and accelerations over time (host arrays).
+
+    Attributes:
+        t: (T,) seconds from the start.
+        q, qd, qdd: (T, DoF) rad, rad/s, rad/s^2.
+        waypoint_t: (N,) the time each waypoint is reached.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    waypoint_t: np.ndarray
+
+
+def _durations(sim, n: int) -> np.ndarray:
+    move = float(sim.move_s)
+    approach = float(getattr(sim, "approach_s", move))
+    return np.array([approach] + [move] * (n - 1))
+
+
+def _min_jerk(tau):
+    s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
+    d1 = 30 * tau**2 * (1 - tau) ** 2
+    d2 = 60 * tau * (1 - tau) * (1 - 2 * tau)
+    return s, d1, d2
+
+
+def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
+    """The commanded motion of ``joints`` (N, DoF) from the start posture: each
+    move a minimum-jerk profile over its duration (the approach over
+    ``sim.approach_s``, the others over ``sim.move_s``) followed by the hold until
+    the waypoint's time is up (dynamic mode; kinematic mode has no holds).
+
+    Args:
+        sim: the `cgda_jax.sim.execute.Simulator`.
+        joints: (N, DoF) waypoints.
+        samples: samples per move.
+    """
+    joints = np.asarray(joints, np.float64)
+    q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
+                            joints])
+    durs = _durations(sim, len(joints))
+    hold = (float(sim.waypoint_s) - float(sim.move_s)) if sim.mode == "dynamic" else 0
+    tau = np.linspace(0.0, 1.0, samples)
+    ts, qs, qds, qdds, reached = [], [], [], [], []
+    t0 = 0.0
+    for i, dur in enumerate(durs):
+        q0, dq = q_all[i], q_all[i + 1] - q_all[i]
+        s, d1, d2 = _min_jerk(tau)
+        ts.append(t0 + tau * dur)
+        qs.append(q0 + s[:, None] * dq)
+        qds.append(d1[:, None] * dq / dur)
+        qdds.append(d2[:, None] * dq / dur**2)
+        t0 += dur
+        if hold > 0:
+            ts.append(np.array([t0 + hold]))
+            qs.append(q_all[i + 1][None])
+            qds.append(np.zeros((1, len(dq))))
+            qdds.append(np.zeros((1, len(dq))))
+            t0 += hold
+        reached.append(t0)
+    return MotionProfile(np.concatenate(ts), np.concatenate(qs), np.concatenate(qds),
+                         np.concatenate(qdds), np.asarray(reached))
+
+
+def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
+    """Worst signed distance along the joint path at ``substeps * factor`` postures
+    per move, its pair and move (None without a collider)."""
+    import jax
+    import jax.numpy as jnp
+
+    feas = getattr(sim, "feasibility", None)
+    collider = getattr(feas, "collider", None)
+    if collider is None:
+        from cgda_jax.sim.collision import Collider
+        from cgda_jax.sim.execute import scene_obstacles
+        from cgda_jax.sim.feasibility import Feasibility
+
+        collider = Feasibility(sim.robot, obstacles=scene_obstacles(sim.scene)).collider
+        if collider is None:
+            return None
+        assert isinstance(collider, Collider)
+    q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
+                            np.asarray(joints, np.float64)])
+    k = max(2, int(sim.substeps) * int(factor))
+    alphas = np.arange(1, k + 1) / k
+    path = q_all[:-1, None] + alphas[None, :, None] * np.diff(q_all, axis=0)[:, None]
+    d = np.asarray(jax.jit(jax.vmap(jax.vmap(collider.distances)))(
+        jnp.asarray(path, jnp.float32)), np.float64)  # (N, K, pairs)
+    move, step, pair = np.unravel_index(int(np.argmin(d)), d.shape)
+    worst = float(d[move, step, pair])
+    per_move = d.min(axis=(1, 2))
+    return {
+        "worst_distance_m": worst,
+        "penetration_m": max(0.0, -worst),
+        "pair": list(collider.pair_names[pair]),
+        "move": int(move),
+        "moves_penetrating": int(np.sum(per_move < -float(
+            getattr(feas, "penetration", 0.005)))),
+        "postures_checked": int(d.shape[0] * d.shape[1]),
+        "pairs": int(collider.n_pairs),
+    }
+
+
+def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarray]:
+    """MuJoCo C replay of the commanded reference at ``timestep / factor``: the
+    evolved joints' measured speeds (T, DoF) and their actuators' forces (T, DoF)."""
+    import mujoco
+
+    fine = sim.finer(factor) if factor > 1 else sim
+    phys = fine.physics
+    m = phys.model
+    d = mujoco.MjData(m)
+    qpos0 = np.asarray(phys.qpos0, np.float64)
+    d.qpos[:] = qpos0
+    d.qpos[phys.gene_qadr] = sim.robot.start_genes
+    mujoco.mj_forward(m, d)
+    jt = mujoco.mjtObj.mjOBJ_JOINT
+    jids = [mujoco.mj_name2id(m, jt, n) for n in sim.robot.joint_names]
+    gene_dof = np.array([m.jnt_dofadr[j] for j in jids])
+    act_of = {int(q): a for a, q in enumerate(phys.act_qadr)}
+    gene_act = np.array([act_of.get(int(q), -1) for q in phys.gene_qadr])
+    profile = np.asarray(fine._profile, np.float64)
+    prev = np.asarray(sim.robot.start_genes, np.float64)
+    speeds, forces = [], []
+    for w in np.asarray(joints, np.float64):
+        target = np.clip(w, sim.robot.lower, sim.robot.upper)
+        c0 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, prev))
+        c1 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, target))
+        for a in profile:
+            d.ctrl[:] = c0 + a * (c1 - c0)
+            mujoco.mj_step(m, d)
+            speeds.append(d.qvel[gene_dof].copy())
+            forces.append(np.where(gene_act >= 0,
+                                   d.actuator_force[np.maximum(gene_act, 0)], np.nan))
+        prev = target
+    return {"speed": np.asarray(speeds), "force": np.asarray(forces),
+            "timestep": float(m.opt.timestep)}
+
+
+def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
+    q = qpos0.copy()
+    q[adr] = values
+    return q
+
+
+def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
+    """The motion of ``joints`` (N, DoF) checked as a roboticist would.
+
+    Args:
+        sim: the `cgda_jax.sim.execute.Simulator` the result was found with.
+        joints: (N, DoF) the reported waypoints (radians / metres).
+        factor: how much finer than the simulator the check looks (collision
+            postures per move; dynamic replay timestep).
+
+    Returns:
+        A JSON-ready dict: ``joints`` (names), ``limits`` (`JointLimits.as_dict`),
+        per joint ``peak_speed``, ``peak_acceleration`` (commanded profile),
+        ``measured_speed`` / ``peak_effort`` (dynamic replay), ``travel_deg``,
+        ``largest_step_deg``; ``moves_over_90_deg``; ``approach_s``, ``move_s``;
+        ``collisions`` (worst distance, pair, move); ``feasible`` and the reasons
+        it is not (``problems``).
+    """
+    from cgda_jax.sim.limits import read_limits
+
+    joints = np.asarray(joints, np.float64)
+    if joints.ndim != 2 or joints.shape[1] != sim.n_dof or not len(joints):
+        raise ValueError(f"joints has shape {joints.shape}, expected (N, {sim.n_dof})")
+    if not np.all(np.isfinite(joints)):
+        raise ValueError("joints contain NaN or inf: no executed motion to check")
+    feas = getattr(sim, "feasibility", None)
+    limits = feas.limits if feas is not None else read_limits(
+        sim.robot.mj_model, sim.robot.joint_names)
+    penetration = float(getattr(feas, "penetration", 0.005))
+    names = list(sim.robot.joint_names)
+    prof = motion_profile(sim, joints)
+    peak_v = np.abs(prof.qd).max(axis=0)
+    peak_a = np.abs(prof.qdd).max(axis=0)
+    q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
+                            joints])
+    steps = np.abs(np.diff(q_all, axis=0))  # (N, DoF), the approach first
+    out: dict[str, Any] = {
+        "joints": names,
+        "limits": limits.as_dict(),
+        "approach_s": float(getattr(sim, "approach_s", sim.move_s)),
+        "move_s": float(sim.move_s),
+        "duration_s": float(prof.waypoint_t[-1]),
+        "peak_speed": dict(zip(names, peak_v.tolist())),
+        "peak_acceleration": dict(zip(names, peak_a.tolist())),
+        "travel_deg": dict(zip(names, np.rad2deg(steps.sum(0)).tolist())),
+        "largest_step_deg": dict(zip(names, np.rad2deg(steps[1:].max(0)).tolist()
+                                     if len(steps) > 1 else [0.0] * len(names))),
+        "approach_deg": dict(zip(names, np.rad2deg(steps[0]).tolist())),
+        "moves_over_90_deg": int(np.sum(np.any(steps[1:] > np.pi / 2, axis=1))),
+    }
+    problems = []
+    vel, acc, eff = (np.asarray(x, np.float64) for x in
+                     (limits.velocity, limits.acceleration, limits.effort))
+    tol = 1 + 1e-5
+    for j, n in enumerate(names):
+        if peak_v[j] > vel[j] * tol:
+            problems.append(f"{n}: {peak_v[j]:.2f} rad/s over its {vel[j]:g} rad/s")
+        if peak_a[j] > acc[j] * tol:
+            problems.append(f"{n}: {peak_a[j]:.2f} rad/s^2 over its {acc[j]:g}")
+    if out["moves_over_90_deg"]:
+        problems.append(f"{out['moves_over_90_deg']} move(s) change a joint by more "
+                        "than 90 degrees")
+    if sim.mode == "dynamic":
+        rep = _dynamic_replay(sim, joints, factor)
+        mv = np.nanmax(np.abs(rep["speed"]), axis=0)
+        me = np.nanmax(np.abs(rep["force"]), axis=0)
+        out["measured_speed"] = dict(zip(names, mv.tolist()))
+        out["peak_effort"] = dict(zip(names, [None if not np.isfinite(v) else v
+                                              for v in me.tolist()]))
+        out["replay_timestep"] = rep["timestep"]
+        for j, n in enumerate(names):
+            if mv[j] > vel[j] * tol:
+                problems.append(f"{n}: measured {mv[j]:.2f} rad/s over its "
+                                f"{vel[j]:g} rad/s")
+            if np.isfinite(me[j]) and me[j] > eff[j] * tol:
+                problems.append(f"{n}: {me[j]:.1f} N m over its {eff[j]:g} N m")
+    col = _collisions(sim, joints, factor)
+    out["collisions"] = col
+    if col is not None and col["penetration_m"] > penetration:
+        a, b = col["pair"]
+        problems.append(f"{a} {col['penetration_m'] * 1e3:.1f} mm into {b} "
+                        f"(move {col['move'] + 1})")
+    out["penetration_allowed_m"] = penetration
+    out["feasible"] = not problems
+    out["problems"] = problems
+    return out
