@@ -17,6 +17,7 @@ Fig. 5, 6, 10                     :func:`plot_goal_vs_executed`
 Fig. 9                            :func:`plot_time_per_point`
 (point errors vs tolerance)       :func:`plot_point_errors`
 Fig. 8, 11                        :func:`plot_frames`
+(motion against the limits)       :func:`plot_motion`
 ================================  ===========================================
 
 Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.evolution`,
@@ -35,6 +36,7 @@ from cgda_jax.plotting.evolution import (
     plot_time_per_point as plot_time_per_point,
 )
 from cgda_jax.plotting.frames import plot_frames as plot_frames
+from cgda_jax.plotting.motion import plot_motion as plot_motion
 from cgda_jax.plotting.tables import plot_cost_matrix as plot_cost_matrix
 from cgda_jax.plotting.trajectories import (
     plot_demonstrations as plot_demonstrations,
@@ -48,6 +50,7 @@ __all__ = [
     "plot_demonstrations",
     "plot_fitness",
     "plot_frames",
+    "plot_motion",
     "plot_goal_vs_executed",
     "plot_point_errors",
     "plot_time_per_point",

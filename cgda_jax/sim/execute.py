@@ -30,7 +30,8 @@ Feasibility (``feasibility``, `cgda_jax.sim.feasibility`): each move is also jud
 as a motion: its sub-step postures (kinematic mode) or its commanded reference at
 ``substeps`` points (dynamic mode) against collisions, and its minimum-jerk timing
 (``move_fraction * waypoint_s`` seconds in both modes; the first move from the
-start posture, the approach, over `Feasibility.approach_s` in kinematic mode)
+start posture, the approach, over its own duration `Feasibility.approach_s`, in
+dynamic mode as a longer first segment of physics)
 against the joint speed and acceleration limits.  The state carries the move's
 violation and their sum over the execution (0 = feasible).
 
@@ -108,13 +109,15 @@ class Simulator:
             (`PaintWall`) raises it to `cgda_jax.sim.chain.path_substeps`, so that
             the straight segments between sub-steps stay that close to the
             marker's curved path.
-        waypoint_s: dynamic mode: seconds of physics per waypoint (the experiments
-            default it to the demonstrations' timing: mean duration / knots).
+        waypoint_s: seconds per waypoint (the experiments default it to the
+            demonstrations' timing: mean duration / knots): dynamic mode's physics
+            time; kinematic mode's timing for the feasibility check (a move over
+            ``move_fraction`` of it, then a hold, as in dynamic mode).
         physics_steps: dynamic mode: physics steps per waypoint; None (default):
             ``round(waypoint_s / timestep)``.
         timestep: dynamic mode: physics step (s); None: the model's own.
-        move_fraction: dynamic mode: share of a waypoint's time spent moving (the
-            minimum-jerk reference); the rest holds the waypoint so the arm settles.
+        move_fraction: share of a waypoint's time spent moving (the minimum-jerk
+            reference); the rest holds the waypoint so the arm settles.
         physics: dynamic mode backend, "auto" (MuJoCo C on a CPU-only JAX, MJX on
             accelerators), "mjx" or "mujoco" (see `cgda_jax.sim.physics`).
         reduce: dynamic mode: weld joints that are neither evolved nor fixed
@@ -208,10 +211,10 @@ class Simulator:
             self._profile = (10 * tau**3 - 15 * tau**4 + 6 * tau**5).astype(np.float32)
         elif self._world_specs:
             robot.make_data()  # mujoco.mjx and the device model, outside any trace
+        # kinematic mode: the timing its feasibility check (and report) assumes
         self.waypoint_s = (self.physics_steps * self.physics.timestep
-                           if mode == "dynamic" else None)
-        self.move_s = float(move_fraction) * (
-            self.waypoint_s if mode == "dynamic" else float(waypoint_s))
+                           if mode == "dynamic" else float(waypoint_s))
+        self.move_s = float(move_fraction) * self.waypoint_s
         self._waypoint_s_arg = float(waypoint_s)
         if feasibility is True:
             from cgda_jax.sim.feasibility import Feasibility
@@ -219,8 +222,20 @@ class Simulator:
             feasibility = Feasibility(robot, obstacles=scene_obstacles(scene))
         self.feasibility = feasibility or None
         self.approach_s = self.move_s
-        if self.feasibility is not None and mode == "kinematic":
+        self.approach_steps = self.physics_steps
+        if self.feasibility is not None:
             self.approach_s = self.feasibility.approach_s(robot, self.move_s)
+        if mode == "dynamic" and self.approach_s > self.move_s:
+            # the approach: a min-jerk move over approach_s, then the usual hold
+            dt = self.physics.timestep
+            k = max(1, int(np.ceil(self.approach_s / dt - 1e-9)))
+            hold = self.physics_steps - max(1, round(self.move_fraction
+                                                     * self.physics_steps))
+            self.approach_steps = k + hold
+            self.approach_s = k * dt
+            tau = np.minimum(np.arange(1, self.approach_steps + 1) / k, 1.0)
+            self._approach_profile = (10 * tau**3 - 15 * tau**4
+                                      + 6 * tau**5).astype(np.float32)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
         # eager set-up and replays: one program each, not one per operation
@@ -341,12 +356,22 @@ class Simulator:
 
         return jax.lax.scan(paint, state.scene, markers)[0]
 
-    def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+    def reference_profiles(self) -> tuple[np.ndarray, np.ndarray]:
+        """Dynamic mode: the min-jerk share of the move at each physics step of the
+        approach (the first move) and of every other move, (T_approach,), (T,)."""
+        if self.mode != "dynamic":
+            raise ValueError("reference_profiles: a kinematic simulator has none")
+        first = getattr(self, "_approach_profile", None)
+        return (self._profile if first is None else first), self._profile
+
+    def _segment(self, state: SimState, target: Array, profile: np.ndarray):
+        """Physics from ``state`` along the min-jerk reference ``profile`` (T,) to
+        ``target``: (physics state, scene state, marker (3,), features (F,))."""
         phys = self.physics
         qpos0 = jnp.asarray(phys.qpos0, jnp.float32)
         c0 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(state.genes))
         c1 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(target))
-        ctrl = c0 + jnp.asarray(self._profile)[:, None] * (c1 - c0)  # (T, nu)
+        ctrl = c0 + jnp.asarray(profile)[:, None] * (c1 - c0)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
         path = sens[:, phys.marker_adr:phys.marker_adr + 3]
         scene_state = self._paint(state, path)
@@ -354,8 +379,19 @@ class Simulator:
             features = self._fset.from_sensordata(sens[-1])
         else:
             features = self.scene.features(scene_state, path[-1])
+        return data, scene_state, path[-1], features
+
+    def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+        if self.approach_steps != self.physics_steps and state.first is not None:
+            data, scene_state, marker, features = jax.lax.cond(
+                state.first,
+                lambda: self._segment(state, target, self._approach_profile),
+                lambda: self._segment(state, target, self._profile))
+        else:
+            data, scene_state, marker, features = self._segment(state, target,
+                                                                self._profile)
         new = state.replace(genes=target, scene=scene_state, data=data,
-                            marker=path[-1])
+                            marker=marker)
         # judged on the commanded reference (the physics path's joints are not
         # read back; the motion report replays them on MuJoCo C)
         return self._judge(state, new), features

@@ -59,7 +59,7 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
     """The commanded motion of ``joints`` (N, DoF) from the start posture: each
     move a minimum-jerk profile over its duration (the approach over
     ``sim.approach_s``, the others over ``sim.move_s``) followed by the hold until
-    the waypoint's time is up (dynamic mode; kinematic mode has no holds).
+    the waypoint's time (``sim.waypoint_s``) is up.
 
     Args:
         sim: the `cgda_jax.sim.execute.Simulator`.
@@ -70,7 +70,7 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
     q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
                             joints])
     durs = _durations(sim, len(joints))
-    hold = (float(sim.waypoint_s) - float(sim.move_s)) if sim.mode == "dynamic" else 0
+    hold = float(sim.waypoint_s) - float(sim.move_s)
     tau = np.linspace(0.0, 1.0, samples)
     ts, qs, qds, qdds, reached = [], [], [], [], []
     t0 = 0.0
@@ -150,10 +150,11 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
     gene_dof = np.array([m.jnt_dofadr[j] for j in jids])
     act_of = {int(q): a for a, q in enumerate(phys.act_qadr)}
     gene_act = np.array([act_of.get(int(q), -1) for q in phys.gene_qadr])
-    profile = np.asarray(fine._profile, np.float64)
+    profiles = fine.reference_profiles()
     prev = np.asarray(sim.robot.start_genes, np.float64)
-    speeds, forces = [], []
-    for w in np.asarray(joints, np.float64):
+    speeds, forces, ends = [], [], []
+    for i, w in enumerate(np.asarray(joints, np.float64)):
+        profile = profiles[min(i, 1)]
         target = np.clip(w, sim.robot.lower, sim.robot.upper)
         c0 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, prev))
         c1 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, target))
@@ -163,9 +164,10 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
             speeds.append(d.qvel[gene_dof].copy())
             forces.append(np.where(gene_act >= 0,
                                    d.actuator_force[np.maximum(gene_act, 0)], np.nan))
+        ends.append(d.qpos[phys.gene_qadr] - target)
         prev = target
     return {"speed": np.asarray(speeds), "force": np.asarray(forces),
-            "timestep": float(m.opt.timestep)}
+            "tracking": np.abs(np.asarray(ends)), "timestep": float(m.opt.timestep)}
 
 
 def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -243,6 +245,8 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         out["peak_effort"] = dict(zip(names, [None if not np.isfinite(v) else v
                                               for v in me.tolist()]))
         out["replay_timestep"] = rep["timestep"]
+        out["tracking_error_deg"] = dict(zip(names, np.rad2deg(
+            rep["tracking"].max(axis=0)).tolist()))  # at the waypoints' ends
         for j, n in enumerate(names):
             if mv[j] > vel[j] * tol:
                 problems.append(f"{n}: measured {mv[j]:.2f} rad/s over its "
