@@ -8,15 +8,6 @@ from __future__ import annotations
 import os
 from typing import Any
 
-__all__ = [
-    "ENV_CLUSTER",
-    "ENV_COORDINATOR",
-    "ENV_LOCAL_DEVICE_IDS",
-    "ENV_NUM_PROCESSES",
-    "ENV_PROCESS_ID",
-    "job_from_env",
-]
-
 ENV_COORDINATOR = "CGDA_COORDINATOR"
 ENV_NUM_PROCESSES = "CGDA_NUM_PROCESSES"
 ENV_PROCESS_ID = "CGDA_PROCESS_ID"
