@@ -352,12 +352,12 @@ def test_unexpected_failure_exits_3_with_the_traceback_in_a_log(
         error, monkeypatch, capsys, tmp_path):
     """Once the checks passed, anything the run raises is a failure (3), a
     ValueError too: a bug, not the user's input."""
-    import cgda_jax
+    from cgda_jax import strategies
 
     def broken_run_ie(sim, goal, **kwargs):
         raise error("something inside broke")
 
-    monkeypatch.setattr(cgda_jax, "run_ie", broken_run_ie)
+    monkeypatch.setattr(strategies, "run_ie", broken_run_ie)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     out = tmp_path / "results" / "out"
     before = previous_run(out)
