@@ -18,7 +18,8 @@ module level, inside functions, relative ones.  The graph's edges:
 
 The checks: no import loop (the failure names the loop), the experiment layer's
 modules in their documented order (each imports only those before it), no
-``_private`` name taken from another module, nothing taken from the re-export
+``_private`` name taken from another module, private modules (``sim/_mujoco_env.py``)
+imported only from inside their own package, nothing taken from the re-export
 package ``cgda_jax`` itself but its submodules and ``__version__``, and nothing
 outside ``cgda_jax/cli/`` importing the CLI.
 """
@@ -28,6 +29,8 @@ from __future__ import annotations
 import ast
 import pathlib
 from collections.abc import Iterator, Mapping
+
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "cgda_jax"
 TOP = "cgda_jax"
@@ -252,22 +255,26 @@ def test_no_import_loop():
     assert not loops, "modules that import each other:\n" + "\n".join(loops)
 
 
-#: cgda_jax.experiment's modules in their import order (its package docstring).
-EXPERIMENT_ORDER = ("config", "demo", "rules", "build", "validate", "compute",
-                    "results", "report", "load", "figures", "run", "trials")
+#: The modules of two packages in their import order (their package docstrings).
+ORDER = {
+    "experiment": ("config", "demo", "rules", "build", "validate", "compute",
+                   "results", "report", "load", "figures", "run", "trials"),
+    "cli": ("output", "list", "plot", "trials", "run", "demo", "app", "__main__"),
+}
 
 
-def test_the_experiment_modules_import_only_those_before_them():
-    package = f"{TOP}.experiment"
+@pytest.mark.parametrize("package", sorted(ORDER))
+def test_a_package_s_modules_import_only_those_before_them(package):
+    order, package = ORDER[package], f"{TOP}.{package}"
     found = sorted(m.rpartition(".")[2] for m in MODULES
                    if m.startswith(package + "."))
-    assert found == sorted(EXPERIMENT_ORDER)
+    assert found == sorted(order)
     bad = []
-    for k, short in enumerate(EXPERIMENT_ORDER):
+    for k, short in enumerate(order):
         for target in GRAPH[f"{package}.{short}"]:
             if _inside(target, package):
                 other = target.rpartition(".")[2]
-                if target == package or EXPERIMENT_ORDER.index(other) >= k:
+                if target == package or order.index(other) >= k:
                     bad.append(f"{package}.{short} imports {target}")
     assert not bad, "\n".join(bad)
 
@@ -277,6 +284,18 @@ def test_no_private_name_is_taken_from_another_module():
            for name, found in IMPORTS.items()
            for source, name_, line in found.names
            if source != name and _is_private(name_)]
+    assert not bad, "\n".join(bad)
+
+
+def test_private_modules_are_imported_only_inside_their_package():
+    bad = []
+    for name, found in IMPORTS.items():
+        for target in found.targets:
+            parts = target.split(".")
+            for i, part in enumerate(parts):
+                owner = ".".join(parts[:i])
+                if _is_private(part) and not _inside(name, owner):
+                    bad.append(f"{name} imports {target}, private to {owner}")
     assert not bad, "\n".join(bad)
 
 

@@ -47,7 +47,7 @@ def summary_table(results: dict[str, dict]) -> list[str]:
 def _offscreen_thread_ok() -> bool:
     """Whether the robot's video may be rendered outside the main thread: EGL and
     OSMesa contexts may, GLFW's (a display, macOS) must stay on the main thread."""
-    from cgda_jax.sim._mujoco_env import headless_backends
+    from cgda_jax.sim import headless_backends
 
     gl = os.environ.get("MUJOCO_GL", "").lower()
     return gl in ("egl", "osmesa") or (not gl and bool(headless_backends()))

@@ -181,7 +181,7 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
     out = pathlib.Path(out)
     try:
         from cgda_jax import plotting
-        from cgda_jax.sim._mujoco_env import last_backend
+        from cgda_jax.sim import last_backend
         from cgda_jax.sim.render import render_frames
         from cgda_jax.sim.video import write_video
 
