@@ -23,8 +23,8 @@ from _common import print_table, report_target, write_json
 
 from cgda_jax import experiment as ex, run_trials
 from cgda_jax.experiment.build import default_waypoint_s
-from cgda_jax.experiment.rules import strategy_function
 from cgda_jax.experiment.compute import replay_check
+from cgda_jax.experiment.rules import strategy_function
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("move_push_box", "rotate_valve")
