@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import logging
 import os
+import pathlib
 import signal
 import sys
 import tempfile
 import threading
-import pathlib
 import traceback
 
 #: Errors that mean bad input while a config is read and checked (status 2).
@@ -26,7 +26,6 @@ EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
 EXIT_DIVERGED = EXIT_FAILURE
 #: Interrupted by a signal: 128 + its number.
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
-
 
 
 def diverged(err: BaseException) -> bool:
@@ -123,11 +122,13 @@ def user_error(args, err: Exception) -> bool:
 
 
 def say(args, text: str) -> None:
+    """``text`` as a line on stderr, unless ``--quiet``."""
     if not args.quiet:
         print(text, file=sys.stderr, flush=True)
 
 
 def say_chosen(args, label: str, rf) -> None:
+    """Say where the results go when the folder asked for was taken."""
     if rf.path != rf.target:
         say(args, f"[{label}] {rf.target} is taken: results go to {rf.path}")
 

@@ -61,7 +61,8 @@ def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
         result = dict(run.result, render=render) if render is not None else run.result
         plots = sorted(str(p.relative_to(run.folder)) for p in written
                        if p.suffix == ".png")
-        (run.folder / "report.md").write_text(report_markdown(run.config, result, plots))
+        report = report_markdown(run.config, result, plots)
+        (run.folder / "report.md").write_text(report)
     say(args, f"[{run.name}] {len(written)} files -> {out}")
     return written
 

@@ -74,7 +74,8 @@ def _min_jerk(s: np.ndarray) -> np.ndarray:
     return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
 
 
-def repetition_progress(rng: np.random.Generator, n: int, rate_hz: float, duration: float):
+def repetition_progress(rng: np.random.Generator, n: int, rate_hz: float,
+                        duration: float):
     """Progress p (T,) in [0, 1] of one repetition with pauses and a hesitation.
 
     The person waits a moment before and after the action, and halfway through may

@@ -305,7 +305,8 @@ def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
                 sub = ".".join(parts[i + 1:])
                 current = dict(getattr(obj, part))
                 current[sub] = table
-                merge_table(obj, {part: current}, ".".join(parts[:i]) + "." if i else "")
+                prefix = ".".join(parts[:i]) + "." if i else ""
+                merge_table(obj, {part: current}, prefix)
                 return
             obj = getattr(obj, part, None)
     for part in reversed(parts):
