@@ -4,7 +4,7 @@ For each of experiments/clean_ie_dynamic.toml and experiments/paint_iet_dynamic.
 the goal and simulator are built exactly as ``cgda run`` builds them, and seeds
 0..9 run as ONE batched `run_trials` call (each trial equals the single run with its
 seed).  Every result is then replayed with MuJoCo C at timestep / 4
-(`experiment.run.replay_check`, the check every ``cgda run`` of a dynamic experiment
+(`experiment.compute.replay_check`, the check every ``cgda run`` of a dynamic experiment
 reports).  Target (issue 9): each experiment succeeds on at least 9 of 10 seeds.
 
     python benchmarks/bench_dynamic_seeds.py [--seeds 10] [--only clean_ie_dynamic]
@@ -21,7 +21,7 @@ from _common import print_table, report_target, write_json
 
 from cgda_jax import experiment as ex
 from cgda_jax import run_trials
-from cgda_jax.experiment.run import replay_check
+from cgda_jax.experiment.compute import replay_check
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("clean_ie_dynamic", "paint_iet_dynamic")

@@ -5,7 +5,7 @@ and simulator are built exactly as ``cgda run`` builds them (`experiment.build`)
 seeds 0..9 run one after another (default; each run is what ``cgda run --set
 strategy.seed=S`` computes, without plots and render) or as ONE batched `run_trials`
 call (``--batched``: every trial runs until the slowest one stops).  Every result is
-replayed with MuJoCo C at timestep / 4 (`experiment.run.replay_check`, the check each
+replayed with MuJoCo C at timestep / 4 (`experiment.compute.replay_check`, the check each
 ``cgda run`` of a dynamic experiment reports).  Target (issue 10): each experiment
 succeeds on at least 8 of 10 seeds.
 
@@ -22,8 +22,9 @@ import numpy as np
 from _common import print_table, report_target, write_json
 
 from cgda_jax import experiment as ex, run_trials
-from cgda_jax.experiment.build import default_waypoint_s, strategy_function
-from cgda_jax.experiment.run import replay_check
+from cgda_jax.experiment.build import default_waypoint_s
+from cgda_jax.experiment.compute import replay_check
+from cgda_jax.experiment.rules import strategy_function
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("move_push_box", "rotate_valve")

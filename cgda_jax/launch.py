@@ -25,7 +25,7 @@ import time
 from collections.abc import Iterable, Sequence
 from typing import TextIO
 
-from cgda_jax.distributed import (
+from cgda_jax.job import (
     ENV_CLUSTER,
     ENV_COORDINATOR,
     ENV_NUM_PROCESSES,

@@ -77,7 +77,7 @@ def test_bad_file_names_the_file(tmp_path, capsys):
 
 
 def test_demo_report_starts_with_a_summary_table():
-    from cgda_jax.cli_demo import summary_table
+    from cgda_jax.cli.demo import summary_table
 
     rows = summary_table({
         "rec": {"kind": "recognition", "success": True, "accuracy": 1.0,
@@ -100,14 +100,13 @@ def test_help_texts_show_examples(capsys):
 
 
 def test_diverged_simulation_exits_3_with_one_line(monkeypatch, capsys, tmp_path):
-    import cgda_jax
-    from cgda_jax import SimulationDiverged
+    from cgda_jax import SimulationDiverged, strategies
 
     def diverging_run_ie(sim, goal, **kwargs):
         raise SimulationDiverged("every one of the 96 candidate evaluations of the IE "
                                  "run diverged (non-finite features): check the gains")
 
-    monkeypatch.setattr(cgda_jax, "run_ie", diverging_run_ie)
+    monkeypatch.setattr(strategies, "run_ie", diverging_run_ie)
     code = main(["run", str(EXPERIMENTS / "clean_ie.toml"), "--quiet",
                  "--set", "output.render=false", "--set", "output.plots=false",
                  "--out", str(tmp_path / "out")])

@@ -352,12 +352,12 @@ def test_unexpected_failure_exits_3_with_the_traceback_in_a_log(
         error, monkeypatch, capsys, tmp_path):
     """Once the checks passed, anything the run raises is a failure (3), a
     ValueError too: a bug, not the user's input."""
-    import cgda_jax
+    from cgda_jax import strategies
 
     def broken_run_ie(sim, goal, **kwargs):
         raise error("something inside broke")
 
-    monkeypatch.setattr(cgda_jax, "run_ie", broken_run_ie)
+    monkeypatch.setattr(strategies, "run_ie", broken_run_ie)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     out = tmp_path / "results" / "out"
     before = previous_run(out)
@@ -446,7 +446,7 @@ def _record_drawing(monkeypatch, fail=None):
 @pytest.mark.parametrize("offscreen_thread", [True, False])
 def test_demo_draws_in_a_second_thread_while_the_next_experiment_computes(
         monkeypatch, tmp_path, offscreen_thread):
-    import cgda_jax.cli_demo as cli_demo
+    import cgda_jax.cli.demo as cli_demo
 
     _tiny_demo(monkeypatch)
     monkeypatch.setattr(cli_demo, "_offscreen_thread_ok", lambda: offscreen_thread)
@@ -472,7 +472,7 @@ def test_demo_draws_in_a_second_thread_while_the_next_experiment_computes(
 
 def test_demo_drawing_error_in_the_second_thread_is_one_error_line(
         monkeypatch, capsys, tmp_path):
-    import cgda_jax.cli_demo as cli_demo
+    import cgda_jax.cli.demo as cli_demo
 
     _tiny_demo(monkeypatch)
     monkeypatch.setattr(cli_demo, "_offscreen_thread_ok", lambda: True)

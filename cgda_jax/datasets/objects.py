@@ -28,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from cgda_jax.data import Demonstration
-from cgda_jax.datasets.synthetic import _check, _progress
+from cgda_jax.datasets.synthetic import check_repetitions, repetition_progress
 
 __all__ = [
     "MOVE_BOX_END",
@@ -58,7 +58,7 @@ def _timing(rng: np.random.Generator, duration_s: float, rate_hz: float):
     """(times (T,), progress (T,) in [0, 1]) of one repetition, pauses included."""
     duration = duration_s * rng.uniform(0.85, 1.15)
     count = round((duration + 1.6) * rate_hz)
-    p, _ = _progress(rng, count, rate_hz, duration)
+    p, _ = repetition_progress(rng, count, rate_hz, duration)
     return np.arange(count) / rate_hz, p
 
 
@@ -124,7 +124,7 @@ def move_box_demos(
     end = _check_point(end, 2, "end")
     if not duration_s > 0:
         raise ValueError(f"duration_s must be positive, got {duration_s!r}")
-    _check(n, rate_hz)
+    check_repetitions(n, rate_hz)
     rng = np.random.default_rng(seed)
     names = (f"{name}.x [m]", f"{name}.y [m]", f"{name}.yaw [rad]")
     demos = []
@@ -162,7 +162,7 @@ def rotate_valve_demos(
     end = float(_check_point([end], 1, "end")[0])
     if not duration_s > 0:
         raise ValueError(f"duration_s must be positive, got {duration_s!r}")
-    _check(n, rate_hz)
+    check_repetitions(n, rate_hz)
     rng = np.random.default_rng(seed)
     demos = []
     for k in range(int(n)):
@@ -193,7 +193,7 @@ def object_actions(
         ``{action: [Demonstration, ...]}`` in the order of `OBJECT_ACTIONS`, each
         with the features `OBJECT_FEATURES`.
     """
-    _check(n_repetitions, rate_hz)
+    check_repetitions(n_repetitions, rate_hz)
     rng = np.random.default_rng(seed)
     hub = np.array([0.23, -0.54])
     out: dict[str, list[Demonstration]] = {a: [] for a in OBJECT_ACTIONS}

@@ -74,7 +74,8 @@ def _min_jerk(s: np.ndarray) -> np.ndarray:
     return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
 
 
-def _progress(rng: np.random.Generator, n: int, rate_hz: float, duration: float):
+def repetition_progress(rng: np.random.Generator, n: int, rate_hz: float,
+                        duration: float):
     """Progress p (T,) in [0, 1] of one repetition with pauses and a hesitation.
 
     The person waits a moment before and after the action, and halfway through may
@@ -128,7 +129,7 @@ def _repetition(
 ) -> _Repetition:
     """Marker features and arm points of one repetition of ``action``."""
     duration, n = _sample_count(rng, action, rate_hz)
-    p, _ = _progress(rng, n, rate_hz, duration)
+    p, _ = repetition_progress(rng, n, rate_hz, duration)
     times = np.arange(n) / rate_hz
     place = _PLACE_MM[action] + rng.normal(0.0, [12.0, 12.0, 6.0])
 
@@ -198,7 +199,8 @@ def _arm_points(
     return arm + rng.normal(0.0, 0.004, size=arm.shape)
 
 
-def _check(n_repetitions: int, rate_hz: float) -> None:
+def check_repetitions(n_repetitions: int, rate_hz: float) -> None:
+    """``n_repetitions`` is a positive integer and ``rate_hz`` positive."""
     if int(n_repetitions) != n_repetitions or n_repetitions < 1:
         raise ValueError(f"n_repetitions must be a positive integer, got {n_repetitions!r}")
     if not rate_hz > 0:
@@ -206,7 +208,7 @@ def _check(n_repetitions: int, rate_hz: float) -> None:
 
 
 def _generate(n_repetitions: int, seed: int, rate_hz: float) -> dict:
-    _check(n_repetitions, rate_hz)
+    check_repetitions(n_repetitions, rate_hz)
     rng = np.random.default_rng(seed)
     return {
         a: [_repetition(rng, a, rate_hz) for _ in range(int(n_repetitions))]
@@ -340,13 +342,13 @@ def clean_circle_demos(
         raise ValueError(f"centre must have shape (3,), got {centre.shape}")
     if not diameter > 0:
         raise ValueError(f"diameter must be positive, got {diameter!r}")
-    _check(n, rate_hz)
+    check_repetitions(n, rate_hz)
     rng = np.random.default_rng(seed)
     demos = []
     for k in range(int(n)):
         duration = duration_s * rng.uniform(0.85, 1.15)
         count = int(round((duration + 1.6) * rate_hz))
-        p, _ = _progress(rng, count, rate_hz, duration)
+        p, _ = repetition_progress(rng, count, rate_hz, duration)
         theta = np.pi / 2.0 + 2.0 * np.pi * p  # start at the top, one revolution
         offset = centre + rng.normal(0.0, 0.004, 3)
         r = diameter / 2.0

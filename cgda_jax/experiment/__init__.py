@@ -14,33 +14,45 @@ Unknown keys and wrong types are errors that name the key (and the file). Two ki
 Each run writes to its folder: ``config.toml`` (resolved), ``result.json``,
 ``arrays.npz``, ``plots/*.png`` and ``report.md``.
 
-Modules, one job each:
+Modules, one job each, in their import order: each imports only modules above it
+(function-level imports too; tests/test_imports.py checks it), and no module takes
+another's ``_private`` name:
 
-- :mod:`~cgda_jax.experiment.config`: schema, TOML reading and writing, overrides.
-- :mod:`~cgda_jax.experiment.rules`: the value rules (choices, ranges, files named,
-  world and object-scene tables).
-- :mod:`~cgda_jax.experiment.build`: the goal, the simulator and the strategy
-  function from a config.
-- :mod:`~cgda_jax.experiment.validate`: every check that needs no compiled program
-  (``--dry-run`` and the start of every run).
-- :mod:`~cgda_jax.experiment.run`: recognition and execution runs.
-- :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved into
-  place when complete, locked, never mixing two runs).
-- :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
-- :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
-  drawn from what its folder stores (also ``cgda plot``).
-- :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-- :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo``.
+1. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
+   overrides (`merge_table`).
+2. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
+3. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
+   files named, the world and object-scene tables, the strategy's options
+   (`strategy_function`), the interval count.
+4. :mod:`~cgda_jax.experiment.build`: the objects: demonstrations and goal, robot,
+   world, scene and simulator, feature labels.
+5. :mod:`~cgda_jax.experiment.validate`: the checks that need built objects and no
+   compiled program (``--dry-run`` and the start of every run: `check_experiment`).
+6. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
+   execution run (and the replay on a finer simulator).
+7. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
+   into place when complete, locked, never mixing two runs).
+8. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
+9. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
+10. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+    drawn from what its folder stores (also ``cgda plot``).
+11. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
+    `run_experiment`): computes, then draws and writes its outputs.
+12. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+    trials``).
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
 """
 
 from cgda_jax.experiment.build import (
-    _SET_BY_CONFIG as _SET_BY_CONFIG,
-    _check_strategy_options as _check_strategy_options,
     build_goal as build_goal,
     build_simulator as build_simulator,
-    strategy_function as strategy_function,
+    synthetic_demos as synthetic_demos,
+)
+from cgda_jax.experiment.compute import (
+    compute_execution as compute_execution,
+    compute_recognition as compute_recognition,
+    replay_check as replay_check,
 )
 from cgda_jax.experiment.config import (
     KINDS as KINDS,
@@ -56,16 +68,11 @@ from cgda_jax.experiment.config import (
     RobotConfig as RobotConfig,
     SceneConfig as SceneConfig,
     StrategyConfig as StrategyConfig,
-    _apply_override as _apply_override,
-    _coerce as _coerce,
-    _merge as _merge,
-    _parse_value as _parse_value,
-    _type_name as _type_name,
     dump_config as dump_config,
     load_config as load_config,
+    merge_table as merge_table,
 )
 from cgda_jax.experiment.demo import (
-    _SMALL as _SMALL,
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
 )
@@ -78,11 +85,10 @@ from cgda_jax.experiment.load import (
     load_run as load_run,
 )
 from cgda_jax.experiment.report import (
-    _close_all as _close_all,
-    _jsonable as _jsonable,
-    _report as _report,
-    _write_json as _write_json,
+    jsonable as jsonable,
     log as log,
+    report_markdown as report_markdown,
+    write_json as write_json,
 )
 from cgda_jax.experiment.results import (
     FolderBusy as FolderBusy,
@@ -91,14 +97,15 @@ from cgda_jax.experiment.results import (
     plan_folder as plan_folder,
 )
 from cgda_jax.experiment.rules import (
-    _choice as _choice,
+    SET_BY_CONFIG as SET_BY_CONFIG,
+    check_strategy_options as check_strategy_options,
     resolve_data_dir as resolve_data_dir,
     resolve_model as resolve_model,
+    strategy_function as strategy_function,
     validate_config as validate_config,
 )
 from cgda_jax.experiment.run import (
     Outputs as Outputs,
-    _synthetic as _synthetic,
     default_folder as default_folder,
     run_execution as run_execution,
     run_experiment as run_experiment,

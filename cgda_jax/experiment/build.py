@@ -1,11 +1,10 @@
-"""Objects from a config: the goal, the simulator and the strategy function."""
+"""Objects from a config: the demonstrations and the goal, the robot, world and scene
+in a simulator, the feature names and labels. (The strategy function is looked up
+by `cgda_jax.experiment.rules.strategy_function`, which checks its options.)"""
 
 from __future__ import annotations
 
-import importlib
-import inspect
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -14,9 +13,13 @@ from cgda_jax.experiment.config import (
     OBJECT_SOURCES,
     ConfigError,
     ExperimentConfig,
-    StrategyConfig,
 )
-from cgda_jax.experiment.rules import resolve_data_dir, resolve_model
+from cgda_jax.experiment.rules import (
+    check_interval_count,
+    resolve_data_dir,
+    resolve_model,
+    validate_world,
+)
 
 
 def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
@@ -40,11 +43,22 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
         from cgda_jax.data import load_xgnitive
 
         demos = load_xgnitive(resolve_data_dir(cfg), d.action, d.stream, d.columns)
-    from cgda_jax.experiment.validate import check_interval_count
-
     check_interval_count(demos, d.interval_s, d.method)  # before generalize allocates
     gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
     return np.asarray(gen.knots, float) * d.scale, demos, gen
+
+
+def synthetic_demos(cfg: ExperimentConfig) -> dict:
+    """The synthetic demonstrations of a recognition run: action -> repetitions."""
+    from cgda_jax.datasets import SPATIAL_FEATURES, select_features, synthetic_actions
+
+    d = cfg.data
+    demos = synthetic_actions(
+        d.n_repetitions, d.seed, features="arm" if d.features == "arm" else "marker"
+    )
+    if d.features == "spatial":
+        demos = {a: select_features(v, SPATIAL_FEATURES) for a, v in demos.items()}
+    return demos
 
 
 def scene_feature_names(cfg: ExperimentConfig) -> list[str]:
@@ -56,6 +70,24 @@ def scene_feature_names(cfg: ExperimentConfig) -> list[str]:
         spec = FeatureSpec.from_dict(entry)
         names += [f"{c} [{spec.unit}]" for c in spec.columns()]
     return names
+
+
+def feature_labels(cfg: ExperimentConfig, names) -> list[str]:
+    """The feature names of a run with their units (``"X [m]"``)."""
+    from cgda_jax.plotting import units
+
+    if cfg.kind == "recognition":
+        table = units.ARM_UNITS if cfg.data.features == "arm" else units.MARKER_UNITS
+    else:
+        table = units.SIM_UNITS  # the goal is in the simulated scene's features
+    return list(units.with_units(names, table))
+
+
+def error_unit(labels) -> str | None:
+    """The unit of a distance between feature points (None: mixed units)."""
+    from cgda_jax.plotting import units
+
+    return units.common_unit(labels)
 
 
 def object_demos(cfg: ExperimentConfig) -> list:
@@ -167,9 +199,7 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
     start = {k: math.radians(v) for k, v in rc.start.items()}
     if cfg.world.objects or cfg.world.contact_geoms:
-        from cgda_jax.experiment.rules import _validate_world
-
-        _validate_world(cfg)  # one line naming the key for a bad object or feature
+        validate_world(cfg)  # one line naming the key for a bad object or feature
         robot = Robot.from_world(
             resolve_model(rc.model), cfg.world.objects, list(rc.joints),
             rc.marker_site, fixed, contact_geoms=cfg.world.contact_geoms,
@@ -198,38 +228,3 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
         waypoint_s=rc.waypoint_s or waypoint_s or 1.0, timestep=rc.timestep or None,
         move_fraction=rc.move_fraction, physics=rc.physics, reduce=rc.reduce,
     )
-
-
-def strategy_function(name: str) -> Callable:
-    """``run_<name>`` from ``cgda_jax`` (or its strategies package)."""
-    import cgda_jax
-
-    fn = getattr(cgda_jax, f"run_{name}", None)
-    if fn is None:
-        try:
-            mod = importlib.import_module(f"cgda_jax.strategies.{name}")
-        except ModuleNotFoundError:
-            raise ConfigError(f"key 'strategy.name': strategy {name!r} is not available") from None
-        fn = getattr(mod, f"run_{name}")
-    return fn
-
-
-#: Arguments of ``run_<name>`` that the config sets itself (not through ``options``).
-_SET_BY_CONFIG = ("sim", "goal", "algorithm", "population_size", "tolerance",
-                  "max_generations", "seed", "chunk_size", "progress_fn")
-
-
-def _check_strategy_options(s: StrategyConfig) -> None:
-    """Every ``strategy.options`` key must be a keyword of ``run_<name>``."""
-    params = inspect.signature(strategy_function(s.name)).parameters
-    allowed = sorted(k for k in params if k not in _SET_BY_CONFIG)
-    for key in s.options:
-        if key in _SET_BY_CONFIG:
-            raise ConfigError(
-                f"key 'strategy.options.{key}': set it as 'strategy.{key}' instead"
-            )
-        if key not in params:
-            raise ConfigError(
-                f"key 'strategy.options.{key}': not an option of strategy "
-                f"'{s.name}'; it takes {allowed}"
-            )

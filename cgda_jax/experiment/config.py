@@ -265,7 +265,7 @@ def _coerce(value: Any, tp, key: str) -> Any:
     raise bad  # pragma: no cover
 
 
-def _merge(obj: Any, table: Mapping[str, Any], prefix: str = "") -> None:
+def merge_table(obj: Any, table: Mapping[str, Any], prefix: str = "") -> None:
     """Apply a (nested) table to a config dataclass in place, checking keys and types."""
     hints = typing.get_type_hints(type(obj))
     for k, v in table.items():
@@ -277,7 +277,7 @@ def _merge(obj: Any, table: Mapping[str, Any], prefix: str = "") -> None:
         if dataclasses.is_dataclass(tp):
             if not isinstance(v, Mapping):
                 raise ConfigError(f"key '{key}' must be a table, got {v!r}")
-            _merge(getattr(obj, k), v, key + ".")
+            merge_table(getattr(obj, k), v, key + ".")
         else:
             setattr(obj, k, _coerce(v, tp, key))
 
@@ -305,12 +305,13 @@ def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
                 sub = ".".join(parts[i + 1:])
                 current = dict(getattr(obj, part))
                 current[sub] = table
-                _merge(obj, {part: current}, ".".join(parts[:i]) + "." if i else "")
+                prefix = ".".join(parts[:i]) + "." if i else ""
+                merge_table(obj, {part: current}, prefix)
                 return
             obj = getattr(obj, part, None)
     for part in reversed(parts):
         table = {part: table}
-    _merge(cfg, table)
+    merge_table(cfg, table)
 
 
 def load_config(
@@ -337,7 +338,7 @@ def load_config(
                               f"start from a built-in one (`cgda list`, "
                               f"`cgda run NAME --dry-run` prints it)")
         try:
-            _merge(cfg, table)
+            merge_table(cfg, table)
         except ConfigError as e:
             raise ConfigError(f"{path}: {e}") from None
         if "name" not in table:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from cgda_jax.experiment.config import ExperimentConfig, _merge
+from cgda_jax.experiment.config import ExperimentConfig, merge_table
 
 #: The main job of ``cgda demo``: overrides of the defaults per experiment (the same
 #: settings as the files of the same name in the repository's ``experiments/``).
@@ -36,9 +36,9 @@ def demo_configs(small: bool = False) -> list[ExperimentConfig]:
     out = []
     for name, table in DEMO_EXPERIMENTS.items():
         cfg = ExperimentConfig(name=name)
-        _merge(cfg, table)
+        merge_table(cfg, table)
         if small:
-            _merge(cfg, {k: v for k, v in _SMALL.items()
+            merge_table(cfg, {k: v for k, v in _SMALL.items()
                          if k == "recognition" or cfg.kind == "execution"})
         out.append(cfg)
     return out

@@ -12,30 +12,12 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.experiment.config import ExperimentConfig
+from cgda_jax.experiment.build import error_unit, feature_labels
 from cgda_jax.experiment.load import Run
 
 log = logging.getLogger("cgda_jax")
 
 VIDEO_SIZE = (640, 480)
-
-
-def feature_labels(cfg: ExperimentConfig, names) -> list[str]:
-    """The feature names of a run with their units (``"X [m]"``)."""
-    from cgda_jax.plotting import units
-
-    if cfg.kind == "recognition":
-        table = units.ARM_UNITS if cfg.data.features == "arm" else units.MARKER_UNITS
-    else:
-        table = units.SIM_UNITS  # the goal is in the simulated scene's features
-    return list(units.with_units(names, table))
-
-
-def error_unit(labels) -> str | None:
-    """The unit of a distance between feature points (None: mixed units)."""
-    from cgda_jax.plotting import units
-
-    return units.common_unit(labels)
 
 
 def _close_all() -> None:
@@ -199,7 +181,7 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
     out = pathlib.Path(out)
     try:
         from cgda_jax import plotting
-        from cgda_jax.sim._mujoco_env import last_backend
+        from cgda_jax.sim import last_backend
         from cgda_jax.sim.render import render_frames
         from cgda_jax.sim.video import write_video
 

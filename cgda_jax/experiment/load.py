@@ -167,7 +167,7 @@ def load_run(folder: str | os.PathLike) -> Run:
 def run_in_memory(folder: pathlib.Path, config: ExperimentConfig, result: dict,
                   arrays: dict) -> Run:
     """The `Run` a folder being written will load as (``result`` through JSON)."""
-    from cgda_jax.experiment.report import _jsonable
+    from cgda_jax.experiment.report import jsonable
 
-    return Run(pathlib.Path(folder), config, json.loads(json.dumps(_jsonable(result))),
+    return Run(pathlib.Path(folder), config, json.loads(json.dumps(jsonable(result))),
                {k: np.asarray(v) for k, v in arrays.items()})

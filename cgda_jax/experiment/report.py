@@ -16,13 +16,14 @@ from cgda_jax.experiment.config import ExperimentConfig
 log = logging.getLogger("cgda_jax")
 
 
-def _jsonable(x: Any) -> Any:
+def jsonable(x: Any) -> Any:
+    """``x`` with NumPy values made plain and non-finite floats ``None``."""
     if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
+        return {str(k): jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
+        return [jsonable(v) for v in x]
     if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
+        return jsonable(x.tolist())
     if isinstance(x, (np.floating, float)):
         return float(x) if math.isfinite(x) else None
     if isinstance(x, np.integer):
@@ -32,21 +33,17 @@ def _jsonable(x: Any) -> Any:
     return x
 
 
-def _write_json(path: pathlib.Path, data: dict) -> None:
-    path.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
-
-
-def _close_all() -> None:
-    import matplotlib.pyplot as plt
-
-    plt.close("all")
+def write_json(path: pathlib.Path, data: dict) -> None:
+    """``data`` (`jsonable`) as indented JSON into ``path``."""
+    path.write_text(json.dumps(jsonable(data), indent=2) + "\n")
 
 
 def _with_unit(value: float, unit: str | None) -> str:
     return f"{value:.4g} {unit}" if unit else f"{value:.4g}"
 
 
-def _report(cfg: ExperimentConfig, result: dict, plots: list[str] | None = None) -> str:
+def report_markdown(cfg: ExperimentConfig, result: dict,
+                    plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
     ``result["plots"]``)."""
     unit = result.get("error_unit")

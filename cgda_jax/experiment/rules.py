@@ -5,9 +5,14 @@ robot and algorithm are in `cgda_jax.experiment.validate`.
 
 from __future__ import annotations
 
+import importlib
+import inspect
+import math
 import os
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+
+import numpy as np
 
 from cgda_jax.experiment.config import (
     KINDS,
@@ -18,7 +23,11 @@ from cgda_jax.experiment.config import (
     XGNITIVE_ENV,
     ConfigError,
     ExperimentConfig,
+    StrategyConfig,
 )
+
+#: Intervals of one generalization (mean demonstration duration / ``interval_s``).
+MAX_INTERVALS = 10_000
 
 
 def _choice(value: str, options: Sequence[str], key: str) -> None:
@@ -103,14 +112,12 @@ def validate_config(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'strategy.{key}' must be >= 1")
     if not cfg.strategy.tolerance > 0:
         raise ConfigError("key 'strategy.tolerance' must be > 0")
-    from cgda_jax.experiment.build import _check_strategy_options
-
-    _check_strategy_options(cfg.strategy)
+    check_strategy_options(cfg.strategy)
     if not cfg.robot.joints:
         raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
     resolve_model(cfg.robot.model)
     if cfg.world.objects or cfg.scene.kind == "objects":
-        _validate_world(cfg)
+        validate_world(cfg)
 
 
 def _validate_objects(cfg: ExperimentConfig) -> None:
@@ -148,7 +155,7 @@ def _validate_objects(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'scene.features[{i}]': {err}") from None
 
 
-def _validate_world(cfg: ExperimentConfig):
+def validate_world(cfg: ExperimentConfig):
     """Compose and compile the world (cheap) and resolve the scene's feature names:
     unknown pieces, keys, geoms, bodies, joints give one line naming the key.
 
@@ -182,3 +189,56 @@ def _validate_world(cfg: ExperimentConfig):
                 raise ConfigError(f"key 'scene.goal_path_site': site {site!r} not "
                                   f"found; the world has sites {sites}")
     return model
+
+
+def check_interval_count(demos: Sequence, interval_s: float, method: str = "paper",
+                         key: str = "data.interval_s") -> None:
+    """The generalization of ``demos`` at ``interval_s`` has at most `MAX_INTERVALS`
+    intervals (checked before `cgda_jax.generalize` allocates them)."""
+    if not demos or not math.isfinite(interval_s) or not interval_s > 0:
+        return  # generalize names these itself
+    durations = np.asarray([float(d.duration) for d in demos])
+    if method == "xgnitive":
+        durations = np.ceil(durations)
+    mean = float(np.mean(durations))
+    n = mean / interval_s
+    if not n <= MAX_INTERVALS:
+        raise ConfigError(
+            f"key '{key}': {interval_s:g} s cuts the {mean:.3g} s demonstrations into "
+            f"{n:.3g} intervals, more than {MAX_INTERVALS:,}; use a larger interval_s"
+        )
+
+
+def strategy_function(name: str) -> Callable:
+    """``run_<name>`` from `cgda_jax.strategies` (or its module of that name)."""
+    from cgda_jax import strategies
+
+    fn = getattr(strategies, f"run_{name}", None)
+    if fn is None:
+        try:
+            mod = importlib.import_module(f"cgda_jax.strategies.{name}")
+        except ModuleNotFoundError:
+            raise ConfigError(f"key 'strategy.name': strategy {name!r} is not available") from None
+        fn = getattr(mod, f"run_{name}")
+    return fn
+
+
+#: Arguments of ``run_<name>`` that the config sets itself (not through ``options``).
+SET_BY_CONFIG = ("sim", "goal", "algorithm", "population_size", "tolerance",
+                  "max_generations", "seed", "chunk_size", "progress_fn")
+
+
+def check_strategy_options(s: StrategyConfig) -> None:
+    """Every ``strategy.options`` key must be a keyword of ``run_<name>``."""
+    params = inspect.signature(strategy_function(s.name)).parameters
+    allowed = sorted(k for k in params if k not in SET_BY_CONFIG)
+    for key in s.options:
+        if key in SET_BY_CONFIG:
+            raise ConfigError(
+                f"key 'strategy.options.{key}': set it as 'strategy.{key}' instead"
+            )
+        if key not in params:
+            raise ConfigError(
+                f"key 'strategy.options.{key}': not an option of strategy "
+                f"'{s.name}'; it takes {allowed}"
+            )

@@ -24,18 +24,13 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from cgda_jax.experiment.config import ConfigError, ExperimentConfig
-from cgda_jax.experiment.rules import validate_config
+from cgda_jax.experiment.rules import check_interval_count, validate_config
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
-#: Intervals of one generalization (mean demonstration duration / ``interval_s``).
-MAX_INTERVALS = 10_000
 #: Goal points (paint ramp length, generalized knots).
 MAX_GOAL_POINTS = 10_000
 #: Candidates per generation.
@@ -70,24 +65,6 @@ def check_seed(value: int, key: str) -> None:
         raise ConfigError(f"key '{key}': seed {value} is not in 0 .. {MAX_SEED}")
 
 
-def check_interval_count(demos: Sequence, interval_s: float, method: str = "paper",
-                         key: str = "data.interval_s") -> None:
-    """The generalization of ``demos`` at ``interval_s`` has at most `MAX_INTERVALS`
-    intervals (checked before `cgda_jax.generalize` allocates them)."""
-    if not demos or not math.isfinite(interval_s) or not interval_s > 0:
-        return  # generalize names these itself
-    durations = np.asarray([float(d.duration) for d in demos])
-    if method == "xgnitive":
-        durations = np.ceil(durations)
-    mean = float(np.mean(durations))
-    n = mean / interval_s
-    if not n <= MAX_INTERVALS:
-        raise ConfigError(
-            f"key '{key}': {interval_s:g} s cuts the {mean:.3g} s demonstrations into "
-            f"{n:.3g} intervals, more than {MAX_INTERVALS:,}; use a larger interval_s"
-        )
-
-
 def _check_static(cfg: ExperimentConfig) -> None:
     """Seeds and sizes known before anything is built."""
     d, s, r = cfg.data, cfg.strategy, cfg.robot
@@ -120,10 +97,10 @@ def _check_static(cfg: ExperimentConfig) -> None:
 
 
 def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
-    from cgda_jax.experiment.run import _synthetic
+    from cgda_jax.experiment.build import synthetic_demos
 
     d = cfg.data
-    demos = _synthetic(cfg)
+    demos = synthetic_demos(cfg)
     for reps in demos.values():
         check_interval_count(reps[: d.n_train], d.interval_s, d.method)
         for t in reps[d.n_train:]:

@@ -2,7 +2,9 @@
 
 # ``mujoco.mjx`` is imported (quietly) only when dynamic mode or the "mjx" kinematics
 # needs it, and the public names below are imported on first access.  The offscreen
-# OpenGL back-end is chosen when rendering (`cgda_jax.sim._mujoco_env.make_renderer`).
+# OpenGL back-end is chosen when rendering (`cgda_jax.sim._mujoco_env.make_renderer`);
+# `headless_backends` (those a headless machine can use) and `last_backend` (the one
+# a render used) are public here for the experiment layer and the CLI.
 import importlib as _importlib
 
 _LAZY = {
@@ -22,6 +24,8 @@ _LAZY = {
     "MarkerScene": "cgda_jax.sim.scenes",
     "PaintWall": "cgda_jax.sim.scenes",
     "ObjectScene": "cgda_jax.sim.scenes",
+    "headless_backends": "cgda_jax.sim._mujoco_env",
+    "last_backend": "cgda_jax.sim._mujoco_env",
 }
 
 __all__ = [
@@ -38,6 +42,8 @@ __all__ = [
     "add_sensors",
     "compile_world",
     "compose_world",
+    "headless_backends",
+    "last_backend",
     "list_pieces",
     "model_path",
     "render_trajectory",

@@ -5,7 +5,8 @@ folder from what it stores. Argument parsing and messages only; the figures are
 from __future__ import annotations
 
 import pathlib
-import sys
+
+from cgda_jax.cli.output import say
 
 PLOT_EXAMPLES = """\
 examples:
@@ -40,15 +41,10 @@ def add_plot_parser(sub, fmt) -> None:
                       help="do not use the persistent JAX compilation cache")
 
 
-def _say(args, text: str) -> None:
-    if not args.quiet:
-        print(text, file=sys.stderr, flush=True)
-
-
 def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
     from cgda_jax.experiment.figures import draw_figures, render_run
     from cgda_jax.experiment.load import load_run
-    from cgda_jax.experiment.report import _report
+    from cgda_jax.experiment.report import report_markdown
     from cgda_jax.experiment.results import check_writable
 
     run = load_run(folder)
@@ -65,8 +61,9 @@ def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
         result = dict(run.result, render=render) if render is not None else run.result
         plots = sorted(str(p.relative_to(run.folder)) for p in written
                        if p.suffix == ".png")
-        (run.folder / "report.md").write_text(_report(run.config, result, plots))
-    _say(args, f"[{run.name}] {len(written)} files -> {out}")
+        report = report_markdown(run.config, result, plots)
+        (run.folder / "report.md").write_text(report)
+    say(args, f"[{run.name}] {len(written)} files -> {out}")
     return written
 
 

@@ -16,8 +16,8 @@ from __future__ import annotations
 import sys
 import time
 
-from cgda_jax.cli_errors import EXIT_MET, EXIT_USAGE
-from cgda_jax.distributed import ENV_PROCESS_ID
+from cgda_jax.cli.output import EXIT_MET, EXIT_USAGE
+from cgda_jax.job import ENV_PROCESS_ID
 
 
 def add_trials_arguments(run) -> None:

@@ -10,8 +10,20 @@ import pathlib
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from cgda_jax.cli import _say, _say_chosen, _start_one
-from cgda_jax.cli_errors import EXIT_MET, EXIT_NOT_MET
+from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
+from cgda_jax.cli.run import start_one
+
+
+DEMO_EXAMPLES = """\
+examples:
+  cgda demo                      # everything, results in results/demo/ (then -2, ...)
+  cgda demo --small --out /tmp/d # a quicker check
+
+Runs the paper's recognition tables (all features, spatial, arm points) and two
+executions on the simulated TEO: clean (IE) and paint (IET). Open
+<out>/report.md: a summary table, then one section per experiment. The first run
+compiles (tens of seconds); later runs reuse the compilation cache.
+"""
 
 
 def summary_table(results: dict[str, dict]) -> list[str]:
@@ -35,7 +47,7 @@ def summary_table(results: dict[str, dict]) -> list[str]:
 def _offscreen_thread_ok() -> bool:
     """Whether the robot's video may be rendered outside the main thread: EGL and
     OSMesa contexts may, GLFW's (a display, macOS) must stay on the main thread."""
-    from cgda_jax.sim._mujoco_env import headless_backends
+    from cgda_jax.sim import headless_backends
 
     gl = os.environ.get("MUJOCO_GL", "").lower()
     return gl in ("egl", "osmesa") or (not gl and bool(headless_backends()))
@@ -58,7 +70,7 @@ def cmd_demo(args) -> int:
     target = pathlib.Path(args.out or "results/demo").expanduser()
     with RunFolder(target, overwrite=args.overwrite, fresh=args.out is None) as rf:
         args.run_folder = rf
-        _say_chosen(args, "demo", rf)
+        say_chosen(args, "demo", rf)
         out = rf.work
         # one experiment's figures and video are drawn in a second thread while the
         # next one computes (XLA compiles and runs without the GIL)
@@ -67,7 +79,7 @@ def cmd_demo(args) -> int:
         try:
             drawn = []
             for cfg in configs:
-                pending = _start_one(cfg, rf.path / cfg.name, out / cfg.name, args)
+                pending = start_one(cfg, rf.path / cfg.name, out / cfg.name, args)
                 drawn.append(pool.submit(pending.finish) if in_thread
                              else _done(pending.finish()))
             for cfg, future in zip(configs, drawn):
@@ -95,6 +107,6 @@ def cmd_demo(args) -> int:
             text = text.replace("](plots/", f"]({name}/plots/")
             report.append(text.replace("# ", "## ", 1))
         (out / "report.md").write_text("\n".join(report))
-    _say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
+    say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
                f"in {wall:.1f} s -> {rf.path / 'report.md'}")
     return EXIT_MET if success else EXIT_NOT_MET

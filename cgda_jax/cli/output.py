@@ -1,4 +1,5 @@
-"""Exit statuses and failures of the ``cgda`` command: which errors are bad input
+"""What the ``cgda`` commands share: progress lines on stderr (`say`), the JAX
+compilation cache, exit statuses and failures: which errors are bad input
 (status 2) and which are failures (3, their traceback saved to a log file), signals
 (130 / 143, the results folder cleaned up) and library warnings as one line each.
 """
@@ -7,6 +8,7 @@ from __future__ import annotations
 
 import logging
 import os
+import pathlib
 import signal
 import sys
 import tempfile
@@ -26,14 +28,13 @@ EXIT_DIVERGED = EXIT_FAILURE
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
 
 
-
-def _diverged(err: BaseException) -> bool:
+def diverged(err: BaseException) -> bool:
     """`err` is a `cgda_jax.SimulationDiverged` (its module is loaded if it is one)."""
     mod = sys.modules.get("cgda_jax.strategies.result")
     return mod is not None and isinstance(err, mod.SimulationDiverged)
 
 
-def _log_warnings() -> None:
+def log_warnings() -> None:
     """Library warnings (logger ``cgda_jax``) as ``cgda: warning: ...`` lines."""
     logger = logging.getLogger("cgda_jax")
     if not logger.handlers:
@@ -51,7 +52,7 @@ class Interrupted(KeyboardInterrupt):
         self.signum = signum
 
 
-class _Signals:
+class Signals:
     """While active, SIGINT and SIGTERM raise `Interrupted` in the main thread (so
     the results folder is cleaned up); afterwards they are only remembered."""
 
@@ -78,7 +79,7 @@ class _Signals:
             signal.signal(sig, handler)
 
 
-def _save_traceback() -> str:
+def save_traceback() -> str:
     """The current exception's traceback in a temporary log file; its path (or why
     it could not be written)."""
     try:
@@ -90,12 +91,12 @@ def _save_traceback() -> str:
         return f"traceback not saved: {err.strerror or err}"
 
 
-def _first_line(err: BaseException) -> str:
+def first_line(err: BaseException) -> str:
     text = str(err.args[0]) if isinstance(err, KeyError) and err.args else str(err)
     return text.strip().splitlines()[0] if text.strip() else type(err).__name__
 
 
-def _interrupted(args, signum: int) -> int:
+def interrupted(args, signum: int) -> int:
     name = signal.Signals(signum).name
     rf = getattr(args, "run_folder", None)
     if rf is None:
@@ -108,7 +109,7 @@ def _interrupted(args, signum: int) -> int:
     return EXIT_SIGNAL.get(signum, 128 + signum)
 
 
-def _user_error(args, err: Exception) -> bool:
+def user_error(args, err: Exception) -> bool:
     """Bad input (status 2): before the run starts, any of `USER_ERRORS`; once it
     runs (everything was checked), only config and file errors, the rest is a
     failure (status 3, with its traceback)."""
@@ -118,3 +119,48 @@ def _user_error(args, err: Exception) -> bool:
     if rf is None or rf.committed:
         return isinstance(err, USER_ERRORS)
     return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError))
+
+
+def say(args, text: str) -> None:
+    """``text`` as a line on stderr, unless ``--quiet``."""
+    if not args.quiet:
+        print(text, file=sys.stderr, flush=True)
+
+
+def say_chosen(args, label: str, rf) -> None:
+    """Say where the results go when the folder asked for was taken."""
+    if rf.path != rf.target:
+        say(args, f"[{label}] {rf.target} is taken: results go to {rf.path}")
+
+
+def _cache_dir() -> pathlib.Path:
+    env = os.environ.get("CGDA_JAX_CACHE")
+    return pathlib.Path(env).expanduser() if env else (
+        pathlib.Path.home() / ".cache" / "cgda_jax" / "jax")
+
+
+def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
+    """Turn on JAX's persistent compilation cache, small programs included.
+
+    Raises:
+        FolderError: the folder cannot be created or written (names it and
+            $CGDA_JAX_CACHE).
+    """
+    import jax
+
+    from cgda_jax.experiment.results import FolderError, check_writable
+
+    path = path or _cache_dir()
+    what = f"compilation cache folder {path} ($CGDA_JAX_CACHE)"
+    try:
+        check_writable(path, what)
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise FolderError(f"{what} cannot be created: {err.strerror or err}") from None
+    except FolderError as err:
+        raise FolderError(f"{err}; point CGDA_JAX_CACHE at a writable folder or "
+                          "pass --no-cache") from None
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return path

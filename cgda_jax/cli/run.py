@@ -1,0 +1,113 @@
+"""``cgda run CONFIG``: check a config, then run it into its results folder (or,
+with ``--trials N``, many seeds of it: `cgda_jax.cli.trials`)."""
+
+from __future__ import annotations
+
+import pathlib
+import time
+
+from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
+from cgda_jax.cli.trials import run_trials_command
+
+RUN_EXAMPLES = """\
+examples:
+  cgda run clean_ie                  # built-in (`cgda list`) -> results/clean_ie/
+  cgda run my_experiment.toml        # a config file of your own
+  cgda run paint_iet --out /tmp/paint
+  cgda run paint_iet --out /tmp/paint --overwrite   # replace it
+  cgda run clean_ie --set strategy.population_size=64 \\
+      --set strategy.seed=3 --set output.render=false
+  cgda run clean_ie --dry-run        # check + print the resolved config
+  cgda run clean_ie --trials 30     # success rate of seeds 0..29
+
+The results folder gets report.md (start there), result.json, arrays.npz,
+config.toml (the resolved config; re-run it with `cgda run <folder>/config.toml`)
+and plots/ (PNGs; execution runs also plots/execution.gif of the robot). It is
+written aside and moved into place when complete: a failed or interrupted run
+leaves the folder as it was. A non-empty --out is refused unless --overwrite; a
+lock refuses a second run into a folder in use.
+Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
+tables printed by --dry-run. With --trials N the folder gets trials.json and a
+report.md success-rate table instead, and the exit status is 0 once they are
+written, whatever the rate. Exit status: 0 goal met, 1 goal not met, 2 bad input
+(config, files, results folder not empty, in use or not writable), 3 any other
+failure (a diverged simulation; otherwise the traceback is saved to a log file
+whose path is printed), 130 / 143 interrupted (SIGINT / SIGTERM).
+Rendering needs offscreen OpenGL: MUJOCO_GL=egl or osmesa (picked automatically on
+a headless Linux machine when unset).
+"""
+
+
+def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
+    """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``)."""
+    return start_one(cfg, shown, work, args).finish()
+
+
+def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
+    """`_run_one` up to its outputs (`~cgda_jax.experiment.run.Outputs`)."""
+    from cgda_jax.experiment import start_run
+    from cgda_jax.progress import ProgressLine
+
+    bar = ProgressLine(cfg.name, quiet=args.quiet)
+    t0 = time.perf_counter()
+    what = (f"{cfg.strategy.name.upper()} execution" if cfg.kind == "execution"
+            else "recognition")
+    say(args, f"[{cfg.name}] {what} ...")
+    work.mkdir(exist_ok=True)
+    try:
+        pending = start_run(cfg, work, progress_fn=bar)
+    finally:
+        bar.close()
+    result = pending.result
+    verdict = "ok" if result.get("success") else "NOT met"
+    extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
+             else f"max point error {result['max_point_error']:.4g}"
+             + (f" {result['error_unit']}" if result.get("error_unit") else ""))
+    say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
+               f"-> {shown}")
+    return pending
+
+
+def _facts(facts: dict) -> str:
+    if "goal_points" in facts:
+        n = facts["features"]
+        return (f"goal {facts['goal_points']} points x {n} feature{'s' * (n != 1)}, "
+                f"{facts['genes']} genes per candidate")
+    return f"{facts.get('actions', '?')} actions"
+
+
+def cmd_run(args) -> int:
+    from cgda_jax.builtin import resolve_config
+    from cgda_jax.experiment import (
+        RunFolder,
+        check_experiment,
+        default_folder,
+        dump_config,
+        load_config,
+        plan_folder,
+    )
+
+    cfg = load_config(resolve_config(args.config), args.overrides)
+    if args.trials is not None:
+        from cgda_jax.experiment.trials import check_trials
+
+        check_trials(cfg, args.trials)
+    facts = check_experiment(cfg)
+    target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
+    fresh = args.out is None
+    if args.dry_run:
+        folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
+        print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
+              f"{folder}\n" + dump_config(cfg), end="")
+        return EXIT_MET
+    if args.trials is not None:
+        return run_trials_command(
+            cfg, args, lambda: RunFolder(target, overwrite=args.overwrite, fresh=fresh),
+            lambda text: say(args, text), lambda rf: say_chosen(args, cfg.name, rf))
+    with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
+        args.run_folder = rf
+        say_chosen(args, cfg.name, rf)
+        result = _run_one(cfg, rf.path, rf.work, args)
+    if not args.quiet:
+        print(rf.path / "report.md")
+    return EXIT_MET if result.get("success") else EXIT_NOT_MET

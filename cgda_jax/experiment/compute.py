@@ -1,0 +1,154 @@
+"""Running an experiment: the numbers of a recognition or an execution run (the
+strategy's result, replayed on a finer simulator) and the arrays saved with them.
+What is drawn and written from them (figures, video, ``result.json``,
+``report.md``) is `cgda_jax.experiment.run`'s.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from cgda_jax.experiment.build import (
+    build_goal,
+    build_simulator,
+    default_waypoint_s,
+    error_unit,
+    feature_labels,
+    synthetic_demos,
+)
+from cgda_jax.experiment.config import ConfigError, ExperimentConfig
+from cgda_jax.experiment.rules import strategy_function
+
+#: What a run computes: the result dict (final but for its outputs' keys), the
+#: arrays (as in ``arrays.npz``) and, for an execution, the simulator.
+Computed = tuple[dict, dict[str, np.ndarray], Any]
+
+
+def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
+    """Generalize, then recognize the held-out repetitions (paper Tables 2-4);
+    ``arrays.npz`` is written into ``out``."""
+    from cgda_jax.generalize import generalize, sample_actions
+    from cgda_jax.recognize import ActionLibrary, cost_matrix
+
+    d, r = cfg.data, cfg.recognition
+    t0 = time.perf_counter()
+    demos = synthetic_demos(cfg)
+    library = ActionLibrary.from_demonstrations(
+        {a: v[: d.n_train] for a, v in demos.items()}, d.interval_s, d.method
+    )
+    names = list(library.names)
+    tests = [(a, t) for a, v in demos.items() for t in v[d.n_train:]]
+    if r.query == "reduced":
+        reduced = [generalize([t], d.interval_s, d.method) for _, t in tests]
+        queries = list(np.asarray(sample_actions(reduced, r.n_samples)))
+    else:
+        queries = [t for _, t in tests]
+    costs = np.asarray(cost_matrix(queries, library, r.metric, r.n_samples), float)
+    recognized = [names[i] for i in costs.argmin(axis=1)]
+    truth = [a for a, _ in tests]
+    accuracy = float(np.mean([p == t for p, t in zip(recognized, truth)]))
+    result = {
+        "kind": "recognition",
+        "name": cfg.name,
+        "features": list(library.feature_names),
+        "feature_labels": feature_labels(cfg, library.feature_names),
+        "metric": r.metric,
+        "actions": names,
+        "queries": [t.name for _, t in tests],
+        "truth": truth,
+        "cost_matrix": costs,
+        "recognized": recognized,
+        "accuracy": accuracy,
+        "success": accuracy == 1.0,
+        "wall_time_s": time.perf_counter() - t0,
+    }
+    arrays = {"cost_matrix": costs}
+    for a in names:
+        arrays[f"knot_times_{a}"] = np.asarray(library[a].knot_times)
+        arrays[f"knots_{a}"] = np.asarray(library[a].knots)
+        arrays.update(_demo_arrays(demos[a][: d.n_train], f"demo_{a}_"))
+    np.savez(out / "arrays.npz", **arrays)
+    return result, arrays, None
+
+
+def _demo_arrays(demos, prefix: str, scale: float = 1.0) -> dict[str, np.ndarray]:
+    """``{prefix}{k}_times`` and ``{prefix}{k}_features`` (times scale) per demo."""
+    out = {}
+    for k, d in enumerate(demos):
+        out[f"{prefix}{k}_times"] = np.asarray(d.times, np.float64)
+        out[f"{prefix}{k}_features"] = np.asarray(d.features, np.float64) * scale
+    return out
+
+
+#: How much finer a result is replayed: dynamic runs at timestep / 4 (MuJoCo C),
+#: kinematic runs at 16 x the sub-steps.
+REPLAY_FACTOR = {"dynamic": 4, "kinematic": 16}
+
+
+def replay_check(sim, res, factor: int | None = None) -> dict:
+    """Re-execute the reported joints on a `factor` x finer simulator
+    (`Simulator.finer`: dynamic mode timestep / factor on MuJoCo C, kinematic mode
+    factor x the sub-steps; default `REPLAY_FACTOR`): the features must agree, or
+    the optimiser exploited the resolution it was evaluated at."""
+    fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
+    feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
+    errors = np.linalg.norm(feats - np.asarray(res.goal), axis=-1)
+    out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
+           else {"substeps": fine.substeps})
+    return out | {
+        "max_feature_difference": float(np.abs(feats - res.features).max()),
+        "max_point_error": float(errors.max()),
+        "success": bool(np.all(errors < res.tolerance)),
+    }
+
+
+def compute_execution(
+    cfg: ExperimentConfig, out: pathlib.Path,
+    progress_fn: Callable[[dict], None] | None = None,
+) -> Computed:
+    """Build the goal and the simulator, run the strategy and replay its result;
+    ``result.json`` (the strategy's) and ``arrays.npz`` are written into ``out``."""
+    goal, demos, gen = build_goal(cfg)
+    waypoint_s = default_waypoint_s(demos, len(goal))
+    sim = build_simulator(cfg, waypoint_s, goal)
+    if goal.shape[1] != sim.n_features:
+        raise ConfigError(
+            f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "
+            f"'{cfg.scene.kind}' scene gives {sim.n_features} {list(sim.feature_names)}"
+        )
+    s = cfg.strategy
+    res = strategy_function(s.name)(
+        sim, goal, algorithm=s.algorithm, population_size=s.population_size,
+        tolerance=s.tolerance, max_generations=s.max_generations, seed=s.seed,
+        chunk_size=s.chunk_size, progress_fn=progress_fn, **s.options,
+    )
+    res.save(out)  # result.json + arrays.npz from the strategy
+    summary = json.loads((out / "result.json").read_text())
+    labels = feature_labels(cfg, sim.feature_names)
+    summary.update({"kind": "execution", "name": cfg.name,
+                    "feature_names": list(sim.feature_names),
+                    "feature_labels": labels, "error_unit": error_unit(labels),
+                    "build": {"waypoint_s": waypoint_s}})
+    with np.load(out / "arrays.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    if gen is not None:  # the generalization and demonstrations, in the goal's units
+        arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)
+        arrays["knots"] = np.asarray(gen.knots, np.float64) * cfg.data.scale
+        arrays.update(_demo_arrays(demos, "demo", cfg.data.scale))
+    np.savez(out / "arrays.npz", **arrays)
+    if sim.mode == "dynamic":
+        summary["physics"] = {
+            "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,
+            "timestep": sim.physics.timestep, "physics_steps": sim.physics_steps,
+            "welded_joints": list(sim.physics.welded),
+        }
+    else:
+        summary["substeps"] = sim.substeps
+    summary["replay"] = replay_check(sim, res)
+    return summary, arrays, sim
