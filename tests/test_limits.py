@@ -1,4 +1,4 @@
-"""Joint limits from a model and the timing of a minimum-jerk move (`cgda_jax.sim.limits`)."""
+"""Joint limits from a model and the timing of a minimum-jerk move (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`)."""
 
 import itertools
 import math
@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from cgda_jax import model_path
-from cgda_jax.sim.limits import (
+from cgda_jax.sim.limits import JointLimits, read_limits
+from cgda_jax.sim.timing import (
     PEAK_ACCELERATION,
     PEAK_SPEED,
-    JointLimits,
     approach_duration,
     min_duration,
     min_jerk,
@@ -21,7 +21,6 @@ from cgda_jax.sim.limits import (
     min_jerk_d2,
     move_peaks,
     move_samples,
-    read_limits,
     violation,
 )
 

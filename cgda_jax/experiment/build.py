@@ -221,10 +221,39 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
         if cfg.scene.params:
             raise ConfigError("key 'scene.params': the marker scene takes no parameters")
         scene = MarkerScene()
+    feasibility = build_feasibility(cfg, robot, scene)
+    timing = {"waypoint_s": rc.waypoint_s or waypoint_s or 1.0,
+              "move_fraction": rc.move_fraction, "feasibility": feasibility}
     if rc.mode != "dynamic":
-        return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps)
+        return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps, **timing)
     return Simulator(
         robot, scene, mode="dynamic", substeps=rc.substeps,
-        waypoint_s=rc.waypoint_s or waypoint_s or 1.0, timestep=rc.timestep or None,
-        move_fraction=rc.move_fraction, physics=rc.physics, reduce=rc.reduce,
+        timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce, **timing,
     )
+
+
+def build_feasibility(cfg: ExperimentConfig, robot, scene):
+    """The `cgda_jax.sim.feasibility.Feasibility` of ``[feasibility]`` and
+    ``robot.limits`` (None with ``strategy.feasibility`` off).  In dynamic mode the
+    pairs that the physics itself collides (the contact geoms against the objects)
+    are left to it.
+
+    Raises:
+        ConfigError: a bad limit or an unknown excluded geom, naming the key.
+    """
+    if not cfg.strategy.feasibility:
+        return None
+    from cgda_jax.sim.execute import scene_obstacles
+    from cgda_jax.sim.feasibility import Feasibility
+
+    f = cfg.feasibility
+    try:
+        return Feasibility(
+            robot, cfg.robot.limits or None, scene_obstacles(scene),
+            penetration=f.penetration, penalty=f.penalty, collisions=f.collisions,
+            self_collision=f.self_collision, exclude=list(f.exclude),
+            samples=f.samples, physics_contacts=cfg.robot.mode == "dynamic")
+    except KeyError as e:
+        raise ConfigError(f"key 'feasibility.exclude': {e.args[0]}") from None
+    except ValueError as e:
+        raise ConfigError(f"key 'robot.limits': {e}") from None

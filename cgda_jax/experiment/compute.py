@@ -151,4 +151,28 @@ def compute_execution(
     else:
         summary["substeps"] = sim.substeps
     summary["replay"] = replay_check(sim, res)
+    motion = motion_check(sim, res)
+    if motion is not None:
+        summary["motion"], profile = motion
+        arrays.update(profile)
+        np.savez(out / "arrays.npz", **arrays)
     return summary, arrays, sim
+
+
+def motion_check(sim, res) -> tuple[dict, dict] | None:
+    """The reported joints checked as a motion (`cgda_jax.sim.motion.motion_report`:
+    collisions 4 x finer, speeds, accelerations, efforts and tracking in a dynamic
+    replay, joint travel) and the commanded profile's arrays (``motion_t``,
+    ``motion_q``, ``motion_qd``, ``motion_waypoint_t``) for the figure; None
+    when no joints were found."""
+    from cgda_jax.sim.motion import motion_profile, motion_report
+
+    joints = np.asarray(res.joints, np.float64)
+    if joints.size == 0 or not np.all(np.isfinite(joints)):
+        return None
+    prof = motion_profile(sim, joints)
+    return motion_report(sim, joints), {
+        "motion_t": prof.t, "motion_q": prof.q, "motion_qd": prof.qd,
+        "motion_waypoint_t": prof.waypoint_t,
+        "joint_lower": np.asarray(sim.lower, np.float64),
+        "joint_upper": np.asarray(sim.upper, np.float64)}

@@ -117,8 +117,13 @@ class RobotConfig:
     model's qpos0).  Dynamic mode (``mode = "dynamic"``): ``physics`` "auto" | "mjx"
     | "mujoco"; ``waypoint_s`` seconds per waypoint (0 = the demonstrations' timing,
     mean duration / goal points; 1 s without demonstrations); ``timestep`` physics
-    step in seconds (0 = the model's own); ``move_fraction`` of a waypoint spent
-    moving (minimum jerk), the rest settling; ``reduce`` welds unmoved joints.
+    step in seconds (0 = the model's own); ``reduce`` welds unmoved joints.
+    Both modes: ``waypoint_s`` and ``move_fraction`` (the share of a waypoint spent
+    moving, minimum jerk; the rest holds) time the moves that the feasibility check
+    judges.  ``limits``: joint limits that override the model's
+    (`cgda_jax.sim.limits.read_limits`): ``velocity`` [rad/s], ``acceleration``
+    [rad/s^2], ``effort`` [N m], each a number for every evolved joint or a table
+    by joint name (``limits = { velocity = 2.0, effort = { r_elbow = 20.0 } }``).
     """
 
     model: str = "teo.xml"
@@ -138,6 +143,7 @@ class RobotConfig:
     timestep: float = 0.0
     move_fraction: float = 0.6
     reduce: bool = True
+    limits: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass
@@ -184,7 +190,10 @@ class StrategyConfig:
     """The execution strategy and its evolutionary algorithm (evosax name).
 
     ``options`` are extra keyword arguments of the strategy function (e.g.
-    ``stagnation`` for FTE).
+    ``stagnation`` for FTE).  ``feasibility`` (default on): a run succeeds only
+    with a motion the robot could perform (no penetration, joint limits kept, the
+    approach included; see ``[feasibility]``); false: the paper's unconstrained
+    execution.
     """
 
     name: str = "ie"
@@ -195,6 +204,27 @@ class StrategyConfig:
     seed: int = 0
     chunk_size: int = 10
     options: dict[str, Any] = dataclasses.field(default_factory=dict)
+    feasibility: bool = True
+
+
+@dataclasses.dataclass
+class FeasibilityConfig:
+    """What a feasible motion is (`cgda_jax.sim.feasibility`; with
+    ``strategy.feasibility`` on).
+
+    ``penetration`` [m]: the deepest contact tolerated between the robot and
+    itself or the world; ``penalty``: fitness added to an infeasible candidate
+    (times 1 + its violation); ``collisions``: check collisions (false: limits
+    only); ``self_collision``: the robot's own pairs too; ``exclude``: geom names
+    left out of the check; ``samples``: collision samples per move.
+    """
+
+    penetration: float = 0.005
+    penalty: float = 1000.0
+    collisions: bool = True
+    self_collision: bool = True
+    exclude: list[str] = dataclasses.field(default_factory=list)
+    samples: int = 10
 
 
 @dataclasses.dataclass
@@ -225,6 +255,8 @@ class ExperimentConfig:
     world: WorldConfig = dataclasses.field(default_factory=WorldConfig)
     scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)
     strategy: StrategyConfig = dataclasses.field(default_factory=StrategyConfig)
+    feasibility: FeasibilityConfig = dataclasses.field(
+        default_factory=FeasibilityConfig)
     output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
 
 

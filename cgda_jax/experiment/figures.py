@@ -108,6 +108,26 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
             per_point, ylabel="generations run (restarts included)",
             title=f"{what}: effort per point", path=path("effort_per_point.png"),
         )
+    motion = r.get("motion")
+    if motion and "motion_t" in a:  # the motion against the limits
+        lim = motion["limits"]
+        names = motion["joints"]
+
+        def per_joint(table) -> np.ndarray:
+            return np.array([np.inf if table[j] is None else table[j] for j in names])
+
+        rc = run.config.robot
+        lower = upper = None
+        if "joint_lower" in a:
+            lower, upper = a["joint_lower"], a["joint_upper"]
+        verdict = "feasible" if motion["feasible"] else "NOT feasible"
+        plotting.plot_motion(
+            a["motion_t"], a["motion_q"], a["motion_qd"], names, lower=lower,
+            upper=upper, velocity=per_joint(lim["velocity"]),
+            waypoint_t=a["motion_waypoint_t"],
+            title=f"{what} on {rc.model}: commanded motion, {verdict}",
+            path=path("motion.png"),
+        )
     return written
 
 

@@ -42,6 +42,54 @@ def _with_unit(value: float, unit: str | None) -> str:
     return f"{value:.4g} {unit}" if unit else f"{value:.4g}"
 
 
+def _limit(value) -> str:
+    return "-" if value is None else f"{value:g}"
+
+
+def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
+    """The report's feasibility section: the motion against the robot's limits
+    (`cgda_jax.sim.motion.motion_report`)."""
+    lim = motion["limits"]
+    col = motion.get("collisions")
+    verdict = "feasible" if motion["feasible"] else "NOT feasible: " + "; ".join(
+        motion["problems"])
+    lines = ["## Feasibility", "",
+             f"Independent check of the reported joints: **{verdict}**."]
+    if optimiser_feasible is not None:
+        lines += ["", "The strategy's own check (every move, bounded between its "
+                  f"samples): {'feasible' if optimiser_feasible else 'infeasible'}."]
+    lines += ["", f"Approach from the start posture: {motion['approach_s']:.2f} s; "
+              f"every other move {motion['move_s']:.2f} s; whole motion "
+              f"{motion['duration_s']:.1f} s; moves changing a joint by more than "
+              f"90 deg: {motion['moves_over_90_deg']}."]
+    if col is not None:
+        a, b = col["pair"]
+        lines += ["", f"Collisions ({col['pairs']} pairs, {col['postures_checked']} "
+                  f"postures): closest {a} - {b}, {col['worst_distance_m'] * 1e3:.1f} "
+                  f"mm ({'penetration' if col['worst_distance_m'] < 0 else 'clear'}; "
+                  f"allowed {motion['penetration_allowed_m'] * 1e3:g} mm), move "
+                  f"{col['move'] + 1}."]
+    dyn = "measured_speed" in motion
+    head = ["joint", "peak speed [rad/s]", "limit", "peak acc. [rad/s^2]", "limit"]
+    if dyn:
+        head += ["measured speed", "peak effort [N m]", "limit", "tracking [deg]"]
+    head += ["travel [deg]", "largest move [deg]"]
+    lines += ["", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    for j in motion["joints"]:
+        row = [j, f"{motion['peak_speed'][j]:.2f}", _limit(lim["velocity"][j]),
+               f"{motion['peak_acceleration'][j]:.2f}",
+               _limit(lim["acceleration"][j])]
+        if dyn:
+            eff = motion["peak_effort"].get(j)
+            row += [f"{motion['measured_speed'][j]:.2f}",
+                    "-" if eff is None else f"{eff:.1f}", _limit(lim["effort"][j]),
+                    f"{motion['tracking_error_deg'][j]:.1f}"]
+        row += [f"{motion['travel_deg'][j]:.0f}",
+                f"{motion['largest_step_deg'][j]:.0f}"]
+        lines.append("| " + " | ".join(row) + " |")
+    return lines
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -103,6 +151,9 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
                 f"{_with_unit(replay['max_point_error'], unit)}, max feature "
                 f"difference {replay['max_feature_difference']:.3g} |",
             ]
+        if result.get("motion"):
+            lines += [""] + motion_lines(result["motion"],
+                                         (result.get("info") or {}).get("feasible"))
         render = result.get("render")
         if render and render.get("ok"):
             lines += ["", "The robot executing the best trajectory (paper Fig. 8/11):", "",

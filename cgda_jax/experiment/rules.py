@@ -112,12 +112,31 @@ def validate_config(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'strategy.{key}' must be >= 1")
     if not cfg.strategy.tolerance > 0:
         raise ConfigError("key 'strategy.tolerance' must be > 0")
+    _validate_feasibility(cfg)
     check_strategy_options(cfg.strategy)
     if not cfg.robot.joints:
         raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
     resolve_model(cfg.robot.model)
     if cfg.world.objects or cfg.scene.kind == "objects":
         validate_world(cfg)
+
+
+def _validate_feasibility(cfg: ExperimentConfig) -> None:
+    """``[feasibility]`` values and the kinds of ``robot.limits`` (the joints and
+    numbers are checked against the model when the simulator is built)."""
+    f = cfg.feasibility
+    for key in ("penetration", "penalty"):
+        v = getattr(f, key)
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"key 'feasibility.{key}' must be a number > 0, got {v}")
+    if f.samples < 1:
+        raise ConfigError(f"key 'feasibility.samples' must be >= 1, got {f.samples}")
+    from cgda_jax.sim.limits import KINDS as LIMIT_KINDS
+
+    for kind in cfg.robot.limits:
+        if kind not in LIMIT_KINDS:
+            raise ConfigError(f"key 'robot.limits.{kind}': unknown; the limits are "
+                              f"{list(LIMIT_KINDS)}")
 
 
 def _validate_objects(cfg: ExperimentConfig) -> None:

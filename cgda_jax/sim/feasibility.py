@@ -15,7 +15,7 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
   bound of the distance on the whole continuous move, so nothing passes through
   between samples (a long move near an obstacle is judged conservatively);
 - **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
-  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`).
+  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`).
 
 The violation of a move is a finite, dimensionless number, 0 when feasible:
 ``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
@@ -33,7 +33,7 @@ The approach (the move from the start posture to the first waypoint) is part of 
 execution and judged like every other move, over its own duration
 `approach_s`: long enough for a move from the start to ANY posture within the
 joint limits to respect the speed and acceleration limits
-(`cgda_jax.sim.limits.approach_duration`), and never shorter than a waypoint's move.
+(`cgda_jax.sim.timing.approach_duration`), and never shorter than a waypoint's move.
 """
 
 from __future__ import annotations
@@ -82,6 +82,9 @@ class Feasibility:
         self_collision: include the robot's own pairs.
         exclude: geom or obstacle names the collision check leaves out.
         samples: collision samples per move (plus its start posture).
+        physics_contacts: leave out the pairs that MuJoCo's physics collides
+            (``contype``/``conaffinity``: a dynamic simulation keeps them apart
+            itself, e.g. the hand pushing a box); False: every pair.
 
     Attributes:
         limits, collider (None without collisions or pairs), penetration, penalty,
@@ -100,6 +103,7 @@ class Feasibility:
         self_collision: bool = True,
         exclude: Sequence[str] = (),
         samples: int = 10,
+        physics_contacts: bool = False,
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
 
@@ -118,6 +122,7 @@ class Feasibility:
         self.samples = int(samples)
         self.collider = None
         self.overlapping: list[tuple[str, str]] = []
+        self.physical: list[tuple[str, str]] = []
         if collisions:
             from cgda_jax.sim.collision import Collider, Obstacle
 
@@ -126,6 +131,9 @@ class Feasibility:
             args = {"self_collision": self_collision, "exclude": tuple(exclude)}
             full = Collider(robot, obs, **args)
             keep, self.overlapping = relevant_pairs(full, robot, obs)
+            if physics_contacts:
+                self.physical = [p for p in keep if _collides(robot.mj_model, *p)]
+                keep = [p for p in keep if p not in self.physical]
             if keep:
                 self.collider = Collider(robot, obs, only=keep, **args)
                 self._reach = np.asarray(self.collider.pair_reach, np.float32)
@@ -141,7 +149,7 @@ class Feasibility:
         """Duration (s) of the approach from the robot's start posture: a min-jerk
         move to any posture within the joint limits stays within the speed and
         acceleration limits (at least ``floor``)."""
-        from cgda_jax.sim.limits import approach_duration
+        from cgda_jax.sim.timing import approach_duration
 
         return float(approach_duration(robot.lower, robot.upper, robot.start_genes,
                                        self.limits, floor))
@@ -149,7 +157,7 @@ class Feasibility:
     def limit_violation(self, dq: Array, duration: Array) -> Array:
         """Violation (scalar) of a min-jerk move of ``dq`` (DoF,) over ``duration``
         seconds against the speed and acceleration limits."""
-        from cgda_jax.sim.limits import move_peaks, violation
+        from cgda_jax.sim.timing import move_peaks, violation
 
         speed, acc = move_peaks(dq, duration)
         return violation(speed, acc, self.limits)
@@ -174,6 +182,17 @@ class Feasibility:
         over = (jnp.maximum(self.depth(q0, dq) - self.penetration, 0.0)
                 / self.penetration)
         return jnp.maximum(self.limit_violation(dq, duration), over)
+
+
+def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:
+    """Whether MuJoCo's collision filter lets the geoms named ``a`` and ``b``
+    collide (obstacles, not in the model, never do)."""
+    ga = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, a)
+    gb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, b)
+    if ga < 0 or gb < 0:
+        return False
+    return bool((m.geom_contype[ga] & m.geom_conaffinity[gb])
+                or (m.geom_contype[gb] & m.geom_conaffinity[ga]))
 
 
 def _obstacle_args(o: Mapping) -> dict:

@@ -48,13 +48,6 @@ def _durations(sim, n: int) -> np.ndarray:
     return np.array([approach] + [move] * (n - 1))
 
 
-def _min_jerk(tau):
-    s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5
-    d1 = 30 * tau**2 * (1 - tau) ** 2
-    d2 = 60 * tau * (1 - tau) * (1 - 2 * tau)
-    return s, d1, d2
-
-
 def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
     """The commanded motion of ``joints`` (N, DoF) from the start posture: each
     move a minimum-jerk profile over its duration (the approach over
@@ -66,17 +59,20 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
         joints: (N, DoF) waypoints.
         samples: samples per move.
     """
+    from cgda_jax.sim.timing import min_jerk, min_jerk_d1, min_jerk_d2
+
     joints = np.asarray(joints, np.float64)
     q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
                             joints])
     durs = _durations(sim, len(joints))
     hold = float(sim.waypoint_s) - float(sim.move_s)
     tau = np.linspace(0.0, 1.0, samples)
+    s, d1, d2 = (np.asarray(f(tau), np.float64)
+                 for f in (min_jerk, min_jerk_d1, min_jerk_d2))
     ts, qs, qds, qdds, reached = [], [], [], [], []
     t0 = 0.0
     for i, dur in enumerate(durs):
         q0, dq = q_all[i], q_all[i + 1] - q_all[i]
-        s, d1, d2 = _min_jerk(tau)
         ts.append(t0 + tau * dur)
         qs.append(q0 + s[:, None] * dq)
         qds.append(d1[:, None] * dq / dur)
