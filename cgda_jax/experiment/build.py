@@ -232,6 +232,31 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     )
 
 
+def nested_limits(limits: dict) -> dict:
+    """``robot.limits`` with dotted keys (``effort.r_elbow = 20`` from a ``--set``
+    override) nested as tables: ``{"effort": {"r_elbow": 20}}``.
+
+    Raises:
+        ConfigError: a kind given both as one number and per joint.
+    """
+    out: dict = {}
+    for key, value in limits.items():
+        kind, _, joint = str(key).partition(".")
+        if not joint:
+            if isinstance(out.get(kind), dict) and not isinstance(value, dict):
+                raise ConfigError(f"key 'robot.limits.{kind}': given both as one "
+                                  "number and per joint")
+            out[kind] = {**out.get(kind, {}), **value} if isinstance(value, dict) \
+                else value
+            continue
+        table = out.setdefault(kind, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"key 'robot.limits.{key}': robot.limits.{kind} is "
+                              "already one number for every joint")
+        table[joint] = value
+    return out
+
+
 def build_feasibility(cfg: ExperimentConfig, robot, scene):
     """The `cgda_jax.sim.feasibility.Feasibility` of ``[feasibility]`` and
     ``robot.limits`` (None with ``strategy.feasibility`` off).  In dynamic mode the
@@ -249,7 +274,7 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
     f = cfg.feasibility
     try:
         return Feasibility(
-            robot, cfg.robot.limits or None, scene_obstacles(scene),
+            robot, nested_limits(cfg.robot.limits) or None, scene_obstacles(scene),
             penetration=f.penetration, penalty=f.penalty, collisions=f.collisions,
             self_collision=f.self_collision, exclude=list(f.exclude),
             samples=f.samples, physics_contacts=cfg.robot.mode == "dynamic")

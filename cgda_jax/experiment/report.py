@@ -69,6 +69,11 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
                   f"mm ({'penetration' if col['worst_distance_m'] < 0 else 'clear'}; "
                   f"allowed {motion['penetration_allowed_m'] * 1e3:g} mm), move "
                   f"{col['move'] + 1}."]
+    contact = motion.get("physics_contact")
+    if contact:
+        a, b = contact["pair"]
+        lines += ["", f"Deepest contact in the physics replay: {a} - {b}, "
+                  f"{contact['deepest_m'] * 1e3:.1f} mm."]
     dyn = "measured_speed" in motion
     head = ["joint", "peak speed [rad/s]", "limit", "peak acc. [rad/s^2]", "limit"]
     if dyn:

@@ -133,7 +133,8 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
         raise ConfigError(f"key 'feasibility.samples' must be >= 1, got {f.samples}")
     from cgda_jax.sim.limits import KINDS as LIMIT_KINDS
 
-    for kind in cfg.robot.limits:
+    for key in cfg.robot.limits:
+        kind = str(key).partition(".")[0]  # a --set override: "effort.r_elbow"
         if kind not in LIMIT_KINDS:
             raise ConfigError(f"key 'robot.limits.{kind}': unknown; the limits are "
                               f"{list(LIMIT_KINDS)}")

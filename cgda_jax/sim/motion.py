@@ -144,6 +144,13 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
     jt = mujoco.mjtObj.mjOBJ_JOINT
     jids = [mujoco.mj_name2id(m, jt, n) for n in sim.robot.joint_names]
     gene_dof = np.array([m.jnt_dofadr[j] for j in jids])
+    moving = np.zeros(m.nbody, bool)  # bodies the evolved joints move
+    for j in jids:
+        moving[m.jnt_bodyid[j]] = True
+    for b in range(1, m.nbody):  # parents come first
+        moving[b] |= moving[m.body_parentid[b]]
+    robot_geom = moving[m.geom_bodyid]
+    deepest = (np.inf, -1, -1)
     act_of = {int(q): a for a, q in enumerate(phys.act_qadr)}
     gene_act = np.array([act_of.get(int(q), -1) for q in phys.gene_qadr])
     profiles = fine.reference_profiles()
@@ -157,13 +164,22 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
         for a in profile:
             d.ctrl[:] = c0 + a * (c1 - c0)
             mujoco.mj_step(m, d)
+            for c in d.contact[:d.ncon]:  # the physics' own contacts of the arm
+                if (robot_geom[c.geom1] or robot_geom[c.geom2]) and c.dist < deepest[0]:
+                    deepest = (float(c.dist), int(c.geom1), int(c.geom2))
             speeds.append(d.qvel[gene_dof].copy())
             forces.append(np.where(gene_act >= 0,
                                    d.actuator_force[np.maximum(gene_act, 0)], np.nan))
         ends.append(d.qpos[phys.gene_qadr] - target)
         prev = target
+    contact = None
+    if deepest[1] >= 0:
+        pair = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom#{g}"
+                for g in deepest[1:]]
+        contact = {"deepest_m": max(0.0, -deepest[0]), "pair": pair}
     return {"speed": np.asarray(speeds), "force": np.asarray(forces),
-            "tracking": np.abs(np.asarray(ends)), "timestep": float(m.opt.timestep)}
+            "tracking": np.abs(np.asarray(ends)), "timestep": float(m.opt.timestep),
+            "contact": contact}
 
 
 def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -241,6 +257,11 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         out["peak_effort"] = dict(zip(names, [None if not np.isfinite(v) else v
                                               for v in me.tolist()]))
         out["replay_timestep"] = rep["timestep"]
+        out["physics_contact"] = rep["contact"]  # None: the arm touched nothing
+        if rep["contact"] and rep["contact"]["deepest_m"] > penetration:
+            a, b = rep["contact"]["pair"]
+            problems.append(f"physics: {a} {rep['contact']['deepest_m'] * 1e3:.1f} mm "
+                            f"into {b}")
         out["tracking_error_deg"] = dict(zip(names, np.rad2deg(
             rep["tracking"].max(axis=0)).tolist()))  # at the waypoints' ends
         for j, n in enumerate(names):
