@@ -104,6 +104,21 @@ def test_speed_limit_makes_a_fast_move_infeasible(tiny):
     assert np.abs(prof.qd[seg, 0]).max() == pytest.approx(1.5, rel=1e-3)
 
 
+def test_a_joint_swinging_over_max_step_is_flailing(tiny):
+    """A move that changes a joint by more than max_step (90 deg) between two
+    waypoints is infeasible however slow; the approach is not capped."""
+    sim = Simulator(tiny, MarkerScene(), waypoint_s=10.0,
+                    feasibility=Feasibility(tiny, collisions=False))
+    state = sim.init_state()
+    far = jnp.asarray([0.0, 0.0, np.deg2rad(100)])
+    first, _ = sim.step(state, far)
+    assert float(first.move_violation) == 0.0  # the approach: 100 deg allowed
+    back, _ = sim.step(first, jnp.asarray([0.0, 0.0, np.deg2rad(-5)]))  # 105 deg
+    assert float(back.move_violation) == pytest.approx(105 / 90 - 1, rel=1e-4)
+    fine, _ = sim.step(first, jnp.asarray([0.0, 0.0, np.deg2rad(15)]))  # 85 deg
+    assert float(fine.move_violation) == 0.0
+
+
 # The obstacle test: three goal points on either side of and above a wall; the
 # straight joint-space moves between them must go around it.
 GOAL = np.array([[0.30, -0.22, 0.25], [0.25, 0.0, 0.50], [0.30, 0.22, 0.25]],
@@ -158,6 +173,6 @@ def test_motion_report_names_what_is_wrong(teo_paint):
     assert rep["collisions"]["pair"][1] == "paint_board"
     assert any("paint_board" in p for p in rep["problems"])
     assert any("rad/s" in p for p in rep["problems"])  # 110 deg in 0.6 s
-    assert rep["moves_over_90_deg"] == 1
+    assert rep["moves_over_max_step"] == 1
     with pytest.raises(ValueError, match="NaN"):
         motion_report(teo_paint, np.full((2, 3), np.nan))

@@ -216,7 +216,9 @@ class FeasibilityConfig:
     itself or the world; ``penalty``: fitness added to an infeasible candidate
     (times 1 + its violation); ``collisions``: check collisions (false: limits
     only); ``self_collision``: the robot's own pairs too; ``exclude``: geom names
-    left out of the check; ``samples``: collision samples per move.
+    left out of the check; ``samples``: collision samples per move;
+    ``max_step_deg``: the largest change of a joint between two waypoints (a larger
+    one is flailing; the approach from the start posture excepted).
     """
 
     penetration: float = 0.005
@@ -225,6 +227,7 @@ class FeasibilityConfig:
     self_collision: bool = True
     exclude: list[str] = dataclasses.field(default_factory=list)
     samples: int = 10
+    max_step_deg: float = 90.0
 
 
 @dataclasses.dataclass

@@ -61,7 +61,7 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     lines += ["", f"Approach from the start posture: {motion['approach_s']:.2f} s; "
               f"every other move {motion['move_s']:.2f} s; whole motion "
               f"{motion['duration_s']:.1f} s; moves changing a joint by more than "
-              f"90 deg: {motion['moves_over_90_deg']}."]
+              f"{motion['max_step_deg']:g} deg: {motion['moves_over_max_step']}."]
     if col is not None:
         a, b = col["pair"]
         lines += ["", f"Collisions ({col['pairs']} pairs, {col['postures_checked']} "

@@ -125,7 +125,7 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
     """``[feasibility]`` values and the kinds of ``robot.limits`` (the joints and
     numbers are checked against the model when the simulator is built)."""
     f = cfg.feasibility
-    for key in ("penetration", "penalty"):
+    for key in ("penetration", "penalty", "max_step_deg"):
         v = getattr(f, key)
         if not (math.isfinite(v) and v > 0):
             raise ConfigError(f"key 'feasibility.{key}' must be a number > 0, got {v}")

@@ -306,7 +306,8 @@ class Simulator:
         if self.feasibility is None:
             return new
         duration = jnp.where(state.first, self.approach_s, self.move_s)
-        v = self.feasibility.move(state.genes, new.genes - state.genes, duration)
+        v = self.feasibility.move(state.genes, new.genes - state.genes, duration,
+                                  state.first)
         return new.replace(violation=state.violation + v, move_violation=v,
                            first=jnp.bool_(False))
 

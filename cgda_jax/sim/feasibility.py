@@ -14,12 +14,14 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
   unit of the move), so it stays above ``(d_k + d_k+1 - L / samples) / 2``: a lower
   bound of the distance on the whole continuous move, so nothing passes through
   between samples (a long move near an obstacle is judged conservatively);
+- **no flailing**: no joint changes by more than ``max_step`` (90 degrees) between
+  two waypoints (the approach excepted);
 - **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
   ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`).
 
 The violation of a move is a finite, dimensionless number, 0 when feasible:
 ``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
-penetration)``.  The strategies add ``penalty * (1 + violation)`` to an infeasible
+penetration, relu(max |dq| / max_step - 1))``.  The strategies add ``penalty * (1 + violation)`` to an infeasible
 candidate's fitness (`penalized`), so evolution is pushed back into the feasible
 region and an infeasible candidate never meets a tolerance.
 
@@ -40,6 +42,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from typing import Any
+
+import math
 
 import jax
 import jax.numpy as jnp
@@ -82,6 +86,9 @@ class Feasibility:
         self_collision: include the robot's own pairs.
         exclude: geom or obstacle names the collision check leaves out.
         samples: collision samples per move (plus its start posture).
+        max_step: the largest change of a joint (radians) between two waypoints
+            (default 90 degrees; inf: no cap): a larger one is flailing, infeasible.
+            The approach is not capped (its duration keeps it within the limits).
         physics_contacts: leave out the pairs that MuJoCo's physics collides
             (``contype``/``conaffinity``: a dynamic simulation keeps them apart
             itself, e.g. the hand pushing a box); False: every pair.
@@ -104,6 +111,7 @@ class Feasibility:
         exclude: Sequence[str] = (),
         samples: int = 10,
         physics_contacts: bool = False,
+        max_step: float = math.pi / 2,
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
 
@@ -119,6 +127,9 @@ class Feasibility:
         self.penalty = float(penalty)
         if int(samples) < 1:
             raise ValueError(f"feasibility samples must be >= 1, got {samples}")
+        if not max_step > 0:
+            raise ValueError(f"feasibility max_step must be > 0 radians, got {max_step}")
+        self.max_step = float(max_step)
         self.samples = int(samples)
         self.collider = None
         self.overlapping: list[tuple[str, str]] = []
@@ -176,12 +187,16 @@ class Feasibility:
         low = 0.5 * (d[:-1] + d[1:] - rate / self.samples)  # (S, pairs)
         return jnp.maximum(-jnp.min(jnp.minimum(low, d[1:])), 0.0)
 
-    def move(self, q0: Array, dq: Array, duration: Array) -> Array:
+    def move(self, q0: Array, dq: Array, duration: Array,
+             approach: Array | bool = False) -> Array:
         """Violation (scalar, 0 = feasible) of one move from ``q0`` by ``dq``
-        (DoF,) each in ``duration`` seconds."""
+        (DoF,) each in ``duration`` seconds (``approach``: the move from the start
+        posture, which `max_step` does not cap)."""
         over = (jnp.maximum(self.depth(q0, dq) - self.penetration, 0.0)
                 / self.penetration)
-        return jnp.maximum(self.limit_violation(dq, duration), over)
+        flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
+        flail = jnp.where(approach, 0.0, flail)
+        return jnp.maximum(jnp.maximum(self.limit_violation(dq, duration), over), flail)
 
 
 def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:

@@ -201,7 +201,9 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         A JSON-ready dict: ``joints`` (names), ``limits`` (`JointLimits.as_dict`),
         per joint ``peak_speed``, ``peak_acceleration`` (commanded profile),
         ``measured_speed`` / ``peak_effort`` (dynamic replay), ``travel_deg``,
-        ``largest_step_deg``; ``moves_over_90_deg``; ``approach_s``, ``move_s``;
+        ``largest_step_deg``; ``moves_over_max_step`` (moves that change a joint
+        by more than ``max_step_deg``, the feasibility's, default 90);
+        ``approach_s``, ``move_s``;
         ``collisions`` (worst distance, pair, move); ``feasible`` and the reasons
         it is not (``problems``).
     """
@@ -216,6 +218,7 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
     limits = feas.limits if feas is not None else read_limits(
         sim.robot.mj_model, sim.robot.joint_names)
     penetration = float(getattr(feas, "penetration", 0.005))
+    max_step = float(getattr(feas, "max_step", np.pi / 2))
     names = list(sim.robot.joint_names)
     prof = motion_profile(sim, joints)
     peak_v = np.abs(prof.qd).max(axis=0)
@@ -235,7 +238,8 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         "largest_step_deg": dict(zip(names, np.rad2deg(steps[1:].max(0)).tolist()
                                      if len(steps) > 1 else [0.0] * len(names))),
         "approach_deg": dict(zip(names, np.rad2deg(steps[0]).tolist())),
-        "moves_over_90_deg": int(np.sum(np.any(steps[1:] > np.pi / 2, axis=1))),
+        "max_step_deg": float(np.rad2deg(max_step)),
+        "moves_over_max_step": int(np.sum(np.any(steps[1:] > max_step, axis=1))),
     }
     problems = []
     vel, acc, eff = (np.asarray(x, np.float64) for x in
@@ -246,9 +250,9 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
             problems.append(f"{n}: {peak_v[j]:.2f} rad/s over its {vel[j]:g} rad/s")
         if peak_a[j] > acc[j] * tol:
             problems.append(f"{n}: {peak_a[j]:.2f} rad/s^2 over its {acc[j]:g}")
-    if out["moves_over_90_deg"]:
-        problems.append(f"{out['moves_over_90_deg']} move(s) change a joint by more "
-                        "than 90 degrees")
+    if out["moves_over_max_step"]:
+        problems.append(f"{out['moves_over_max_step']} move(s) change a joint by more "
+                        f"than {out['max_step_deg']:g} degrees")
     if sim.mode == "dynamic":
         rep = _dynamic_replay(sim, joints, factor)
         mv = np.nanmax(np.abs(rep["speed"]), axis=0)

@@ -1,0 +1,114 @@
+"""Feasible execution (issue 21): success that a robot could perform, and its cost.
+
+For each execution experiment, R seeds (default 10, in one ``run_trials`` call) run
+twice: with ``strategy.feasibility`` on (the default) and off (the paper's
+unconstrained execution).  Every reported trajectory is then checked independently
+with `cgda_jax.sim.motion.motion_report` (collisions at 4 x the postures, the
+commanded speeds and accelerations, in dynamic mode a MuJoCo C replay at timestep / 4:
+measured speeds, actuator forces, contacts).  A trial counts as a **feasible success**
+when the strategy reports success and the independent check finds no problem: no
+penetration over 5 mm, peak joint speed <= the limit (3 rad/s on TEO), effort <= its
+limit (30 N m), no joint change over 90 degrees between consecutive waypoints.
+
+Targets (issue 21): paint IET kinematic and dynamic >= 9 / 10 feasible successes;
+iron and clean 10 / 10; a feasible run's run time within 2 x the unconstrained one and
+its compile time within 1.5 x.
+
+    python benchmarks/bench_feasibility.py [--trials 10] [--only paint_iet ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+from _common import print_table, write_json
+
+from cgda_jax.builtin import resolve_config
+from cgda_jax.experiment import load_config
+from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
+from cgda_jax.sim.motion import motion_report
+from cgda_jax.strategies.trials import run_trials
+
+EXPERIMENTS = ["clean_ie", "clean_fte", "paint_iet", "clean_ie_dynamic",
+               "paint_iet_dynamic", "move_push_box", "rotate_valve", "iron_ie_xgnitive"]
+TARGETS = {"paint_iet": 9, "paint_iet_dynamic": 9, "iron_ie_xgnitive": 10,
+           "clean_ie": 10, "clean_ie_dynamic": 10, "clean_fte": 10}
+
+
+def run(name: str, trials: int, feasible: bool) -> dict:
+    cfg = load_config(resolve_config(name),
+                      [f"strategy.feasibility={'true' if feasible else 'false'}"])
+    goal, demos, _ = build_goal(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    s = cfg.strategy
+    t0 = time.perf_counter()
+    results = run_trials(s.name, sim, goal, trials, seed=s.seed, algorithm=s.algorithm,
+                         population_size=s.population_size, tolerance=s.tolerance,
+                         max_generations=s.max_generations, chunk_size=s.chunk_size,
+                         **s.options)
+    whole = time.perf_counter() - t0
+    checks = [motion_report(sim, np.asarray(r.joints))
+              if np.all(np.isfinite(r.joints)) else None for r in results]
+    ok = [bool(r.success) for r in results]
+    clean = [c is not None and c["feasible"] for c in checks]
+    pen = [c["collisions"]["penetration_m"] if c and c["collisions"] else 0.0
+           for c in checks if c]
+    speed = [max([*c["peak_speed"].values(), *c.get("measured_speed", {}).values()])
+             for c in checks if c]
+    effort = [max([v for v in c.get("peak_effort", {}).values() if v is not None]
+                  or [0.0]) for c in checks if c]
+    jumps = [c["moves_over_max_step"] for c in checks if c]
+    return {
+        "experiment": name, "feasibility": feasible, "trials": trials,
+        "success": sum(ok), "feasible_success": sum(a and b for a, b in zip(ok, clean)),
+        "max_penetration_mm": 1e3 * max(pen or [0.0]),
+        "max_speed": max(speed or [0.0]), "max_effort": max(effort or [0.0]),
+        "moves_over_90": sum(jumps),
+        "run_s": float(results[0].wall_time_s),
+        "compile_s": float(results[0].compile_time_s), "whole_s": whole,
+        "problems": sorted({p.split(":")[0] if "mm into" not in p else p
+                            for c in checks if c for p in c["problems"]})[:6],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--trials", type=int, default=10)
+    ap.add_argument("--only", nargs="*", default=None)
+    args = ap.parse_args()
+    names = args.only or EXPERIMENTS
+    if "iron_ie_xgnitive" in names and not os.environ.get("CGDA_XGNITIVE_DIR"):
+        print("iron_ie_xgnitive skipped: set CGDA_XGNITIVE_DIR to the xgnitive data")
+        names = [n for n in names if n != "iron_ie_xgnitive"]
+    rows = []
+    for name in names:
+        for feasible in (False, True):
+            row = run(name, args.trials, feasible)
+            print({k: row[k] for k in ("experiment", "feasibility", "success",
+                                       "feasible_success", "run_s", "compile_s")},
+                  flush=True)
+            rows.append(row)
+    for row in rows:
+        if row["feasibility"]:
+            base = next(r for r in rows if r["experiment"] == row["experiment"]
+                        and not r["feasibility"])
+            row["run_ratio"] = row["run_s"] / max(base["run_s"], 1e-9)
+            row["compile_ratio"] = row["compile_s"] / max(base["compile_s"], 1e-9)
+            target = TARGETS.get(row["experiment"])
+            row["target"] = "-" if target is None else (
+                f">= {target}: {'met' if row['feasible_success'] >= target else 'MISSED'}")
+    print_table(rows, ["experiment", "feasibility", "success", "feasible_success",
+                       "max_penetration_mm", "max_speed", "max_effort", "moves_over_90",
+                       "run_s", "compile_s", "run_ratio", "compile_ratio", "target"])
+    for row in rows:
+        if row["problems"]:
+            print(f"{row['experiment']} feasibility={row['feasibility']}: "
+                  f"{row['problems']}")
+    write_json("feasibility", {"rows": rows})
+
+
+if __name__ == "__main__":
+    main()
