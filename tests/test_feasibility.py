@@ -98,7 +98,7 @@ def test_speed_limit_makes_a_fast_move_infeasible(tiny):
     assert float(third.move_violation) == 0.0
     # the profile's speeds against finite differences of its positions
     prof = motion_profile(sim, np.array([[0.0, 0.0, 1.7], [0.4, 0.0, 1.7]]), 2001)
-    seg = slice(2001, 4002)
+    seg = slice(2002, 4003)  # after the approach (2001 samples) and its hold (1)
     fd = np.gradient(prof.q[seg, 0], prof.t[seg])
     np.testing.assert_allclose(fd[5:-5], prof.qd[seg, 0][5:-5], atol=2e-3)
     assert np.abs(prof.qd[seg, 0]).max() == pytest.approx(1.5, rel=1e-3)
