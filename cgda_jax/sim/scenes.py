@@ -62,6 +62,15 @@ def segment_distance2(points: Array, start: Array, end: Array) -> Array:
     products (slow on XLA's CPU back-end under ``vmap``):
     ``|p - start - t d|^2 = |p - start|^2 - 2 t (p - start) . d + t^2 d . d``.
     """
+    rel, d, rel_d, rel2, dd = _segment_terms(points, start, end)
+    t = jnp.clip(rel_d / jnp.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    return jnp.maximum(rel2 - 2.0 * t * rel_d + t * t * dd, 0.0)
+
+
+def _segment_terms(points: Array, start: Array, end: Array):
+    """Per-coordinate terms of the distances from ``points`` (S, 3) to the segments
+    ``start -> end`` ((..., 3) each): ``rel`` (3 x (..., S), p - start), ``d``
+    (..., 3), ``rel . d``, ``|rel|^2`` (..., S) and ``d . d`` (..., 1)."""
     points = jnp.asarray(points)
     start = jnp.asarray(start, points.dtype)
     d = jnp.asarray(end, points.dtype) - start
@@ -69,8 +78,7 @@ def segment_distance2(points: Array, start: Array, end: Array) -> Array:
     rel_d = sum(r * d[..., c, None] for c, r in enumerate(rel))
     rel2 = sum(r * r for r in rel)
     dd = jnp.sum(d * d, axis=-1)[..., None]
-    t = jnp.clip(rel_d / jnp.where(dd > 0, dd, 1.0), 0.0, 1.0)
-    return jnp.maximum(rel2 - 2.0 * t * rel_d + t * t * dd, 0.0)
+    return rel, d, rel_d, rel2, dd
 
 
 def front_segment_distance2(
@@ -86,14 +94,8 @@ def front_segment_distance2(
     closest point of that interval is the unconstrained closest ``t`` clipped into
     it (the squared distance is a convex quadratic in t).
     """
-    points = jnp.asarray(points)
-    start = jnp.asarray(start, points.dtype)
-    f = jnp.asarray(front, points.dtype)
-    d = jnp.asarray(end, points.dtype) - start
-    rel = [points[:, c] - start[..., c, None] for c in range(3)]  # (..., S) each
-    rel_d = sum(r * d[..., c, None] for c, r in enumerate(rel))
-    rel2 = sum(r * r for r in rel)
-    dd = jnp.sum(d * d, axis=-1)[..., None]
+    rel, d, rel_d, rel2, dd = _segment_terms(points, start, end)
+    f = jnp.asarray(front, d.dtype)
     s0 = -sum(r * f[c] for c, r in enumerate(rel))  # side of the start, (..., S)
     sd = jnp.sum(d * f, axis=-1)[..., None]  # its rate along the segment
     safe = jnp.where(sd != 0, sd, 1.0)
