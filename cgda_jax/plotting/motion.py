@@ -81,7 +81,7 @@ def plot_motion(
         dashed.append("joint ranges (top)")
     if velocity is not None and np.any(np.isfinite(velocity)):
         dashed.append("speed limits (bottom)")
-    note = f" (dashed: {', '.join(dashed)})" if dashed else ""
+    note = f"\ndashed: {', '.join(dashed)}" if dashed else ""
     top.set_title((title or "Executed motion and the robot's limits") + note,
                   fontsize=9)
     top.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
