@@ -61,10 +61,11 @@ from jax import Array
 from cgda_jax.sim.chain import body_chain_ops
 from cgda_jax.sim.distance_fns import KINDS, error_bound, pair_distance, swap_needed
 
-__all__ = ["Collider", "Obstacle"]
+__all__ = ["GEOM_KINDS", "Collider", "Obstacle", "geom_radius", "geom_reach"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
-_TYPES = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
+#: MuJoCo geom type id -> the supported kind name (`distance_fns.KINDS`).
+GEOM_KINDS = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
 _SIZE_LEN = {"sphere": 1, "capsule": 2, "box": 3, "cylinder": 2, "plane": 0}
 
 
@@ -200,7 +201,7 @@ class Collider:
         for g in range(m.ngeom):
             if names[g] in exclude or m.geom_rgba[g, 3] == 0:
                 continue
-            if int(m.geom_type[g]) not in _TYPES:
+            if int(m.geom_type[g]) not in GEOM_KINDS:
                 self.skipped.append(names[g])
                 continue
             usable.append(g)
@@ -213,7 +214,7 @@ class Collider:
         const = [g for g in usable if not moving[int(m.geom_bodyid[g])]]
         kept_obs = [o for o in obstacles if o.name not in exclude]
         table_names = [names[g] for g in mov + const] + [o.name for o in kept_obs]
-        table_types = ([_TYPES[int(m.geom_type[g])] for g in mov + const]
+        table_types = ([GEOM_KINDS[int(m.geom_type[g])] for g in mov + const]
                        + [o.type for o in kept_obs])
         sizes = [np.asarray(m.geom_size[g], float) for g in mov + const]
         c_R = [data.geom_xmat[g].reshape(3, 3).copy() for g in const]
@@ -413,7 +414,7 @@ def _worst(d: Array) -> tuple[Array, Array]:
 
 def geom_radius(kind: int, size: np.ndarray) -> float:
     """Radius (m) of a ball about a geom's centre that holds the geom."""
-    kind = _TYPES.get(int(kind), "")
+    kind = GEOM_KINDS.get(int(kind), "")
     size = np.asarray(size, float)
     if kind == "sphere":
         return float(size[0])

@@ -215,7 +215,6 @@ class Simulator:
         self.waypoint_s = (self.physics_steps * self.physics.timestep
                            if mode == "dynamic" else float(waypoint_s))
         self.move_s = float(move_fraction) * self.waypoint_s
-        self._waypoint_s_arg = float(waypoint_s)
         if feasibility is True:
             from cgda_jax.sim.feasibility import Feasibility
 
@@ -249,7 +248,7 @@ class Simulator:
         optimiser may exploit the resolution it was evaluated at."""
         if self.mode != "dynamic":
             return Simulator(self.robot, self.scene, substeps=self.substeps * factor,
-                             waypoint_s=self._waypoint_s_arg,
+                             waypoint_s=self.waypoint_s,
                              move_fraction=self.move_fraction,
                              feasibility=self.feasibility)
         return Simulator(

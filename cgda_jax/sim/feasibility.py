@@ -216,25 +216,14 @@ def _obstacle_args(o: Mapping) -> dict:
                 else o[k]) for k in keys if k in o}
 
 
-def _sdf(kind: str, size: np.ndarray, R: np.ndarray, p: np.ndarray, x: np.ndarray):
-    """NumPy signed distance from points ``x`` (..., 3) to a geom (world frame)."""
-    loc = (x - p) @ R  # into the geom's frame
-    if kind == "sphere":
-        return np.linalg.norm(loc, axis=-1) - size[0]
-    if kind == "capsule":
-        z = np.clip(loc[..., 2], -size[1], size[1])
-        loc = loc.copy()
-        loc[..., 2] -= z
-        return np.linalg.norm(loc, axis=-1) - size[0]
-    if kind in ("box", "cylinder"):
-        if kind == "box":
-            q = np.abs(loc) - size[:3]
-        else:
-            q = np.stack([np.linalg.norm(loc[..., :2], axis=-1) - size[0],
-                          np.abs(loc[..., 2]) - size[1]], -1)
-        return (np.linalg.norm(np.maximum(q, 0.0), axis=-1)
-                + np.minimum(q.max(axis=-1), 0.0))
-    return loc[..., 2]  # plane: solid below its z = 0
+def _sdf(kind: str, size, R: np.ndarray, p: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Signed distances (K,) from points ``x`` (K, 3) to a geom (world frame ``R``,
+    ``p``): `cgda_jax.sim.distance_fns.sdf_local` in the geom's frame."""
+    from cgda_jax.sim.distance_fns import sdf_local
+
+    loc = jnp.asarray((x - p) @ R, jnp.float32)
+    size = jnp.asarray(np.resize(np.asarray(size, np.float32), 3))
+    return np.asarray(jax.vmap(lambda y: sdf_local(kind, size, y))(loc), np.float64)
 
 
 def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
@@ -251,7 +240,7 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     Returns:
         (kept pair names, overlapping pair names).
     """
-    from cgda_jax.sim.collision import geom_radius
+    from cgda_jax.sim.collision import GEOM_KINDS, geom_radius
 
     if collider.n_pairs == 0:
         return [], []
@@ -272,12 +261,9 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
         data.qpos[robot.qpos_adr] = q
         mujoco.mj_kinematics(m, data)
         centres[i] = data.geom_xpos
-    mujoco.mj_kinematics(m, data)  # leave it at the last node; const geoms below
-    data.qpos[:] = qpos0
+    data.qpos[:] = qpos0  # the constant geoms' poses, below
     mujoco.mj_kinematics(m, data)
     spacing = (upper - lower) / (n - 1)
-    kinds = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k
-             for k in ("sphere", "capsule", "box", "cylinder", "plane")}
     keep = []
     for k, (a, b) in enumerate(collider.pair_names):
         if (a, b) in overlapping:
@@ -292,7 +278,7 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
             lb = np.linalg.norm(centres[:, ga] - centres[:, gb], axis=-1) - ra - rb
         elif b in gid:
             gb = gid[b]
-            lb = _sdf(kinds[int(m.geom_type[gb])], m.geom_size[gb],
+            lb = _sdf(GEOM_KINDS[int(m.geom_type[gb])], m.geom_size[gb],
                       data.geom_xmat[gb].reshape(3, 3), data.geom_xpos[gb],
                       centres[:, ga]) - ra
         else:

@@ -98,14 +98,12 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     feas = getattr(sim, "feasibility", None)
     collider = getattr(feas, "collider", None)
     if collider is None:
-        from cgda_jax.sim.collision import Collider
         from cgda_jax.sim.execute import scene_obstacles
         from cgda_jax.sim.feasibility import Feasibility
 
         collider = Feasibility(sim.robot, obstacles=scene_obstacles(sim.scene)).collider
         if collider is None:
             return None
-        assert isinstance(collider, Collider)
     q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
                             np.asarray(joints, np.float64)])
     k = max(2, int(sim.substeps) * int(factor))

@@ -228,8 +228,7 @@ class PlanBase:
 
     def point_features(self, state: Any, pop_u: jax.Array) -> jax.Array:
         """Features (P, F) after one step from `state` to each posture of `pop_u` (P, DoF)."""
-        q = self.joints(pop_u)
-        return self.map_population(lambda w: self.sim.step(state, w)[1], q)
+        return self.point_outcome(state, pop_u)[0]
 
     @property
     def feasibility(self) -> Any:
