@@ -406,3 +406,17 @@ def test_algorithm_by_name_class_or_configured_instance(sim, goal):
         make_algorithm(dict, 8, 3)
     with pytest.raises(ValueError, match="already built"):
         make_algorithm(inst, 8, 3, algorithm_kwargs={"std_schedule": 0.1})
+
+
+def test_iet_backtracks_go_further_back_when_a_point_keeps_missing(paint_sim):
+    # The last goal point (150 % painted) is unreachable: each backtrack in a row from
+    # it re-evolves one more point before it (1, then 2, then 3 points back), so every
+    # earlier point is tried again; one point back each time never reaches point 0
+    # (seed 0: tries [1, 2, 4, 3]).
+    goal = np.array([[0.0], [25.0], [50.0], [150.0]])
+    res = run_iet(paint_sim, goal, seed=0, restarts=0, backtracks=3,
+                  population_size=12, tolerance=1.0, max_generations=60)
+    assert res.info["backtracks_used"] == 3
+    assert res.info["point_tries"] == [2, 3, 4, 4]
+    np.testing.assert_allclose(res.features[:3], goal[:3], atol=1e-4)
+    assert not res.success

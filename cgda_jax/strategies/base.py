@@ -244,6 +244,18 @@ class PlanBase:
 
         return penalized(fitness, violation, self.feasibility.penalty)
 
+    def least_motion(self, state: Any, pop_u: jax.Array, error: jax.Array) -> jax.Array:
+        """With feasibility: a point's ``error`` (P,) where it meets the tolerance
+        replaced by ``tolerance * m / (m + 1)``, ``m`` the joint motion (radians,
+        Euclidean) from the state's posture: every candidate that meets the
+        tolerance still does, and the one that moves least ranks first (no
+        flailing: the committed posture is the nearest good one the generation
+        found).  Without feasibility: ``error`` as is (the paper's fitness)."""
+        if self.feasibility is None:
+            return error
+        m = jnp.linalg.norm(self.joints(pop_u) - state.genes, axis=-1)
+        return jnp.where(error < self.tolerance, self.tolerance * m / (m + 1.0), error)
+
     def point_outcome(self, state: Any, pop_u: jax.Array) -> tuple[jax.Array, Any]:
         """Features (P, F) and the move's violation (P,) (None without
         feasibility) after one step from `state` to each posture of `pop_u`."""
@@ -268,15 +280,16 @@ class PlanBase:
         """Fitness of one posture (P, DoF) -> (P,) stepped to from `state`.
 
         The Euclidean distance of its features to `goal_point` (F,); with `prefix_sq`
-        (the summed squared error of earlier points) ``sqrt(prefix_sq + error^2)``.
+        (the summed squared error of earlier points) ``sqrt(prefix_sq + error^2)``;
+        with feasibility below the tolerance ranked by joint motion
+        (`least_motion`) and penalized where infeasible (`penalize`).
         """
 
         def fitness_u(pop):
             feats, violation = self.point_outcome(state, pop)
-            if prefix_sq is None:
-                f = jnp.linalg.norm(feats - goal_point, axis=-1)
-            else:
-                f = jnp.sqrt(prefix_sq + jnp.sum((feats - goal_point) ** 2, axis=-1))
+            err = self.least_motion(state, pop,
+                                    jnp.linalg.norm(feats - goal_point, axis=-1))
+            f = err if prefix_sq is None else jnp.sqrt(prefix_sq + err**2)
             return self.penalize(f, violation)
 
         return fitness_u

@@ -58,6 +58,8 @@ class IETState:
             backtrack); the next one of point i is number ``tries[i]``.
         restart: restarts of the current point since it was (re)entered.
         backtracks: backtracks spent.
+        stuck, depth: the point that made the last backtrack and how many points
+            back it went (a point that keeps missing goes back further each time).
         best_u, best_fitness: best genes / fitness over the tries of the current
             point since it was (re)entered (its restarts); the committed posture.
         sim_states: simulator state before each point (stacked, N + 1).
@@ -80,6 +82,8 @@ class IETState:
     tries: jax.Array
     restart: jax.Array
     backtracks: jax.Array
+    stuck: jax.Array
+    depth: jax.Array
     best_u: jax.Array
     best_fitness: jax.Array
     sim_states: Any
@@ -111,7 +115,8 @@ class IETPlan(PlanBase):
             many times; the best over all restarts is kept.
         backtracks: when a point still misses after its restarts, the previous point
             is re-evolved (fresh key) and the point tried again, up to this many times
-            per run (escapes prefixes that leave no way to the goal, e.g. every
+            per run; the k-th backtrack in a row from the same point goes k points
+            back (escapes prefixes that leave no way to the goal, e.g. every
             remaining square only reachable by sweeping across another one).
         warm_start: the first evolution of each point starts at the previous
             point's committed posture (point 0: the start posture) instead of the
@@ -207,7 +212,7 @@ class IETPlan(PlanBase):
             samples = jnp.zeros((n, 0, self.n_dof))
         s = IETState(
             evo=None, key=key, point=zero_i, tries=jnp.zeros((n,), jnp.int32),
-            restart=zero_i, backtracks=zero_i,
+            restart=zero_i, backtracks=zero_i, stuck=zero_i - 1, depth=zero_i,
             best_u=jnp.zeros((self.n_dof,), jnp.float32),
             best_fitness=jnp.asarray(jnp.inf, jnp.float32),
             sim_states=jax.tree.map(
@@ -260,8 +265,12 @@ class IETPlan(PlanBase):
             return self._start(s, i, s.restart + 1)
 
         def backtrack(s):
-            return self._start(s.replace(backtracks=s.backtracks + 1), i - 1,
-                               jnp.zeros_like(i))
+            # the k-th backtrack in a row from the same point goes k points back:
+            # re-evolving only the previous point rarely changes what is left
+            # (which squares remain unpainted, where the arm stands)
+            depth = jnp.where(s.stuck == i, s.depth + 1, 1)
+            s = s.replace(backtracks=s.backtracks + 1, stuck=i, depth=depth)
+            return self._start(s, jnp.maximum(i - depth, 0), jnp.zeros_like(i))
 
         def stop(s):  # nothing valid to commit: every candidate diverged
             return s.replace(stopped=jnp.asarray(True))
@@ -388,7 +397,9 @@ def run_iet(
             without samples, a random start mean.
         backtracks: a point that still missed after its restarts makes the run
             re-evolve the previous point (fresh key) and try again, up to this many
-            times per run. 0 and 0 give the paper's plain Algorithm 1.
+            times per run; the k-th backtrack in a row from the same point
+            re-evolves the k previous points. 0 and 0 give the paper's plain
+            Algorithm 1.
         warm_start: start each point's first evolution at the previous point's
             posture (point 0: the start posture) instead of the middle of the joint
             ranges; for goals reached by small continuous moves (pushing an object).
