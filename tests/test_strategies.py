@@ -420,3 +420,19 @@ def test_iet_backtracks_go_further_back_when_a_point_keeps_missing(paint_sim):
     assert res.info["point_tries"] == [2, 3, 4, 4]
     np.testing.assert_allclose(res.features[:3], goal[:3], atol=1e-4)
     assert not res.success
+
+
+def test_iet_stagnation_ends_a_stuck_evolution_early(paint_sim):
+    # 150 % painted cannot be met and the painted share is discrete: the evolution
+    # of point 1 stops improving at once; with stagnation it ends after 5 generations
+    # without improvement instead of spending all 60.
+    goal = np.array([[0.0], [150.0]])
+    kw = {"restarts": 0, "backtracks": 0, "population_size": 8, "tolerance": 1.0,
+          "max_generations": 60}
+    stuck = run_iet(paint_sim, goal, seed=0, stagnation=5, **kw)
+    full = run_iet(paint_sim, goal, seed=0, stagnation=None, **kw)
+    assert full.info["point_generations"][1] == 60
+    assert 5 <= stuck.info["point_generations"][1] < 20
+    assert stuck.info["stagnation"] == 5 and not stuck.success
+    with pytest.raises(ValueError, match="stagnation"):
+        run_iet(paint_sim, goal, stagnation=0, **kw)

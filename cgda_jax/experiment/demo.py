@@ -24,7 +24,7 @@ DEMO_EXPERIMENTS: dict[str, dict[str, Any]] = {
         "data": {"source": "paint_ramp", "goal_points": 17},
         "scene": {"kind": "paint"},
         "strategy": {"name": "iet", "population_size": 32, "tolerance": 3.0,
-                     "max_generations": 200},
+                     "max_generations": 200, "options": {"backtracks": 24}},
     },
 }
 

@@ -32,6 +32,7 @@ from cgda_jax.strategies.base import (
     points_independent,
     ragged_rows,
 )
+from cgda_jax.strategies.ie import STAGNATION
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
@@ -135,8 +136,12 @@ class IETPlan(PlanBase):
     name = "iet"
 
     def __init__(self, sim, goal, *, restarts=0, backtracks=0, warm_start=False,
-                 restart_samples=RESTART_SAMPLES, **kwargs):
+                 restart_samples=RESTART_SAMPLES, stagnation=None, **kwargs):
         super().__init__(sim, goal, int(sim.n_dof), **kwargs)
+        if stagnation is not None and (isinstance(stagnation, bool)
+                                       or int(stagnation) < 1):
+            raise ValueError(f"stagnation must be >= 1 or None; got {stagnation!r}")
+        self.stagnation = None if stagnation is None else int(stagnation)
         if int(restart_samples) < 0:
             raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
         self.restart_samples = (int(restart_samples) if points_independent(sim)
@@ -161,7 +166,10 @@ class IETPlan(PlanBase):
 
         def stop(evo):
             own_sq = evo.best_fitness**2 - prefix_sq
-            return (own_sq < tol_sq) | (evo.generation >= self.max_generations)
+            out = (own_sq < tol_sq) | (evo.generation >= self.max_generations)
+            if self.stagnation is not None:
+                out = out | (evo.stall >= self.stagnation)
+            return out
 
         return stop
 
@@ -340,6 +348,7 @@ class IETPlan(PlanBase):
             points_without_valid=[n_done] if bool(final["stopped"]) else [],
             restarts=self.restarts,
             warm_start=self.warm_start,
+            stagnation=self.stagnation,
             backtracks=self.backtracks,
             backtracks_used=int(final["backtracks"]),
             point_tries=final["tries"].tolist(),
@@ -374,6 +383,7 @@ def run_iet(
     backtracks: int = BACKTRACKS,
     warm_start: bool = False,
     restart_samples: int = RESTART_SAMPLES,
+    stagnation: int | None = STAGNATION,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -406,6 +416,10 @@ def run_iet(
         restart_samples: postures sampled once per run (kinematic mode, stateless
             scene; one batched call inside the compiled init) whose nearest to each
             goal point seed its restarts with a local search; 0: off.
+        stagnation: an evolution of a point also stops after this many
+            generations without improvement (None: only at `max_generations`), so
+            a point stuck where it cannot meet epsilon restarts or backtracks
+            early instead of spending its whole budget.
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
 
@@ -423,6 +437,7 @@ def run_iet(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         restarts=restarts, backtracks=backtracks, warm_start=warm_start,
-        restart_samples=restart_samples, progress_fn=progress_fn, devices=devices,
+        restart_samples=restart_samples, stagnation=stagnation,
+        progress_fn=progress_fn, devices=devices,
     )
     return result

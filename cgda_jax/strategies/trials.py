@@ -25,7 +25,8 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
                     "refine": "none", "reach_check": False,
                     "restart_samples": ie.RESTART_SAMPLES}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
-                      "warm_start": False, "restart_samples": iet.RESTART_SAMPLES}),
+                      "warm_start": False, "restart_samples": iet.RESTART_SAMPLES,
+                      "stagnation": iet.STAGNATION}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
                       "stagnation": None}),
 }
