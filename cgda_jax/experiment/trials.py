@@ -193,9 +193,14 @@ def run_trials_experiment(
         The summary: ``trials``, ``successes``, ``success_rate``, ``wilson95``, ...
 
     Raises:
-        ConfigError: a recognition config or a bad `n_trials` (`check_trials`).
+        ConfigError: a recognition config, a bad `n_trials` (`check_trials`) or
+            anything `cgda_jax.experiment.check_experiment` refuses (the seed range,
+            the batch's size, ...).
     """
+    from cgda_jax.experiment.validate import check_experiment
+
     n = check_trials(cfg, n_trials)
+    check_experiment(cfg, trials=n)  # seeds, sizes, options: before any program
     t0 = time.perf_counter()
     seeds = [cfg.strategy.seed + i for i in range(n)]
     records = trial_records(cfg, seeds, progress_fn)
