@@ -166,7 +166,8 @@ def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
 
 
 #: Which config key a robot-building message is about (first matching prefix).
-_ROBOT_KEYS = (("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
+_ROBOT_KEYS = (("kinematic mode", "robot.mode"), ("model", "robot.model"),
+               ("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
                ("site", "robot.marker_site"), ("keyframe", "robot.keyframe"))
 
 
