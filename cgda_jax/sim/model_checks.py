@@ -45,15 +45,16 @@ _OBJECTS = {
     "mat": (mujoco.mjtObj.mjOBJ_MATERIAL, "nmat"),
     "pair": (mujoco.mjtObj.mjOBJ_PAIR, "npair"),
 }
-#: Fields an MJCF file sets directly (reported before the fields derived from them).
-_GIVEN = frozenset({
-    "body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass", "body_inertia",
-    "geom_size", "geom_pos", "geom_quat", "geom_friction", "jnt_pos", "jnt_axis",
-    "jnt_range", "jnt_stiffness", "jnt_margin", "site_pos", "site_quat", "site_size",
-    "dof_damping", "dof_armature", "dof_frictionloss", "actuator_gainprm",
-    "actuator_ctrlrange", "actuator_forcerange", "actuator_gear", "tendon_range",
-    "tendon_stiffness", "qpos0", "qpos_spring", "key_qpos", "key_ctrl", "eq_data",
-})
+#: Fields an MJCF file sets directly, reported before the fields derived from them
+#: (geoms before the masses and inertias MuJoCo derives from their sizes).
+_GIVEN = (
+    "geom_size", "geom_pos", "geom_quat", "geom_friction", "body_pos", "body_quat",
+    "jnt_pos", "jnt_axis", "jnt_range", "jnt_stiffness", "jnt_margin", "site_pos",
+    "site_quat", "site_size", "dof_damping", "dof_armature", "dof_frictionloss",
+    "actuator_gainprm", "actuator_ctrlrange", "actuator_forcerange", "actuator_gear",
+    "tendon_range", "tendon_stiffness", "qpos0", "qpos_spring", "key_qpos",
+    "key_ctrl", "eq_data", "body_mass", "body_inertia", "body_ipos", "body_iquat",
+)
 _WORDS = {"jnt": "joint", "eq": "equality", "cam": "camera", "mat": "material",
           "dof": "joint", "key": "keyframe"}
 
@@ -88,7 +89,8 @@ def check_model_numbers(m: mujoco.MjModel, source: str = "the model") -> None:
             raise ValueError(f"model {source}: option {field} = {value.tolist()} is "
                              "not a finite float32 number")
     # the numbers an MJCF file gives first, then what MuJoCo derives from them
-    fields = sorted(dir(m), key=lambda f: (f not in _GIVEN, f))
+    rank = {f: i for i, f in enumerate(_GIVEN)}
+    fields = sorted(dir(m), key=lambda f: (rank.get(f, len(rank)), f))
     for field in fields:
         if field.startswith("_"):
             continue
