@@ -17,8 +17,9 @@ compiled:
 A trial's result does not depend on the batch it runs in: the vmapped programs of
 two or more trials give each trial the same bits whatever the batch size and the
 other seeds (measured: batches of 2, 3, 4 and 8 holding seed 2, the shrinking
-driver and the lock-step one; tests/test_trials_batching.py), so the batch never
-shrinks below 2. A single run (``run_fte(seed=s)``, one key through `runner.drive`)
+driver, the lock-step one and IE's pooled points; tests/test_trials_batching.py),
+so the batch never shrinks below 2 (a lock-step "batch" of one, `runner.drive` with
+one key, is the single run). A single run (``run_fte(seed=s)``, one key through `runner.drive`)
 is the unbatched program: XLA fuses and rounds it differently in the last bits
 (from about the second generation, 1e-6 in the fitness), and the rank-based
 selection of an evolution strategy can turn that into another search path, so a
