@@ -46,6 +46,7 @@ import jax
 import jax.numpy as jnp
 
 from cgda_jax.checks import check_finite, is_traced
+from cgda_jax.sizes import check_elements
 
 __all__ = ["dtw", "dtw_multi", "euclidean", "resample", "soft_dtw"]
 
@@ -331,6 +332,8 @@ def resample(x: jax.Array, n: int) -> jax.Array:
     t_len = x2.shape[0]
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
+    check_elements(int(n) * x2.shape[1], "n", f"{int(n):,} samples x {x2.shape[1]} "
+                   "features")
     if t_len == n:
         out = x2
     elif t_len < 2:

@@ -41,9 +41,11 @@ __all__ = [
     "INT32_ELEMENTS",
     "MAX_DEMO_SAMPLES",
     "MAX_DTW_CELLS",
+    "MAX_KNOTS",
     "MEMORY_FRACTION",
     "SizeError",
     "available_memory",
+    "check_elements",
     "check_estimate",
     "check_processes",
     "check_recognition",
@@ -63,6 +65,9 @@ MEMORY_FRACTION = 0.8
 MAX_DTW_CELLS = 10**12
 #: Samples of one demonstration (9 hours at 30 Hz).
 MAX_DEMO_SAMPLES = 1_000_000
+#: Knots of one generalization: its RBF system is knots x knots (float64: 800 MB
+#: and about 1e12 / 3 operations to solve at this size).
+MAX_KNOTS = 10_000
 #: Memory a process holds before its first program (Python, JAX, XLA, MuJoCo).
 BYTES_PER_PROCESS = 600 * 2**20
 
@@ -183,6 +188,23 @@ def check_estimate(est: Estimate, name: str, memory: int | None | str = "now") -
         raise SizeError(
             f"{name}: {est.what} needs about {gib(est.nbytes)} of memory, more than "
             f"{MEMORY_FRACTION:.0%} of the {gib(mem)} available{hint}")
+
+
+def check_elements(count: int, name: str, what: str, itemsize: int = _FLOAT) -> None:
+    """One array of `count` elements (of `itemsize` bytes) within XLA's 32-bit size
+    and the memory; `what` describes it (``"4 actions x 1e9 samples x 3 features"``).
+
+    Raises:
+        SizeError: naming `name`.
+    """
+    nbytes = int(count) * int(itemsize)
+    if count > INT32_ELEMENTS:
+        raise SizeError(f"{name}: {what} is one array of {count:.3g} elements, beyond "
+                        "XLA's 32-bit limit of 2**31 - 1")
+    mem = available_memory()
+    if mem is not None and nbytes > MEMORY_FRACTION * mem:
+        raise SizeError(f"{name}: {what} needs about {gib(nbytes)}, more than "
+                        f"{MEMORY_FRACTION:.0%} of the {gib(mem)} available")
 
 
 def run_estimate(

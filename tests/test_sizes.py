@@ -170,3 +170,19 @@ def test_cli_dry_run_refuses_sizes_by_name(env, args, words):
     err = one_error(cgda(env, "run", *args, "--dry-run"))
     for w in words:
         assert w in err
+
+
+def test_generalization_and_resampling_sizes_are_refused_by_name():
+    from cgda_jax import generalize, resample
+    from cgda_jax.datasets import clean_circle_demos
+
+    demos = clean_circle_demos(n=2, seed=0)
+    with pytest.raises(SizeError, match=r"interval_s: 1e-06 s cuts the .* into "
+                       r"[\d,]+ intervals, more than 10,000"):
+        generalize(demos, interval_s=1e-6)
+    action = generalize(demos, interval_s=1.0)
+    with pytest.raises(SizeError, match=r"n: 3,000,000,000 samples x \d+ knots is one "
+                       r"array .* 32-bit"):
+        action.sample(3 * 10**9)
+    with pytest.raises(SizeError, match=r"n: 1,000,000,000 samples x 3 features"):
+        resample(np.zeros((5, 3), np.float32), 10**9)

@@ -26,9 +26,10 @@ from cgda_jax.experiment.config import (
     ExperimentConfig,
     StrategyConfig,
 )
+from cgda_jax.sizes import MAX_KNOTS
 
 #: Intervals of one generalization (mean demonstration duration / ``interval_s``).
-MAX_INTERVALS = 10_000
+MAX_INTERVALS = MAX_KNOTS
 
 
 def _choice(value: str, options: Sequence[str], key: str) -> None:
