@@ -32,8 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.checks import FLOAT32_MAX, check_finite, is_traced
-from cgda_jax.sizes import MAX_KNOTS, SizeError, check_elements
 from cgda_jax.data import Demonstration, validate_demonstrations
+from cgda_jax.sizes import MAX_KNOTS, SizeError, check_elements
 
 __all__ = [
     "GeneralizedAction",

@@ -37,12 +37,12 @@ import pathlib
 
 __all__ = [
     "BYTES_PER_PROCESS",
-    "Estimate",
     "INT32_ELEMENTS",
     "MAX_DEMO_SAMPLES",
     "MAX_DTW_CELLS",
     "MAX_KNOTS",
     "MEMORY_FRACTION",
+    "Estimate",
     "SizeError",
     "available_memory",
     "check_elements",
