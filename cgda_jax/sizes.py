@@ -346,6 +346,7 @@ def check_processes(processes: int, run_bytes: int = 0, name: str = "--processes
     nbytes = here * (BYTES_PER_PROCESS + int(run_bytes) // max(p, 1))
     mem = available_memory()
     if mem is not None and nbytes > MEMORY_FRACTION * mem:
-        raise SizeError(f"{name} {p}: {here} process{'es' * (here != 1)} need about "
+        raise SizeError(f"{name} {p}: {here} process{'es' * (here != 1)} "
+                        f"need{'s' * (here == 1)} about "
                         f"{gib(nbytes)} of memory, more than {MEMORY_FRACTION:.0%} of "
                         f"the {gib(mem)} available")

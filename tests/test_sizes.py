@@ -65,7 +65,7 @@ def test_processes_against_cores_and_memory():
                        rf"machine gives this process {sizes.cores()} core"):
         sizes.check_processes(sizes.cores() + 1)
     sizes.check_processes(sizes.cores() + 1, local=False)  # spread over a cluster
-    with pytest.raises(SizeError, match="--processes 1: 1 process need about"):
+    with pytest.raises(SizeError, match="--processes 1: 1 process needs about"):
         sizes.check_processes(1, run_bytes=10**15)
 
 
