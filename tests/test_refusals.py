@@ -17,6 +17,7 @@ from cgda_jax import MarkerScene, ObjectScene, Robot, Simulator, model_path
 from cgda_jax.cli import main
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+EXP = REPO / "experiments"  # this checkout's configs, not an installed copy
 TINY = (REPO / "models" / "tiny_arm.xml").read_text()
 JOINTS = ["yaw", "shoulder", "elbow"]
 ON_TINY = ["--set", 'robot.joints=["yaw", "shoulder", "elbow"]', "--set",
@@ -31,7 +32,8 @@ def _cache(tmp_path_factory, monkeypatch):
 def dry_run_error(capsys, name, *sets) -> str:
     """``cgda run NAME --dry-run --set ...``: status 2 and one line naming why."""
     args = [a for s in sets for a in ("--set", s)] if sets and "=" in sets[0] else []
-    code = main(["run", name, "--dry-run", *(args or sets)])
+    config = REPO / "experiments" / f"{name}.toml"  # this checkout's, not installed
+    code = main(["run", str(config), "--dry-run", *(args or sets)])
     err = capsys.readouterr().err
     assert code == 2, err
     assert err.count("\n") == 1 and err.startswith("cgda: error:"), err
@@ -81,7 +83,7 @@ def test_every_strategy_keyword_has_a_kind():
 
 def test_options_that_need_independent_points_are_refused_in_the_dry_run(capsys):
     err = dry_run_error(capsys, "paint_iet", 'strategy.name="ie"',
-                        'strategy.options.refine="adam"')
+                        'strategy.options={ refine = "adam" }')
     assert "key 'strategy.options.refine'" in err and "independent points" in err
 
 
@@ -181,11 +183,12 @@ def env():
 
 
 @pytest.mark.parametrize("args, words", [
-    (["move_push_box", "--set", 'robot.mode="kinematic"'],
+    ([str(EXP / "move_push_box.toml"), "--set", 'robot.mode="kinematic"'],
      ["key 'robot.mode'", "feature body 'box'", "robot.mode = \"dynamic\""]),
-    (["clean_ie", "--set", "strategy.options.restarts=-1"],
+    ([str(EXP / "clean_ie.toml"), "--set", "strategy.options.restarts=-1"],
      ["key 'strategy.options.restarts'"]),
-    (["clean_ie", "--set", "strategy.tolerance=inf"], ["key 'strategy.tolerance'"]),
+    ([str(EXP / "clean_ie.toml"), "--set", "strategy.tolerance=inf"],
+     ["key 'strategy.tolerance'"]),
 ])
 def test_cli_refusals_are_one_line(env, args, words):
     proc = subprocess.run([sys.executable, "-m", "cgda_jax.cli", "run", *args,

@@ -16,6 +16,7 @@ from cgda_jax import MarkerScene, Robot, Simulator, model_path, sizes
 from cgda_jax.sizes import SizeError
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+EXP = REPO / "experiments"  # this checkout's configs, not an installed copy
 JOINTS = ["yaw", "shoulder", "elbow"]
 
 
@@ -150,20 +151,23 @@ def test_cli_refuses_100000_trials_before_the_folder_or_xla(env, tmp_path):
     """It aborted inside XLA (SIGABRT, 32 lines of C++), leaving a lock and a
     temporary folder; the dry-run called it valid."""
     out = tmp_path / "out"
-    err = one_error(cgda(env, "run", "clean_ie", "--trials", 100000, "--out", out,
-                         "--quiet"))
+    err = one_error(cgda(env, "run", EXP / "clean_ie.toml", "--trials", 100000,
+                         "--out", out, "--quiet"))
     assert "--trials: 100,000 trials" in err and "32-bit" in err and "fit" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no folder, lock, .tmp
-    err = one_error(cgda(env, "run", "clean_ie", "--dry-run", "--trials", 10**9))
+    err = one_error(cgda(env, "run", EXP / "clean_ie.toml", "--dry-run", "--trials",
+                         10**9))
     assert "--trials: 1,000,000,000 trials" in err
 
 
 @pytest.mark.parametrize("args, words", [
-    (["clean_ie", "--trials", "2", "--set", "strategy.seed=4294967295"],
+    ([str(EXP / "clean_ie.toml"), "--trials", "2", "--set",
+      "strategy.seed=4294967295"],
      ["strategy.seed", "4294967296", "32-bit"]),
-    (["move_push_box", "--set", "data.duration_s=1e9"],
+    ([str(EXP / "move_push_box.toml"), "--set", "data.duration_s=1e9"],
      ["data.duration_s", "3.45e+10 samples per demonstration"]),
-    (["clean_ie", "--trials", "4", "--processes", str(sizes.cores() + 1)],
+    ([str(EXP / "clean_ie.toml"), "--trials", "4", "--processes",
+      str(sizes.cores() + 1)],
      [f"--processes {sizes.cores() + 1}", "core"]),
 ])
 def test_cli_dry_run_refuses_sizes_by_name(env, args, words):
