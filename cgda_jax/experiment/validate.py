@@ -96,7 +96,7 @@ def _check_object_demos(cfg: ExperimentConfig) -> None:
     try:
         check_samples(count, "key 'data.duration_s'",
                       f"{duration:g} s at {RATE_HZ:g} Hz", n=d.n_demos,
-                      width=2 if d.source == "move_box" else 1)
+                      width=3 if d.source == "move_box" else 1)
     except SizeError as err:
         raise ConfigError(str(err)) from None
     n = (duration + 1.6) / d.interval_s
