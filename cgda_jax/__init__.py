@@ -92,14 +92,14 @@ _LAZY.update({
 })
 
 
-_SUBMODULES = ("checks", "datasets")
+_SUBMODULES = ("checks", "datasets", "sizes")
 
 __all__: list[str] = ["__version__", *_LAZY, *_SUBMODULES]
 
 
 def __getattr__(name: str):
-    """Import a public name (or the ``checks`` / ``datasets`` module) on first
-    access."""
+    """Import a public name (or the ``checks`` / ``datasets`` / ``sizes`` module) on
+    first access."""
     if name in _SUBMODULES:
         module = _importlib.import_module(f"cgda_jax.{name}")
     elif name in _LAZY:
@@ -137,7 +137,9 @@ _sys.modules[__name__].__class__ = _Package
 
 
 if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
-    from cgda_jax import checks as checks, datasets as datasets  # noqa: F401
+    from cgda_jax import (  # noqa: F401
+        checks as checks, datasets as datasets, sizes as sizes,
+    )
     from cgda_jax.data import (  # noqa: F401
         Demonstration, load_csv, load_npz, load_xgnitive, save_csv, save_npz,
         validate_demonstrations,

@@ -10,6 +10,21 @@ local costs of a diagonal are computed inside the step from ``x`` and a reversed
 padded copy of ``y`` (a contiguous ``dynamic_slice``), so the ``N x M`` cost matrix is
 never materialised.
 
+Every finite input, however large or small: each function scales its inputs by a
+power of two (exact) so that their largest magnitude is in [1, 2) (`dtw`: per
+feature, the others: per pair), computes there, and scales the result back. So no
+local cost, square or accumulated cost overflows while the distance itself fits the
+dtype, the "unreachable" border value is always above every reachable cost, and tiny
+inputs (1e-30) do not vanish in their squares. A distance beyond the dtype's range
+(``dtw_multi`` of two float32 trajectories 3e38 apart) is refused by an eager call
+(``ValueError`` naming the function) and is ``inf`` under ``jit``. Two bounds
+remain, both far below float32's own rounding of the inputs: values below the
+smallest normal number (1.2e-38 in float32) count as 0 (XLA on a CPU flushes them),
+and a value more than 2**126 times smaller than the largest of its feature (`dtw`)
+or pair (the others) counts as 0; either changes a result by at most
+``(N + M) * sqrt(F) * 2**-124 * max|x|, |y|``. Float16 / bfloat16 inputs are computed
+in float32.
+
 Non-finite inputs: an eager call with a NaN or an infinity in ``x`` or ``y`` raises
 ``ValueError`` naming the input and the index of the bad value; a traced call (under
 ``jit``, ``vmap``, ``scan``) returns NaN instead, without a host sync.  Wrap a jitted
@@ -30,11 +45,14 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
-from cgda_jax.checks import check_finite
+from cgda_jax.checks import check_finite, is_traced
+from cgda_jax.sizes import check_elements
 
 __all__ = ["dtw", "dtw_multi", "euclidean", "resample", "soft_dtw"]
 
 # A large finite value for "unreachable" cells: inf would turn into NaN under grad.
+# The inputs are scaled to magnitudes below 2 first (`_scale_exponents`), so every
+# reachable accumulated cost is below 4 * sqrt(F) * (N + M), far below it.
 _BIG = 1e30
 
 
@@ -61,8 +79,45 @@ def _pair(
         raise ValueError(
             f"x and y have different feature counts: x {x.shape}, y {y.shape}"
         )
-    dtype = jnp.result_type(x, y)
+    dtype = jnp.result_type(x, y, jnp.float32)  # float16 / bfloat16 in float32
     return x.astype(dtype), y.astype(dtype)
+
+
+def _pow2(e: jax.Array, dtype) -> jax.Array:
+    """``2.0 ** e`` exactly, built from its bits (``e`` inside the dtype's normal
+    exponent range)."""
+    info = jnp.finfo(dtype)
+    bias = int(info.maxexp) - 1
+    int_t = jnp.int64 if jnp.dtype(dtype).itemsize == 8 else jnp.int32
+    bits = (e.astype(int_t) + bias) << int(info.nmant)
+    return jax.lax.bitcast_convert_type(bits, dtype)
+
+
+def _times_pow2(v: jax.Array, k: jax.Array) -> jax.Array:
+    """``v * 2**k`` exactly (but for over- / underflow of the result), in two
+    factors so that each is a normal number of the dtype."""
+    half = k // 2
+    return v * _pow2(half, v.dtype) * _pow2(k - half, v.dtype)
+
+
+def _scale_exponents(x: jax.Array, y: jax.Array, per_feature: bool) -> jax.Array:
+    """``k`` with ``max(|x|, |y|) / 2**k`` in [1, 2) (0 for all-zero inputs), per
+    feature (F,) or for the pair (); no gradient flows through it."""
+    axis = 0 if per_feature else None
+    top = jnp.maximum(jnp.max(jnp.abs(x), axis=axis), jnp.max(jnp.abs(y), axis=axis))
+    _, e = jnp.frexp(jax.lax.stop_gradient(top))  # top = f * 2**e, f in [0.5, 1)
+    return jnp.where(top > 0, e - 1, 0)
+
+
+def _refuse_overflow(value: jax.Array, where: str) -> jax.Array:
+    """An eager call whose (finite) inputs give a distance beyond the dtype's range
+    is refused; under ``jit`` it stays ``inf``."""
+    if not is_traced(value) and not bool(jnp.all(jnp.isfinite(value))):
+        top = float(jnp.finfo(value.dtype).max)
+        raise ValueError(
+            f"{where}: the distance of 'x' and 'y' is beyond the {value.dtype} range "
+            f"(larger than {top:.3g}); scale both trajectories down")
+    return value
 
 
 def _nan_unless_finite(value: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
@@ -141,7 +196,7 @@ def _safe_euclid_cost(xd: jax.Array, yd: jax.Array) -> jax.Array:
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)
 
 
-def _soft_min(gamma: float) -> Callable[[jax.Array, jax.Array, jax.Array], jax.Array]:
+def _soft_min(gamma: float | jax.Array) -> Callable[[jax.Array, jax.Array, jax.Array], jax.Array]:
     """``-gamma log(exp(-a/gamma) + exp(-b/gamma) + exp(-c/gamma))``, shifted by the
     hard minimum so that it stays finite (and its gradient too) when some or all of
     the three are the "unreachable" value."""
@@ -172,7 +227,8 @@ def dtw(x: jax.Array, y: jax.Array) -> jax.Array:
 
     Raises:
         ValueError: bad shapes, or (eager calls) a NaN or an infinity in ``x`` or
-            ``y`` (the message names the input and the index).
+            ``y`` (the message names the input and the index), or a distance beyond
+            the dtype's range (under ``jit``: ``inf``).
 
     Examples:
         >>> import jax.numpy as jnp
@@ -180,8 +236,10 @@ def dtw(x: jax.Array, y: jax.Array) -> jax.Array:
         0.0
     """
     x, y = _pair(x, y, "dtw")
-    per_dim = _accumulated_cost(x, y, _abs_cost)
-    return _nan_unless_finite(jnp.sum(per_dim) / (x.shape[0] + y.shape[0]), x, y)
+    k = _scale_exponents(x, y, per_feature=True)
+    per_dim = _accumulated_cost(_times_pow2(x, -k), _times_pow2(y, -k), _abs_cost)
+    per_dim = _times_pow2(per_dim / (x.shape[0] + y.shape[0]), k)
+    return _refuse_overflow(_nan_unless_finite(jnp.sum(per_dim), x, y), "dtw")
 
 
 def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:
@@ -201,7 +259,10 @@ def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:
         ValueError: as `dtw`.
     """
     x, y = _pair(x, y, "dtw_multi")
-    return _nan_unless_finite(_accumulated_cost(x, y, _euclid_cost), x, y)
+    k = _scale_exponents(x, y, per_feature=False)
+    value = _accumulated_cost(_times_pow2(x, -k), _times_pow2(y, -k), _euclid_cost)
+    value = _times_pow2(value, k)
+    return _refuse_overflow(_nan_unless_finite(value, x, y), "dtw_multi")
 
 
 def soft_dtw(
@@ -238,13 +299,18 @@ def soft_dtw(
     if not float(gamma) > 0:
         raise ValueError(f"soft_dtw: gamma must be > 0, got {gamma}")
     x, y = _pair(x, y, "soft_dtw")
-    combine = _soft_min(float(gamma))
+    # soft_dtw_gamma(s x, s y) = s * soft_dtw_{gamma / s}(x, y): computed at a scale
+    # where no cost overflows (see the module docstring)
+    k = _scale_exponents(x, y, per_feature=not multi)
+    xs, ys = _times_pow2(x, -k), _times_pow2(y, -k)
+    g = _times_pow2(jnp.full(k.shape, float(gamma), x.dtype), -k)
     if multi:
-        value = _accumulated_cost(x, y, _safe_euclid_cost, combine)
+        value = _accumulated_cost(xs, ys, _safe_euclid_cost, _soft_min(g))
+        value = _times_pow2(value, k)
     else:
-        per_dim = _accumulated_cost(x, y, _abs_cost, combine)
-        value = jnp.sum(per_dim) / (x.shape[0] + y.shape[0])
-    return _nan_unless_finite(value, x, y)
+        per_dim = _accumulated_cost(xs, ys, _abs_cost, _soft_min(g[:, None]))
+        value = jnp.sum(_times_pow2(per_dim / (x.shape[0] + y.shape[0]), k))
+    return _refuse_overflow(_nan_unless_finite(value, x, y), "soft_dtw")
 
 
 def resample(x: jax.Array, n: int) -> jax.Array:
@@ -266,6 +332,8 @@ def resample(x: jax.Array, n: int) -> jax.Array:
     t_len = x2.shape[0]
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
+    check_elements(int(n) * x2.shape[1], "n", f"{int(n):,} samples x {x2.shape[1]} "
+                   "features")
     if t_len == n:
         out = x2
     elif t_len < 2:
@@ -298,5 +366,7 @@ def euclidean(x: jax.Array, y: jax.Array, n_samples: int | None = None) -> jax.A
     """
     x, y = _pair(x, y, "euclidean")
     n = max(x.shape[0], y.shape[0]) if n_samples is None else int(n_samples)
-    diff = resample(x, n) - resample(y, n)
-    return _nan_unless_finite(jnp.sqrt(jnp.sum(diff**2)), x, y)
+    k = _scale_exponents(x, y, per_feature=False)
+    diff = resample(_times_pow2(x, -k), n) - resample(_times_pow2(y, -k), n)
+    value = _times_pow2(jnp.sqrt(jnp.sum(diff**2)), k)
+    return _refuse_overflow(_nan_unless_finite(value, x, y), "euclidean")

@@ -33,6 +33,7 @@ import numpy as np
 
 from cgda_jax.checks import FLOAT32_MAX, check_finite, is_traced
 from cgda_jax.data import Demonstration, validate_demonstrations
+from cgda_jax.sizes import MAX_KNOTS, SizeError, check_elements
 
 __all__ = [
     "GeneralizedAction",
@@ -228,6 +229,9 @@ class GeneralizedAction:
         """(n, F) values at ``n`` equally spaced normalized times in [0, 1]."""
         if n < 1:
             raise ValueError(f"n must be >= 1, got {n}")
+        k = int(self.knot_times.shape[0])
+        check_elements(int(n) * (k + self.n_features), "n",
+                       f"{int(n):,} samples x {k} knots")
         return _sample(self.knot_times, self.knots, self.weights, int(n))
 
 
@@ -244,6 +248,9 @@ def sample_actions(actions: Sequence[GeneralizedAction], n: int) -> jax.Array:
         raise ValueError("sample_actions: no actions given")
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
+    k = max(int(a.knot_times.shape[0]) for a in actions)
+    check_elements(len(actions) * int(n) * (k + actions[0].n_features), "n",
+                   f"{len(actions)} actions x {int(n):,} samples x {k} knots")
     counts = {a.n_features for a in actions}
     if len(counts) > 1:
         raise ValueError(
@@ -364,6 +371,11 @@ def generalize(
             f"{interval_s} gives {n_bins} interval(s); need at least 2 "
             f"(use a smaller interval_s)"
         )
+    if n_bins > MAX_KNOTS:  # before the bins and the knots x knots system exist
+        raise SizeError(
+            f"interval_s: {interval_s:g} s cuts the {mean_duration:.4g} s "
+            f"demonstrations into {n_bins:,} intervals, more than {MAX_KNOTS:,} (an "
+            f"RBF system of {n_bins:,} x {n_bins:,}); use a larger interval_s")
     means = _bin_means(demos, n_bins, method)
     if method == "xgnitive":
         knot_times = np.linspace(0.0, 1.0, n_bins)

@@ -25,6 +25,7 @@ from cgda_jax.checks import check_float32
 from cgda_jax.data import Demonstration
 from cgda_jax.distance import dtw, dtw_multi, euclidean, resample
 from cgda_jax.generalize import GeneralizedAction, generalize, sample_actions
+from cgda_jax.sizes import check_recognition
 
 __all__ = ["ActionLibrary", "Recognition", "cost_matrix", "recognize", "METRICS"]
 
@@ -168,6 +169,11 @@ def cost_matrix(
 
     Returns:
         (Q, A) costs; lower is more similar.
+
+    Raises:
+        ValueError: a bad metric, library, query or sample count.
+        cgda_jax.sizes.SizeError: `n_samples` too large for the memory, XLA's
+            32-bit sizes or `cgda_jax.sizes.MAX_DTW_CELLS` (before allocating).
     """
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; expected one of {tuple(METRICS)}")
@@ -177,9 +183,13 @@ def cost_matrix(
         queries = [queries]
     if len(queries) == 0:
         raise ValueError("no queries given")
-    if n_samples < 2:
-        raise ValueError(f"n_samples must be >= 2, got {n_samples}")
+    if isinstance(n_samples, bool) or int(n_samples) != n_samples or n_samples < 2:
+        raise ValueError(f"n_samples must be a whole number >= 2, got {n_samples!r}")
+    n_samples = int(n_samples)
     names = library.feature_names
+    # before anything is resampled: memory, XLA's 32-bit sizes, DTW work
+    check_recognition(len(queries), len(library), n_samples, max(len(names), 1),
+                      metric=metric)
     q = tuple(_query_array(x, k, n_samples, names) for k, x in enumerate(queries))
     return _pairwise(METRICS[metric], n_samples, q, tuple(library.values()))
 

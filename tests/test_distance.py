@@ -222,3 +222,70 @@ def test_checked_distance_names_the_input_and_the_batch_index():
         eucl(x, y_inf, n_samples=8)
     np.testing.assert_allclose(float(eucl(x, y, n_samples=8)),
                                float(euclidean(x, y, 8)), rtol=1e-6)
+
+
+# --- every finite float32 input (issue 25): exact, or refused by name -------------
+
+MAGNITUDES = [1e-30, 1e-20, 1e-3, 1e19, 1e30, 1e31, 1e36]
+
+
+@pytest.mark.parametrize("scale", MAGNITUDES)
+def test_distances_are_exact_at_every_finite_magnitude(scale):
+    """The border value (1e30) used to be below the costs of large inputs: s = 1e31
+    gave wrong distances; squares overflowed from 1e19 and vanished below 1e-19."""
+    x, y = _pair(9, 7, 3, seed=11)
+    x, y = (x * np.float32(scale)), (y * np.float32(scale))
+    assert np.all(np.isfinite(x)) and np.all(np.isfinite(y))
+    x64, y64 = x.astype(float), y.astype(float)
+    for fn, ref in ((dtw, dtw_np(x64, y64)), (dtw_multi, dtw_multi_np(x64, y64)),
+                    (euclidean, euclidean_np(x64, y64, 9))):
+        np.testing.assert_allclose(float(fn(x, y)), ref, rtol=1e-5,
+                                   err_msg=f"{fn.__name__} at {scale:g}")
+        np.testing.assert_allclose(float(jax.jit(fn)(x, y)), ref, rtol=1e-5)
+
+
+def test_features_of_very_different_magnitudes_are_each_exact():
+    # dtw scales each feature apart: a 1e-20 feature beside a 1e30 one still counts
+    x = np.array([[1e30, 0.0], [2e30, 1e-20], [1e30, 3e-20]], np.float32)
+    y = np.array([[1e30, 1e-20], [2e30, 0.0]], np.float32)
+    ref = dtw_np(x.astype(float), y.astype(float))
+    np.testing.assert_allclose(float(dtw(x, y)), ref, rtol=1e-5)
+    per_feature = [dtw_np(x[:, [f]].astype(float), y[:, [f]].astype(float))
+                   for f in range(2)]
+    assert per_feature[1] > 0  # the small feature's share is kept, not lost
+    np.testing.assert_allclose(float(dtw(x[:, 1], y[:, 1])), per_feature[1], rtol=1e-5)
+
+
+@pytest.mark.parametrize("fn", [dtw, dtw_multi, euclidean], ids=lambda f: f.__name__)
+def test_largest_float32_inputs_are_exact_or_refused_by_name(fn):
+    big = np.float32(3e38)
+    x, y = np.full((4, 1), big), np.full((3, 1), -big)
+    ref = {dtw: dtw_np, dtw_multi: dtw_multi_np}.get(fn)
+    ref = ref(x.astype(float), y.astype(float)) if ref else euclidean_np(
+        x.astype(float), y.astype(float), 4)
+    if ref <= np.finfo(np.float32).max:  # dtw: 6e38 per cell / (N + M) fits
+        np.testing.assert_allclose(float(fn(x, y)), ref, rtol=1e-5)
+        return
+    with pytest.raises(ValueError, match=rf"{fn.__name__}: the distance of 'x' and "
+                       r"'y' is beyond the float32 range"):
+        fn(x, y)
+    assert float(jax.jit(fn)(x, y)) == np.inf  # traced: inf, never a wrong number
+
+
+def test_dtw_of_the_largest_inputs_fits_after_normalisation():
+    x = np.full((5, 2), np.float32(3e38))
+    y = np.full((5, 2), np.float32(-3e38))
+    # per cell 6e38 (beyond float32), D / (N + M) = 3e38 per feature: the sum of two
+    # features (6e38) no longer fits and is refused
+    with pytest.raises(ValueError, match="dtw: the distance .* beyond the float32"):
+        dtw(x, y)
+    np.testing.assert_allclose(float(dtw(x[:, 0], y[:, 0])), 3e38, rtol=1e-5)
+
+
+def test_scaled_distances_keep_their_gradient():
+    x, y = _pair(8, 6, 2, seed=12)
+    for scale in (1e-20, 1.0, 1e30):
+        for fn in (dtw, dtw_multi):
+            g = np.asarray(jax.grad(fn)(jnp.asarray(x * scale), jnp.asarray(y * scale)))
+            g1 = np.asarray(jax.grad(fn)(jnp.asarray(x), jnp.asarray(y)))
+            np.testing.assert_allclose(g, g1, rtol=1e-5, atol=1e-6)  # homogeneous

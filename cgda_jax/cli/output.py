@@ -118,7 +118,10 @@ def user_error(args, err: Exception) -> bool:
     rf = getattr(args, "run_folder", None)
     if rf is None or rf.committed:
         return isinstance(err, USER_ERRORS)
-    return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError))
+    from cgda_jax.sizes import SizeError  # refused before it allocates
+
+    return isinstance(err, (ConfigError, FileNotFoundError, NotADirectoryError,
+                            SizeError))
 
 
 def say(args, text: str) -> None:

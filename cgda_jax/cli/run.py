@@ -76,6 +76,26 @@ def _facts(facts: dict) -> str:
     return f"{facts.get('actions', '?')} actions"
 
 
+def _job_size(args) -> tuple[int, bool]:
+    """Processes the seeds are split over and whether they all share this machine:
+    ``--processes P`` (a dry run, or the launcher), a launched worker, or one
+    process of a cluster job (``CGDA_NUM_PROCESSES``)."""
+    import os
+
+    from cgda_jax.job import ENV_NUM_PROCESSES
+
+    if getattr(args, "processes", 1) > 1:
+        return args.processes, True
+    for var, local in (("CGDA_LAUNCHED_PROCESSES", True), (ENV_NUM_PROCESSES, False)):
+        try:
+            n = int(os.environ.get(var, ""))
+        except ValueError:
+            continue
+        if n > 1:
+            return n, local
+    return 1, True
+
+
 def cmd_run(args) -> int:
     from cgda_jax.builtin import resolve_config
     from cgda_jax.experiment import (
@@ -92,7 +112,8 @@ def cmd_run(args) -> int:
         from cgda_jax.experiment.trials import check_trials
 
         check_trials(cfg, args.trials)
-    facts = check_experiment(cfg)
+    processes, local = _job_size(args)
+    facts = check_experiment(cfg, trials=args.trials, processes=processes, local=local)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
     if args.dry_run:

@@ -54,6 +54,33 @@ OBJECT_ACTIONS: tuple[str, ...] = ("MOVE", "SWEEP", "ROTATE")
 OBJECT_FEATURES: tuple[str, ...] = ("object.x [m]", "object.y [m]", "object.yaw [rad]")
 
 
+#: Default mean duration of an object demonstration [s] and the tracker's rate [Hz].
+DEFAULT_DURATION_S: float = 7.4
+RATE_HZ: float = 30.0
+
+
+def longest_s(duration_s: float) -> float:
+    """The longest repetition of mean push time `duration_s`: 15 % longer, plus
+    1.6 s of pauses."""
+    return 1.15 * float(duration_s) + 1.6
+
+
+def check_duration(duration_s: float, rate_hz: float, n: int, width: int) -> None:
+    """`duration_s` finite and > 0, and `n` demonstrations of it at `rate_hz`
+    within `cgda_jax.sizes.MAX_DEMO_SAMPLES` samples each and the memory
+    (checked before any is generated).
+
+    Raises:
+        ValueError / cgda_jax.sizes.SizeError: naming ``duration_s``.
+    """
+    from cgda_jax.sizes import check_samples, samples_estimate
+
+    if not (np.isfinite(duration_s) and duration_s > 0):
+        raise ValueError(f"duration_s must be a finite number > 0, got {duration_s!r}")
+    check_samples(samples_estimate(longest_s(duration_s), rate_hz), "duration_s",
+                  f"{duration_s:g} s at {rate_hz:g} Hz", n=n, width=width)
+
+
 def _timing(rng: np.random.Generator, duration_s: float, rate_hz: float):
     """(times (T,), progress (T,) in [0, 1]) of one repetition, pauses included."""
     duration = duration_s * rng.uniform(0.85, 1.15)
@@ -91,8 +118,8 @@ def move_box_demos(
     *,
     curve: float = 0.0,
     name: str = "box",
-    rate_hz: float = 30.0,
-    duration_s: float = 7.4,
+    rate_hz: float = RATE_HZ,
+    duration_s: float = DEFAULT_DURATION_S,
     noise_m: float = 0.002,
     noise_rad: float = 0.01,
 ) -> list[Demonstration]:
@@ -122,9 +149,8 @@ def move_box_demos(
     """
     start = _check_point(start, 2, "start")
     end = _check_point(end, 2, "end")
-    if not duration_s > 0:
-        raise ValueError(f"duration_s must be positive, got {duration_s!r}")
     check_repetitions(n, rate_hz)
+    check_duration(duration_s, rate_hz, n, 3)
     rng = np.random.default_rng(seed)
     names = (f"{name}.x [m]", f"{name}.y [m]", f"{name}.yaw [rad]")
     demos = []
@@ -142,8 +168,8 @@ def rotate_valve_demos(
     seed: int = 0,
     *,
     name: str = "valve",
-    rate_hz: float = 30.0,
-    duration_s: float = 7.4,
+    rate_hz: float = RATE_HZ,
+    duration_s: float = DEFAULT_DURATION_S,
     noise_rad: float = 0.01,
 ) -> list[Demonstration]:
     """Demonstrations of a valve turned from ``start`` to ``end`` (ROTATE).
@@ -160,9 +186,8 @@ def rotate_valve_demos(
     """
     start = float(_check_point([start], 1, "start")[0])
     end = float(_check_point([end], 1, "end")[0])
-    if not duration_s > 0:
-        raise ValueError(f"duration_s must be positive, got {duration_s!r}")
     check_repetitions(n, rate_hz)
+    check_duration(duration_s, rate_hz, n, 1)
     rng = np.random.default_rng(seed)
     demos = []
     for k in range(int(n)):

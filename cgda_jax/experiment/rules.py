@@ -11,6 +11,7 @@ import math
 import os
 import pathlib
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -25,9 +26,10 @@ from cgda_jax.experiment.config import (
     ExperimentConfig,
     StrategyConfig,
 )
+from cgda_jax.sizes import MAX_KNOTS
 
 #: Intervals of one generalization (mean demonstration duration / ``interval_s``).
-MAX_INTERVALS = 10_000
+MAX_INTERVALS = MAX_KNOTS
 
 
 def _choice(value: str, options: Sequence[str], key: str) -> None:
@@ -110,8 +112,9 @@ def validate_config(cfg: ExperimentConfig) -> None:
     for key in ("population_size", "max_generations", "chunk_size"):
         if getattr(cfg.strategy, key) < 1:
             raise ConfigError(f"key 'strategy.{key}' must be >= 1")
-    if not cfg.strategy.tolerance > 0:
-        raise ConfigError("key 'strategy.tolerance' must be > 0")
+    if not (math.isfinite(cfg.strategy.tolerance) and cfg.strategy.tolerance > 0):
+        raise ConfigError(f"key 'strategy.tolerance' must be a finite number > 0, got "
+                          f"{cfg.strategy.tolerance}")
     _validate_feasibility(cfg)
     check_strategy_options(cfg.strategy)
     if not cfg.robot.joints:
@@ -248,8 +251,80 @@ SET_BY_CONFIG = ("sim", "goal", "algorithm", "population_size", "tolerance",
                   "max_generations", "seed", "chunk_size", "progress_fn")
 
 
+#: The kind of every ``strategy.options`` value a config can set: ("int", lowest),
+#: ("number", rule), ("bool", None), ("choice", where the choices are), ("devices",
+#: None), ("table", None); "api": a keyword only Python callers can pass.
+OPTION_KINDS: dict[str, tuple[str, Any]] = {
+    "restarts": ("int", 0), "restart_samples": ("int", 0), "backtracks": ("int", 0),
+    "stagnation": ("int", 1), "init_samples": ("int", 1), "refine_steps": ("int", 1),
+    "max_steps": ("int", 1), "lookahead": ("int", 1),
+    "min_improvement": ("number", "in [0, 1)"), "init_std": ("number", "> 0"),
+    "refine_gamma": ("number", "> 0"),
+    "reach_check": ("bool", None), "warm_start": ("bool", None),
+    "init": ("choice", "fte.INITS"), "refine": ("choice", "refine.REFINE"),
+    "distance": ("choice", "fte.DISTANCES"),
+    "devices": ("devices", None),
+    "algorithm_kwargs": ("table", None), "algorithm_params": ("table", None),
+    "keys": ("api", None),
+}
+
+
+def _choices(where: str) -> tuple[str, ...]:
+    module, _, name = where.partition(".")
+    return tuple(getattr(importlib.import_module(f"cgda_jax.strategies.{module}"),
+                         name))
+
+
+def _number_ok(value: float, rule: str) -> bool:
+    if rule == "in [0, 1)":
+        return 0 <= value < 1
+    return value > 0
+
+
+def _device_count() -> int:
+    import jax
+
+    return jax.device_count()
+
+
+def option_problem(key: str, value: Any) -> str | None:
+    """What is wrong with ``strategy.options.<key> = value`` (None: nothing), by the
+    kind `OPTION_KINDS` gives the key (type first, then range)."""
+    kind, rule = OPTION_KINDS.get(key, ("any", None))
+    is_int = isinstance(value, int) and not isinstance(value, bool)
+    if kind == "int":
+        if not is_int:
+            return f"must be a whole number >= {rule}, got {value!r}"
+        return None if value >= rule else f"must be >= {rule}, got {value}"
+    if kind == "number":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"must be a number {rule}, got {value!r}"
+        ok = math.isfinite(value) and _number_ok(float(value), rule)
+        return None if ok else f"must be a finite number {rule}, got {value}"
+    if kind == "bool":
+        return None if isinstance(value, bool) else f"must be true or false, got " \
+            f"{value!r}"
+    if kind == "choice":
+        options = _choices(rule)
+        return None if value in options else f"{value!r} is not one of {list(options)}"
+    if kind == "devices":
+        if value == "all":
+            return None
+        if not is_int:
+            return f"must be \"all\" or a device count, got {value!r}"
+        have = _device_count()
+        return None if 1 <= value <= have else (
+            f"{value} devices asked, this machine has {have}")
+    if kind == "table":
+        return None if isinstance(value, dict) else f"must be a table, got {value!r}"
+    if kind == "api":
+        return "only a Python caller can pass it (an array), not a config"
+    return None
+
+
 def check_strategy_options(s: StrategyConfig) -> None:
-    """Every ``strategy.options`` key must be a keyword of ``run_<name>``."""
+    """Every ``strategy.options`` key must be a keyword of ``run_<name>``, and its
+    value of the type and in the range that keyword takes (`option_problem`)."""
     params = inspect.signature(strategy_function(s.name)).parameters
     allowed = sorted(k for k in params if k not in SET_BY_CONFIG)
     for key in s.options:
@@ -262,3 +337,6 @@ def check_strategy_options(s: StrategyConfig) -> None:
                 f"key 'strategy.options.{key}': not an option of strategy "
                 f"'{s.name}'; it takes {allowed}"
             )
+        problem = option_problem(key, s.options[key])
+        if problem:
+            raise ConfigError(f"key 'strategy.options.{key}': {problem}")

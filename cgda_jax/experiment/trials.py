@@ -1,9 +1,10 @@
 """Success rate of an execution experiment over N seeds (``cgda run CONFIG --trials N``).
 
 Seeds ``strategy.seed, strategy.seed + 1, ...`` run as ONE batched call
-(`cgda_jax.strategies.trials.run_seeds`: each trial gives the result of the single
-run with its seed). Three steps, usable apart (e.g. seeds split over processes and
-their records joined before writing):
+(`cgda_jax.strategies.trials.run_seeds`: each trial gives the same bits in any batch;
+`cgda_jax.strategies.batching` says how it can differ from the single run). Three
+steps, usable apart (e.g. seeds split over processes and their records joined before
+writing):
 
 - `trial_records` (cfg, seeds) -> one plain dict per seed (JSON-ready);
 - `summarize` (records) -> the success count, rate and its Wilson 95% interval;
@@ -193,9 +194,14 @@ def run_trials_experiment(
         The summary: ``trials``, ``successes``, ``success_rate``, ``wilson95``, ...
 
     Raises:
-        ConfigError: a recognition config or a bad `n_trials` (`check_trials`).
+        ConfigError: a recognition config, a bad `n_trials` (`check_trials`) or
+            anything `cgda_jax.experiment.check_experiment` refuses (the seed range,
+            the batch's size, ...).
     """
+    from cgda_jax.experiment.validate import check_experiment
+
     n = check_trials(cfg, n_trials)
+    check_experiment(cfg, trials=n)  # seeds, sizes, options: before any program
     t0 = time.perf_counter()
     seeds = [cfg.strategy.seed + i for i in range(n)]
     records = trial_records(cfg, seeds, progress_fn)

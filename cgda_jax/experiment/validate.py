@@ -4,10 +4,14 @@ way (`check_experiment`).
 
 On top of `validate_config` (keys, types, choices, files and folders named):
 
-- seeds in 0 .. 2**32 - 1 (`MAX_SEED`);
+- seeds in 0 .. 2**32 - 1 (`MAX_SEED`), the last of ``--trials N`` included;
 - sizes a machine can hold: interval count of the generalization, goal points,
   population, population x goal points, simulated steps per generation,
-  repetitions, recognition samples (the ``MAX_*`` constants);
+  repetitions, recognition samples (the ``MAX_*`` constants), the samples of object
+  demonstrations (``data.duration_s``), and what the run will hold at once:
+  trials x population x points x values per evaluation, sampled postures
+  (`cgda_jax.sizes`: XLA's 32-bit sizes and the memory available), and
+  ``--processes P`` against the cores and the memory;
 - the goal, built (demonstrations generalized in NumPy; no JAX program runs): finite,
   as many features as the scene gives;
 - the robot and the scene, built as the run builds them (not compiled): joints,
@@ -26,8 +30,21 @@ import math
 import re
 from typing import Any
 
-from cgda_jax.experiment.config import ConfigError, ExperimentConfig
-from cgda_jax.experiment.rules import check_interval_count, validate_config
+from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
+from cgda_jax.experiment.rules import (
+    MAX_INTERVALS,
+    check_interval_count,
+    validate_config,
+)
+from cgda_jax.sizes import (
+    SizeError,
+    check_estimate,
+    check_processes,
+    check_recognition,
+    check_samples,
+    run_estimate,
+    samples_estimate,
+)
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
@@ -65,7 +82,32 @@ def check_seed(value: int, key: str) -> None:
         raise ConfigError(f"key '{key}': seed {value} is not in 0 .. {MAX_SEED}")
 
 
-def _check_static(cfg: ExperimentConfig) -> None:
+def _check_object_demos(cfg: ExperimentConfig) -> None:
+    """An object source's demonstrations (``data.duration_s`` at 30 Hz, each up to
+    15 % longer plus 1.6 s of rest) within `cgda_jax.sizes.MAX_DEMO_SAMPLES`, the
+    memory, and `MAX_INTERVALS`, before they are generated."""
+    from cgda_jax.datasets.objects import DEFAULT_DURATION_S, RATE_HZ, longest_s
+
+    d = cfg.data
+    duration = d.duration_s or DEFAULT_DURATION_S
+    if not math.isfinite(duration):
+        raise ConfigError(f"key 'data.duration_s': {duration} is not a finite number")
+    count = samples_estimate(longest_s(duration), RATE_HZ)
+    try:
+        check_samples(count, "key 'data.duration_s'",
+                      f"{duration:g} s at {RATE_HZ:g} Hz", n=d.n_demos,
+                      width=3 if d.source == "move_box" else 1)
+    except SizeError as err:
+        raise ConfigError(str(err)) from None
+    n = (duration + 1.6) / d.interval_s
+    if not n <= MAX_INTERVALS:
+        raise ConfigError(
+            f"key 'data.duration_s': {duration:g} s demonstrations cut at "
+            f"data.interval_s = {d.interval_s:g} s are {n:.3g} intervals, more than "
+            f"{MAX_INTERVALS:,}; use a shorter duration or a larger interval_s")
+
+
+def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
     """Seeds and sizes known before anything is built."""
     d, s, r = cfg.data, cfg.strategy, cfg.robot
     check_seed(d.seed, "data.seed")
@@ -76,7 +118,14 @@ def _check_static(cfg: ExperimentConfig) -> None:
             raise ConfigError("key 'recognition.n_samples' must be >= 2")
         return
     check_seed(s.seed, "strategy.seed")
+    if trials is not None and s.seed + trials - 1 > MAX_SEED:
+        raise ConfigError(
+            f"key 'strategy.seed' with --trials {trials}: the seeds {s.seed} .. "
+            f"{s.seed + trials - 1} pass {MAX_SEED} (seeds are 32-bit); use "
+            f"strategy.seed <= {MAX_SEED - trials + 1} or fewer trials")
     _at_most(d.n_demos, MAX_REPETITIONS, "data.n_demos")
+    if d.source in OBJECT_SOURCES:
+        _check_object_demos(cfg)
     if d.source == "clean_circle" and d.n_demos < 1:
         raise ConfigError("key 'data.n_demos' must be >= 1")
     if d.source == "paint_ramp":
@@ -105,11 +154,20 @@ def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
         check_interval_count(reps[: d.n_train], d.interval_s, d.method)
         for t in reps[d.n_train:]:
             check_interval_count([t], d.interval_s, d.method)
+    queries = sum(len(reps) - d.n_train for reps in demos.values())
+    features = len(next(iter(demos.values()))[0].feature_names)
+    try:
+        check_recognition(queries, len(demos), cfg.recognition.n_samples, features,
+                          name="key 'recognition.n_samples'",
+                          metric=cfg.recognition.metric)
+    except SizeError as err:
+        raise ConfigError(str(err)) from None
     return {"actions": len(demos)}
 
 
 #: Which config key a robot-building message is about (first matching prefix).
-_ROBOT_KEYS = (("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
+_ROBOT_KEYS = (("kinematic mode", "robot.mode"), ("model", "robot.model"),
+               ("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
                ("site", "robot.marker_site"), ("keyframe", "robot.keyframe"))
 
 
@@ -198,7 +256,72 @@ def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
         raise ConfigError(f"key '{key}': {text}") from None
 
 
-def _check_execution(cfg: ExperimentConfig) -> dict[str, Any]:
+def _sampled_postures(cfg: ExperimentConfig, sim) -> tuple[int, str]:
+    """Postures the strategy samples once per trial and the option that sets them
+    (the plans' own rule: `cgda_jax.strategies.runner.plan_estimate`)."""
+    from cgda_jax.strategies.base import points_independent
+    from cgda_jax.strategies.trials import STRATEGIES
+
+    s = cfg.strategy
+    opts = {**STRATEGIES[s.name][1], **s.options}
+    if s.name == "fte":
+        init = opts["init"]
+        if init == "auto":
+            init = "reach" if points_independent(sim) else "sampled"
+        return (int(opts["init_samples"]) if init in ("sampled", "reach") else 0,
+                "init_samples")
+    if s.name in ("ie", "iet") and points_independent(sim) and int(opts["restarts"]):
+        return int(opts["restart_samples"]), "restart_samples"
+    return 0, ""
+
+
+def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
+    """Options that need independent points (kinematic mode, a stateless scene),
+    refused as the plans refuse them, before the run."""
+    from cgda_jax.strategies.base import points_independent
+
+    o = cfg.strategy.options
+    if points_independent(sim):
+        return
+    for key, asks in (("init", o.get("init") == "reach"),
+                      ("refine", o.get("refine", "none") != "none"),
+                      ("reach_check", o.get("reach_check") is True)):
+        if asks:
+            raise ConfigError(
+                f"key 'strategy.options.{key}': {o[key]!r} needs independent points "
+                f"(kinematic mode and a scene without state, e.g. the marker); this "
+                f"run is {sim.mode} mode with the '{cfg.scene.kind}' scene")
+
+
+def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | None,
+                    processes: int, local: bool) -> None:
+    """What the run will hold at once (`cgda_jax.sizes.run_estimate`) within XLA's
+    32-bit sizes and the memory of each process; `processes` against the cores."""
+    from cgda_jax.sizes import dynamic_width
+
+    s = cfg.strategy
+    samples, option = _sampled_postures(cfg, sim)
+    backend = getattr(sim.backend, "name", None)
+    n = trials or 1
+    share = -(-n // max(processes, 1))  # each process batches its own seeds
+    est = run_estimate(
+        trials=share, population=s.population_size, points=n_points,
+        features=sim.n_features, dof=sim.n_dof, bodies=sim.robot.mj_model.nbody,
+        strategy=s.name, samples=samples,
+        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0)
+    name = ("--trials" if trials and trials > 1
+            else f"key 'strategy.options.{option}'" if est.part != "generation"
+            else "key 'strategy.population_size'")
+    try:
+        check_estimate(est, name)
+        if processes > 1:
+            check_processes(processes, est.nbytes * processes, local=local)
+    except SizeError as err:
+        raise ConfigError(str(err)) from None
+
+
+def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
+                     processes: int = 1, local: bool = True) -> dict[str, Any]:
     from cgda_jax.experiment.build import build_goal
     from cgda_jax.strategies.base import check_config
 
@@ -232,13 +355,24 @@ def _check_execution(cfg: ExperimentConfig) -> dict[str, Any]:
         raise ConfigError(f"key 'data': {err}") from None
     n_genes = n_points * sim.n_dof if s.name == "fte" else sim.n_dof
     _check_algorithm(cfg, n_genes)
+    _check_option_combinations(cfg, sim)
+    _check_run_size(cfg, sim, n_points, trials, processes, local)
     return {"goal_points": n_points, "features": int(goal.shape[1]),
             "genes": int(n_genes)}
 
 
-def check_experiment(cfg: ExperimentConfig) -> dict[str, Any]:
+def check_experiment(cfg: ExperimentConfig, trials: int | None = None,
+                     processes: int = 1, local: bool = True) -> dict[str, Any]:
     """Everything a run of ``cfg`` would check, without compiling it (see the
     module docstring).
+
+    Args:
+        cfg: the experiment.
+        trials: ``--trials N`` (None: one run): the seed range and the batch size.
+        processes: processes the trials are split over (``--processes P`` or a
+            cluster job's size).
+        local: the processes all run on this machine (``--processes P``): checked
+            against its cores; False for one process of a cluster job.
 
     Returns:
         A few facts found on the way: recognition ``actions``; execution
@@ -248,7 +382,7 @@ def check_experiment(cfg: ExperimentConfig) -> dict[str, Any]:
         ConfigError / FileNotFoundError: naming the config key or the file.
     """
     validate_config(cfg)
-    _check_static(cfg)
+    _check_static(cfg, trials)
     if cfg.kind == "recognition":
         return _check_recognition(cfg)
-    return _check_execution(cfg)
+    return _check_execution(cfg, trials, processes, local)

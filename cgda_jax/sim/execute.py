@@ -192,6 +192,12 @@ class Simulator:
             from cgda_jax.sim.features import FeatureSet
 
             self._fset = FeatureSet(robot.mj_model, self._world_specs)
+        if mode == "kinematic":  # constraints, tendons, features it cannot honour
+            from cgda_jax.sim.model_checks import check_kinematic
+
+            check_kinematic(robot.mj_model, robot.joint_ids, self._fset.specs
+                            if self._fset is not None else (),
+                            None if self._world_specs else robot.site_id)
         self.physics = self.backend = None
         self.physics_steps = 0
         if mode == "dynamic":

@@ -190,6 +190,9 @@ class Robot:
         if both:
             raise ValueError(f"joints {sorted(both)} are both evolved and fixed")
 
+        from cgda_jax.sim.model_checks import check_model_numbers
+
+        check_model_numbers(mj_model, source)  # nan / inf / beyond float32, named
         jt = mujoco.mjtObj.mjOBJ_JOINT
         self.mj_model = mj_model
         self.joint_names = joints

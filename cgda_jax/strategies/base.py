@@ -111,8 +111,8 @@ def check_config(
     if not np.all(np.isfinite(g)):
         bad = int(np.argmax(~np.all(np.isfinite(g), axis=1)))
         raise ValueError(f"goal has a non-finite value at point {bad}")
-    if tolerance is not None and not tolerance > 0:
-        raise ValueError(f"tolerance must be > 0; got {tolerance}")
+    if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
+        raise ValueError(f"tolerance must be a finite number > 0; got {tolerance}")
     if max_generations is not None and int(max_generations) < 1:
         raise ValueError(f"max_generations must be >= 1; got {max_generations}")
     return jax.device_put(g)  # a transfer (jnp.asarray compiles a copy program)

@@ -14,9 +14,20 @@ compiled:
   trials. IE points finish at very different generations (a trial's slowest point
   sets its length), so this drops about half of the work a per-trial run does.
 
-Both give each trial the result of the single run with its seed (the same
-per-trial / per-point programs on other batch sizes: equal up to float32 rounding of
-the fused code, as with `runner.drive`). A trial's history is what its single run
+A trial's result does not depend on the batch it runs in: the vmapped programs of
+two or more trials give each trial the same bits whatever the batch size and the
+other seeds (measured: batches of 2, 3, 4 and 8 holding seed 2, the shrinking
+driver, the lock-step one and IE's pooled points; tests/test_trials_batching.py),
+so the batch never shrinks below 2 (a lock-step "batch" of one, `runner.drive` with
+one key, is the single run). A single run (``run_fte(seed=s)``, one key through `runner.drive`)
+is the unbatched program: XLA fuses and rounds it differently in the last bits
+(from about the second generation, 1e-6 in the fitness), and the rank-based
+selection of an evolution strategy can turn that into another search path, so a
+trial and the single run of its seed end equal to about 1e-4 on most seeds but on
+another path on some (measured: 2 of 8 seeds of an FTE run on the tiny arm, final
+errors 288 vs 227 mm and 402 vs 440 mm; issue 25 reports seed 3 of 10 on a 7-joint
+arm in physics, 38.5 mm batched and 18.9 mm alone). Success rates are rates of the
+same search; compare seeds one to one between batched runs. A trial's history is what its single run
 records (its chunks until it stopped). ``info["batching"]`` says which driver ran and
 ``info["batch_sizes"]`` the batch of each chunk (trials, or point evolutions).
 """
@@ -110,16 +121,27 @@ def drive_repacked(
     *,
     chunk_size: int = 10,
     progress_fn: Callable[[dict[str, Any]], None] | None = None,
-    min_size: int = 1,
+    min_size: int = 2,
 ) -> list[Any]:
     """Like `runner.drive` (same arguments and results), but finished trials leave
     the batch between chunks and the rest are re-packed into the smallest size of
     `ladder` (R) that holds them (padding repeats the last running trial; its copy
-    is dropped)."""
+    is dropped).
+
+    The batch never shrinks below 2 trials (`min_size`; a single trial runs with a
+    copy of itself): XLA rounds a batch of one like an unbatched program, not like
+    the batches of two or more, whose programs give each trial the same bits
+    whatever the batch's size and other seeds (see the module docstring)."""
     if int(chunk_size) < 1:
         raise ValueError(f"chunk_size must be >= 1; got {chunk_size}")
     n = int(keys.shape[0])
-    sizes = ladder(n, min_size)
+    if n == 1:  # the batched program, run with a copy: the same bits as in a batch
+        results = drive_repacked(plan, jnp.concatenate([keys, keys]),
+                                 chunk_size=chunk_size, progress_fn=progress_fn,
+                                 min_size=min_size)[:1]
+        results[0].info["trials_in_batch"] = 1
+        return results
+    sizes = ladder(n, max(int(min_size), 2))
     progs = _Programs()
 
     def chunk(carry):

@@ -44,6 +44,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
+from cgda_jax.sizes import Estimate, check_estimate, dynamic_width, run_estimate
 from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.result import ExecutionResult, SimulationDiverged
 
@@ -246,6 +247,42 @@ def check_divergence(results: list[ExecutionResult]) -> None:
     )
 
 
+def plan_estimate(plan: Any, n_trials: int) -> Estimate:
+    """What `n_trials` trials of `plan` in one batch hold at once
+    (`cgda_jax.sizes.run_estimate`)."""
+    sim = plan.sim
+    robot = getattr(sim, "robot", None)
+    model = getattr(robot, "mj_model", None)
+    samples = int(getattr(plan, "restart_samples", 0) or 0)
+    if getattr(plan, "init_mode", None) in ("sampled", "reach"):
+        samples = max(samples, int(plan.init_samples))
+    backend = getattr(getattr(sim, "backend", None), "name", None)
+    return run_estimate(
+        trials=n_trials, population=int(plan.info["population_size"]),
+        points=plan.n_points, features=int(sim.n_features), dof=plan.n_dof,
+        bodies=int(model.nbody) if model is not None else 1, strategy=plan.name,
+        samples=samples,
+        dynamic_width=(dynamic_width(model) if backend == "mjx" and model is not None
+                       else 0))
+
+
+def check_seeds(seeds: Any) -> list[int]:
+    """`seeds` as ints in 0 .. 2**32 - 1 (JAX keys are 32-bit).
+
+    Raises:
+        ValueError: an empty list, or a seed out of range (named with its place).
+    """
+    out = []
+    for i, s in enumerate(seeds):
+        if isinstance(s, bool) or int(s) != s or not 0 <= int(s) <= 2**32 - 1:
+            raise ValueError(f"seed {s!r} (trial {i}) is not an integer in 0 .. "
+                             f"{2**32 - 1}; JAX keys are 32-bit")
+        out.append(int(s))
+    if not out:
+        raise ValueError("seeds is empty: give at least one")
+    return out
+
+
 def seed_keys(seeds: Any) -> jax.Array:
     """Typed keys (R,) from integer seeds (R,)."""
     return jax.vmap(jax.random.key)(jnp.asarray(seeds, dtype=jnp.uint32))
@@ -288,14 +325,23 @@ def run(
 
     Raises:
         SimulationDiverged: every candidate evaluation of the run diverged.
+        cgda_jax.sizes.SizeError: the run would not fit (XLA's 32-bit sizes or the
+            memory; see `plan_estimate`), before anything is compiled.
+        ValueError: a seed outside 0 .. 2**32 - 1.
     """
     if shard not in ("population", "trials"):
         raise ValueError(f"shard must be 'population' or 'trials'; got {shard!r}")
+    seeds = check_seeds(seeds)
     sharding = resolve_devices(devices)
     goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
     plan = plan_cls(sim, goal, tolerance=tolerance, max_generations=max_generations,
                     sharding=sharding if shard == "population" else None,
                     **plan_kwargs)
+    # before any program is compiled: XLA aborts on 32-bit overflows
+    est = plan_estimate(plan, len(seeds))
+    sampled = "init_samples" if plan.name == "fte" else "restart_samples"
+    check_estimate(est, sampled if est.part != "generation" and len(seeds) == 1
+                   else "n_trials" if len(seeds) > 1 else "population_size")
     if driver is not None and sharding is None:
         results = driver(plan, seed_keys(seeds), chunk_size=chunk_size,
                          progress_fn=progress_fn)

@@ -53,8 +53,11 @@ def run_trials(
 ) -> list[ExecutionResult]:
     """Runs `n_trials` independent trials of a strategy at once.
 
-    Trial r uses seed ``seed + r`` and gives the same result as the single run with that
-    seed (up to float32 rounding: the batch is another shape of the same program).
+    Trial r uses seed ``seed + r``; its result is the same bits in any batch of
+    trials (any size, any other seeds). The single run with that seed is the
+    unbatched program, rounded differently in the last bits; most seeds end within
+    about 1e-4 of it, some on another search path (see
+    `cgda_jax.strategies.batching`).
     By default the batch shrinks as trials finish (`cgda_jax.strategies.batching`):
     finished trials, or for IE with independent points finished points, leave it
     between chunks, so a trial that stops early costs no more than its own run.
