@@ -181,6 +181,22 @@ def default_waypoint_s(demos: list, n_points: int) -> float:
     return float(np.mean([d.duration for d in demos])) / n_points
 
 
+def robot_marker(cfg: ExperimentConfig):
+    """The marker of ``[robot]``: ``marker`` (a table) if given, else
+    ``marker_site``.
+
+    Raises:
+        ConfigError: both given (``marker_site`` changed from its default).
+    """
+    rc = cfg.robot
+    if not rc.marker:
+        return rc.marker_site
+    if rc.marker_site != "marker":
+        raise ConfigError(f"keys 'robot.marker' and 'robot.marker_site': give one "
+                          f"(marker = {rc.marker}, marker_site = {rc.marker_site!r})")
+    return dict(rc.marker)
+
+
 def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
                     goal=None):
     """Robot (+ the world's objects) + scene + Simulator from the config.
@@ -198,16 +214,17 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     rc = cfg.robot
     fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
     start = {k: math.radians(v) for k, v in rc.start.items()}
+    marker = robot_marker(cfg)
     if cfg.world.objects or cfg.world.contact_geoms:
         validate_world(cfg)  # one line naming the key for a bad object or feature
         robot = Robot.from_world(
             resolve_model(rc.model), cfg.world.objects, list(rc.joints),
-            rc.marker_site, fixed, contact_geoms=cfg.world.contact_geoms,
+            marker, fixed, contact_geoms=cfg.world.contact_geoms,
             keyframe=rc.keyframe or None, start=start,
         )
     else:
         robot = Robot.from_mjcf(
-            resolve_model(rc.model), list(rc.joints), rc.marker_site, fixed,
+            resolve_model(rc.model), list(rc.joints), marker, fixed,
             keyframe=rc.keyframe or None, start=start,
         )
     if cfg.scene.kind == "objects":

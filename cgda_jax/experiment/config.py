@@ -108,9 +108,16 @@ class RecognitionConfig:
 
 @dataclasses.dataclass
 class RobotConfig:
-    """The robot: MJCF model (built-in name or path), evolved joints, marker site.
+    """The robot: MJCF model (built-in name or path), evolved joints, marker.
 
-    ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    ``model``: a built-in model's name (``teo.xml``) or a file; a relative path in a
+    config file is relative to that file's folder (one given with ``--set``, to the
+    working folder).  ``marker_site``: the site whose position the scenes read;
+    ``marker``: instead of it, ``{ body = "hand", pos = [x, y, z] }`` (a point fixed
+    on a body, metres in its frame) or ``{ site = "..." }``.
+    ``fixed`` holds joint values in DEGREES (converted to radians for the robot;
+    default none: joints neither evolved nor fixed stay at the start posture, welded
+    in dynamic mode).
     ``start``: start values of evolved joints in DEGREES (every execution starts
     there; default the model's ``qpos0`` or the keyframe's).
     ``keyframe``: a ``<key>`` of the model whose qpos is the start posture ("" = the
@@ -131,9 +138,8 @@ class RobotConfig:
         default_factory=lambda: ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
     )
     marker_site: str = "marker"
-    fixed: dict[str, float] = dataclasses.field(
-        default_factory=lambda: {"r_forearm_rotation": 45.0}
-    )
+    marker: dict[str, Any] = dataclasses.field(default_factory=dict)
+    fixed: dict[str, float] = dataclasses.field(default_factory=dict)
     start: dict[str, float] = dataclasses.field(default_factory=dict)
     mode: str = "kinematic"
     substeps: int = 8
@@ -349,10 +355,34 @@ def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
     merge_table(cfg, table)
 
 
+#: Config keys holding a file or folder: a relative one in a file is relative to it.
+PATH_KEYS = (("robot", "model"), ("data", "data_dir"))
+
+
+def _relative_to(cfg: ExperimentConfig, table: Mapping[str, Any],
+                 folder: pathlib.Path) -> None:
+    """The `PATH_KEYS` that ``table`` (a config file's) sets, made relative to the
+    file's ``folder``: a relative path there becomes that folder's (absolute) path,
+    except a bare file name that is not there (a built-in model's name)."""
+    for section, key in PATH_KEYS:
+        raw = (table.get(section) or {}).get(key) if isinstance(
+            table.get(section), Mapping) else None
+        if not isinstance(raw, str) or not raw:
+            continue
+        p = pathlib.Path(raw).expanduser()
+        if p.is_absolute() or raw.startswith("~"):
+            continue
+        beside = (folder / p).resolve()
+        if beside.exists() or p.name != raw:
+            setattr(getattr(cfg, section), key, str(beside))
+
+
 def load_config(
     path: str | os.PathLike | None = None, overrides: Sequence[str] = ()
 ) -> ExperimentConfig:
     """Defaults, then the TOML file at ``path``, then ``key=value`` overrides.
+
+    File and folder names in the file (`PATH_KEYS`) are relative to its folder.
 
     Raises:
         ConfigError: unknown key, wrong type, unparsable file (message names the
@@ -378,6 +408,7 @@ def load_config(
             raise ConfigError(f"{path}: {e}") from None
         if "name" not in table:
             cfg.name = path.stem
+        _relative_to(cfg, table, path.parent)
     for setting in overrides:
         try:
             _apply_override(cfg, setting)
