@@ -241,12 +241,30 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     feasibility = build_feasibility(cfg, robot, scene)
     timing = {"waypoint_s": rc.waypoint_s or waypoint_s or 1.0,
               "move_fraction": rc.move_fraction, "feasibility": feasibility}
+    control = build_control(cfg)  # checked in either mode
     if rc.mode != "dynamic":
         return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps, **timing)
     return Simulator(
         robot, scene, mode="dynamic", substeps=rc.substeps,
-        timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce, **timing,
+        timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce,
+        control=control, **timing,
     )
+
+
+def build_control(cfg: ExperimentConfig):
+    """The `cgda_jax.sim.control.Control` of ``[robot.control]``.
+
+    Raises:
+        ConfigError: a bad value, naming the key.
+    """
+    import dataclasses
+
+    from cgda_jax.sim.control import Control
+
+    try:
+        return Control.from_dict(dataclasses.asdict(cfg.robot.control))
+    except ValueError as err:
+        raise ConfigError(f"key 'robot.control': {err}") from None
 
 
 def nested_limits(limits: dict) -> dict:
@@ -285,8 +303,7 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
     """
     if not cfg.strategy.feasibility:
         return None
-    from cgda_jax.sim.execute import scene_obstacles
-    from cgda_jax.sim.feasibility import Feasibility
+    from cgda_jax.sim.feasibility import Feasibility, scene_obstacles
 
     f = cfg.feasibility
     try:

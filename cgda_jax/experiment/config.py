@@ -107,6 +107,28 @@ class RecognitionConfig:
 
 
 @dataclasses.dataclass
+class ControlConfig:
+    """``[robot.control]``: how dynamic mode drives the joints
+    (`cgda_jax.sim.control`).
+
+    ``mode``: "auto" (position actuators as the model has them; motors and other
+    actuators through a joint-space PD) or "pd" (every driven joint through the PD,
+    adding one where a joint has no actuator).  ``kp`` [N m/rad], ``kd``
+    [N m s/rad], ``force_limit`` [N m]: the PD's, each one number for every PD joint
+    or a table by joint name (empty: from the model; ``kp`` defaults to the force
+    limit / 0.1 rad, ``kd`` to ``damping_ratio`` x critical damping).
+    ``gravity``: the PD compensates gravity (MuJoCo's ``qfrc_bias`` at rest).
+    """
+
+    mode: str = "auto"
+    kp: Any = dataclasses.field(default_factory=dict)
+    kd: Any = dataclasses.field(default_factory=dict)
+    force_limit: Any = dataclasses.field(default_factory=dict)
+    damping_ratio: float = 1.0
+    gravity: bool = True
+
+
+@dataclasses.dataclass
 class RobotConfig:
     """The robot: MJCF model (built-in name or path), evolved joints, marker.
 
@@ -131,6 +153,7 @@ class RobotConfig:
     (`cgda_jax.sim.limits.read_limits`): ``velocity`` [rad/s], ``acceleration``
     [rad/s^2], ``effort`` [N m], each a number for every evolved joint or a table
     by joint name (``limits = { velocity = 2.0, effort = { r_elbow = 20.0 } }``).
+    ``control``: ``[robot.control]`` (`ControlConfig`).
     """
 
     model: str = "teo.xml"
@@ -150,6 +173,7 @@ class RobotConfig:
     move_fraction: float = 0.6
     reduce: bool = True
     limits: dict[str, Any] = dataclasses.field(default_factory=dict)
+    control: ControlConfig = dataclasses.field(default_factory=ControlConfig)
 
 
 @dataclasses.dataclass
