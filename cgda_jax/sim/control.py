@@ -338,7 +338,8 @@ def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
                     "force limit); set robot.control.kp (or force_limit)")
             kp, src["kp"] = half / KP_SATURATION, f"force limit / {KP_SATURATION}"
         if kd is None and kind == "position" and kp == float(m.actuator_gainprm[a, 0]):
-            kd, src["kd"] = -float(m.actuator_biasprm[a, 2]), "mjcf position kv"
+            kd = -float(m.actuator_biasprm[a, 2]) + 0.0  # no -0.0
+            src["kd"] = "mjcf position kv"
         if kd is None:
             if inertia is None:
                 inertia = _inertia(m, qpos)

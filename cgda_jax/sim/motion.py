@@ -215,18 +215,29 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
     f = float(end_force[i, j])
     saturated = (np.isfinite(hi) and f >= 0.99 * hi) or (np.isfinite(lo)
                                                         and f <= 0.99 * lo)
-    how = "" if drive is None else (
-        f"its {'position servo' if drive.kind == 'position' else 'PD'}")
-    why = (f"{how} is at its force limit ({f:.3g} of [{lo:g}, {hi:g}])" if saturated
-           else f"{how} holds {f:.3g} within its force limit, short of the "
-           "target (a load against the gain: gravity or a contact)")
+    servo = drive is not None and drive.kind == "position"
+    how = "its position servo" if servo else "its PD"
+    if saturated:
+        why = (f"{how} is at its force limit ({f:.3g} of [{lo:g}, {hi:g}]); a "
+               "larger limit (robot.control.force_limit for a PD, the model's "
+               "forcerange / ctrlrange) or postures it can hold would reach them")
+    elif servo:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(gravity against its gain, or a contact); robot.control.mode = "
+               "\"pd\" keeps its gains and compensates gravity")
+    elif drive is not None and not drive.gravity:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(gravity against its gain, or a contact); robot.control.gravity = "
+               "true compensates gravity")
+    else:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(still moving, or a contact); a larger robot.control.kp or a longer "
+               "robot.waypoint_s lets it settle")
     worse = int(np.sum(err[:, j] > threshold_deg))
     return (f"the arm cannot reach its commanded postures: joint {name!r} ends "
             f"waypoint {i + 1} {err[i, j]:.1f} {unit} from its target ({worse} of "
             f"{len(err)} waypoints beyond {threshold_deg:g} {unit}); {why}. The "
-            "evolved waypoints are commands, not the postures reached; "
-            "[robot.control] (mode = \"pd\" with gravity compensation, gains, "
-            "force limits) changes how the joints are driven")
+            "evolved waypoints are commands, not the postures reached")
 
 
 def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
