@@ -16,6 +16,7 @@ from cgda_jax.experiment.compute import motion_check
 from cgda_jax.experiment.config import ConfigError, load_config
 from cgda_jax.experiment.report import control_lines, motion_lines
 from cgda_jax.sim.control import Control, plan_control
+from cgda_jax.sim.limits import read_limits
 from cgda_jax.sim.motion import tracking_note
 
 # A two-link arm pitching about y, horizontal (the heaviest gravity load) at zero.
@@ -175,6 +176,10 @@ def test_drives_come_from_the_actuators_and_the_config(arms):
     assert (d.kind, d.kp, d.kd, d.gravity) == ("position", 200.0, 9.7, False)
     d = plan_control(servo, servo.qpos0, JOINTS, {"mode": "pd"}).drives[0]
     assert (d.kind, d.kp, d.kd, d.gravity) == ("pd", 200.0, 9.7, True)
+    # the feasibility's effort limit of a motor: gear x ctrlrange, as the PD's
+    lim = read_limits(m, JOINTS)
+    np.testing.assert_array_equal(lim.effort, [20.0, 8.0])
+    assert lim.source["effort"] == ("mjcf ctrlrange:m1", "mjcf ctrlrange:m2")
     lines = "\n".join(control_lines(plan.as_dict()))
     assert "| shoulder | joint-space PD | m1 (motor) | 50 | 1 | +-5 | yes |" in lines
 
