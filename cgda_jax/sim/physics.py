@@ -202,6 +202,8 @@ class Physics:
                                    timestep=timestep, features=features,
                                    control=self.control, model=full)
         check_transmissions(self.model, robot.source)
+        self._spec, self._source = spec, robot.source
+        self.object_bodies = tuple(getattr(robot, "object_bodies", ()))
         self.features = None
         if features:
             from cgda_jax.sim.features import FeatureSet
@@ -237,6 +239,14 @@ class Physics:
         return (f"Physics(nq={self.nq}, nu={self.nu}, timestep={self.timestep}, "
                 f"welded={len(self.welded)} joints)")
 
+    def mjx_model(self) -> mujoco.MjModel:
+        """`model` ready for MJX: unsupported geom pairs the task does not need
+        turned off (`cgda_jax.sim.mjx_prep.mjx_ready`; an error naming a needed one).
+        """
+        from cgda_jax.sim.mjx_prep import mjx_ready
+
+        return mjx_ready(self.model, self._spec, self.object_bodies, self._source)
+
     def start_state(self, genes: Array) -> Array:
         """(nq + nv,) state at rest with the evolved joints at ``genes`` (DoF,)."""
         qpos = jnp.asarray(self.qpos0, jnp.float32).at[self.gene_qadr].set(genes)
@@ -256,7 +266,7 @@ class MjxBackend:
         self.physics = physics
         mjx = mjx_module()
         with jax.ensure_compile_time_eval():
-            self.model = mjx.put_model(physics.model, impl="jax")
+            self.model = mjx.put_model(physics.mjx_model(), impl="jax")
             self._data0 = mjx.make_data(self.model, impl="jax")
 
     def _data(self, state):

@@ -30,7 +30,7 @@ import mujoco
 import numpy as np
 from jax import Array
 
-from cgda_jax.builtin import models_dir
+from cgda_jax.builtin import model_path
 from cgda_jax.sim._mujoco_env import mjx_module
 from cgda_jax.sim.marker import (
     MARKER_POINT_SITE,
@@ -39,6 +39,7 @@ from cgda_jax.sim.marker import (
     marker_spec,
     with_marker_point,
 )
+from cgda_jax.sim.mjx_prep import collision_free
 from cgda_jax.sim.posture import FIXED_RANGE_TOL, start_posture
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
@@ -50,24 +51,6 @@ _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 #: constant transforms (`cgda_jax.sim.chain`); "mjx" runs ``mjx.kinematics`` on the
 #: whole model and reads ``site_xpos``.  Both equal ``mujoco.mj_kinematics``.
 KINEMATICS = ("chain", "mjx")
-
-
-def model_path(name: str) -> pathlib.Path:
-    """Path of a built-in model (the repository's ``models/``, installed with the
-    package as ``cgda_jax._models``).
-
-    Args:
-        name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
-
-    Raises:
-        FileNotFoundError: no such built-in model (the message lists the ones there).
-    """
-    folder = models_dir()
-    path = folder / name
-    if not path.is_file():
-        have = sorted(p.name for p in folder.glob("*.xml"))
-        raise FileNotFoundError(f"no built-in model {name!r} in {folder}; have {have}")
-    return path
 
 
 def _id(
@@ -109,7 +92,11 @@ class Robot:
         marker_site: its name (`MARKER_POINT_SITE` for a point on a body).
         marker: the marker as given: a site's name or ``{"body", "pos"}``.
         kinematics: "chain" or "mjx" (see `KINEMATICS`).
+        object_bodies: the bodies of the world's objects (`from_world`; their
+            contacts are the task's, `cgda_jax.sim.mjx_prep`).
     """
+
+    object_bodies: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -303,9 +290,13 @@ class Robot:
         if body is not None:
             factory = with_marker_point(factory, body, pos, source)
         mj_model = factory().compile()
-        return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
-                   source=source, keyframe=keyframe, spec_factory=factory,
-                   start=start)
+        robot = cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
+                    source=source, keyframe=keyframe, spec_factory=factory,
+                    start=start)
+        own = compose_world(path, [], contact_geoms).compile().nbody  # then objects
+        robot.object_bodies = tuple(mj_model.body(b).name
+                                    for b in range(own, mj_model.nbody))
+        return robot
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
         if kinematics == "chain":
@@ -352,7 +343,8 @@ class Robot:
         nor the model transfer is paid unless dynamic mode or "mjx" FK asks."""
         if self._mjx_model is None:
             with jax.ensure_compile_time_eval():  # concrete arrays even inside a trace
-                self._mjx_model = mjx_module().put_model(self.mj_model, impl="jax")
+                self._mjx_model = mjx_module().put_model(  # kinematics: no contacts
+                    collision_free(self.mj_model, self._spec_factory), impl="jax")
         return self._mjx_model
 
     def make_data(self, qpos: Array | None = None):
@@ -374,7 +366,7 @@ class Robot:
 
     def with_kinematics(self, kinematics: str) -> Robot:
         """The same robot with another forward-kinematics back-end."""
-        return Robot(
+        other = Robot(
             self.mj_model,
             self.joint_names,
             self.marker,
@@ -385,6 +377,8 @@ class Robot:
             spec_factory=self._spec_factory,
             start=self.start,
         )
+        other.object_bodies = self.object_bodies
+        return other
 
     @property
     def start_genes(self) -> np.ndarray:
