@@ -64,7 +64,7 @@ from cgda_jax.logs import warn_once
 from cgda_jax.sim.drives import build_drives, gravity_sets
 
 __all__ = ["CONTROL_MODES", "KP_SATURATION", "Control", "ControlPlan", "Drive",
-           "actuator_kind", "plan_control"]
+           "actuator_kind", "check_transmissions", "plan_control"]
 
 #: ``Control.mode`` values.
 CONTROL_MODES = ("auto", "pd")
@@ -73,7 +73,6 @@ CONTROL_MODES = ("auto", "pd")
 KP_SATURATION = 0.1
 
 _JOINT = int(mujoco.mjtTrn.mjTRN_JOINT)
-_HINGE, _SLIDE = int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)
 
 
 def _per_joint(value, what: str) -> float | dict[str, float] | None:
