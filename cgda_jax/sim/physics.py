@@ -181,7 +181,12 @@ class Physics:
 
     def __init__(self, robot, *, timestep: float | None = None, reduce: bool = True,
                  features: Sequence = (), control=None):
-        from cgda_jax.sim.control import Control, check_transmissions, plan_control
+        from cgda_jax.sim.control import (
+            Control,
+            actuator_kind,
+            check_transmissions,
+            plan_control,
+        )
 
         full = robot.mj_model
         start = np.asarray(robot.qpos0, np.float64)
@@ -196,6 +201,13 @@ class Physics:
         held += [mujoco.mj_id2name(full, jt, j) for j in sorted(actuated)
                  if int(full.jnt_type[j]) in (_HINGE, _SLIDE)
                  and mujoco.mj_id2name(full, jt, j) not in {*held, *self.welded}]
+        if None in held or "" in held:  # an unnamed joint: only a servo holds it
+            if any(actuator_kind(full, a) != "position" for j, a in actuated.items()
+                   if not mujoco.mj_id2name(full, jt, j)):
+                raise ValueError(f"control: {robot.source} has an unnamed joint "
+                                 "driven by a motor; name it so that dynamic mode "
+                                 "can drive it with a PD")
+            held = [n for n in held if n]
         self.control = plan_control(full, start, held, control, robot.source)
         spec = robot.spec()
         self.model = reduced_model(spec, robot.marker_site, weld=self.welded,
