@@ -20,6 +20,7 @@ __all__ = [
     "experiment_names",
     "experiment_path",
     "experiments_dir",
+    "model_path",
     "models_dir",
     "resolve_config",
 ]
@@ -45,6 +46,24 @@ def _folder(package: str, source: str) -> pathlib.Path:
 def models_dir() -> pathlib.Path:
     """Folder of the built-in models (robots; object pieces in ``objects/``)."""
     return _folder("cgda_jax._models", "models")
+
+
+def model_path(name: str) -> pathlib.Path:
+    """Path of a built-in model (the repository's ``models/``, installed with the
+    package as ``cgda_jax._models``).
+
+    Args:
+        name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
+
+    Raises:
+        FileNotFoundError: no such built-in model (the message lists the ones there).
+    """
+    folder = models_dir()
+    path = folder / name
+    if not path.is_file():
+        have = sorted(p.name for p in folder.glob("*.xml"))
+        raise FileNotFoundError(f"no built-in model {name!r} in {folder}; have {have}")
+    return path
 
 
 @functools.cache

@@ -34,7 +34,7 @@ def test_defaults_file_and_overrides_layer(tmp_path):
     assert cfg.kind == "execution" and cfg.strategy.name == "iet"
     assert cfg.strategy.tolerance == 3.0 and isinstance(cfg.strategy.tolerance, float)
     assert cfg.strategy.population_size == 64
-    assert cfg.robot.fixed == {"r_forearm_rotation": 45.0, "r_wrist": 10.0}
+    assert cfg.robot.fixed == {"r_wrist": 10.0}  # no default: TEO's configs set it
     assert cfg.strategy.max_generations == ExperimentConfig().strategy.max_generations
     # the dumped config loads back to the same values
     again = load_config(_write(tmp_path, dump_config(cfg), "again.toml"))

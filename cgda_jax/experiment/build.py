@@ -181,6 +181,22 @@ def default_waypoint_s(demos: list, n_points: int) -> float:
     return float(np.mean([d.duration for d in demos])) / n_points
 
 
+def robot_marker(cfg: ExperimentConfig):
+    """The marker of ``[robot]``: ``marker`` (a table) if given, else
+    ``marker_site``.
+
+    Raises:
+        ConfigError: both given (``marker_site`` changed from its default).
+    """
+    rc = cfg.robot
+    if not rc.marker:
+        return rc.marker_site
+    if rc.marker_site != "marker":
+        raise ConfigError(f"keys 'robot.marker' and 'robot.marker_site': give one "
+                          f"(marker = {rc.marker}, marker_site = {rc.marker_site!r})")
+    return dict(rc.marker)
+
+
 def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
                     goal=None):
     """Robot (+ the world's objects) + scene + Simulator from the config.
@@ -198,16 +214,17 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     rc = cfg.robot
     fixed = {k: math.radians(v) for k, v in rc.fixed.items()}
     start = {k: math.radians(v) for k, v in rc.start.items()}
+    marker = robot_marker(cfg)
     if cfg.world.objects or cfg.world.contact_geoms:
         validate_world(cfg)  # one line naming the key for a bad object or feature
         robot = Robot.from_world(
             resolve_model(rc.model), cfg.world.objects, list(rc.joints),
-            rc.marker_site, fixed, contact_geoms=cfg.world.contact_geoms,
+            marker, fixed, contact_geoms=cfg.world.contact_geoms,
             keyframe=rc.keyframe or None, start=start,
         )
     else:
         robot = Robot.from_mjcf(
-            resolve_model(rc.model), list(rc.joints), rc.marker_site, fixed,
+            resolve_model(rc.model), list(rc.joints), marker, fixed,
             keyframe=rc.keyframe or None, start=start,
         )
     if cfg.scene.kind == "objects":
@@ -224,12 +241,30 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
     feasibility = build_feasibility(cfg, robot, scene)
     timing = {"waypoint_s": rc.waypoint_s or waypoint_s or 1.0,
               "move_fraction": rc.move_fraction, "feasibility": feasibility}
+    control = build_control(cfg)  # checked in either mode
     if rc.mode != "dynamic":
         return Simulator(robot, scene, mode=rc.mode, substeps=rc.substeps, **timing)
     return Simulator(
         robot, scene, mode="dynamic", substeps=rc.substeps,
-        timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce, **timing,
+        timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce,
+        control=control, **timing,
     )
+
+
+def build_control(cfg: ExperimentConfig):
+    """The `cgda_jax.sim.control.Control` of ``[robot.control]``.
+
+    Raises:
+        ConfigError: a bad value, naming the key.
+    """
+    import dataclasses
+
+    from cgda_jax.sim.control import Control
+
+    try:
+        return Control.from_dict(dataclasses.asdict(cfg.robot.control))
+    except ValueError as err:
+        raise ConfigError(f"key 'robot.control': {err}") from None
 
 
 def nested_limits(limits: dict) -> dict:
@@ -268,8 +303,7 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
     """
     if not cfg.strategy.feasibility:
         return None
-    from cgda_jax.sim.execute import scene_obstacles
-    from cgda_jax.sim.feasibility import Feasibility
+    from cgda_jax.sim.feasibility import Feasibility, scene_obstacles
 
     f = cfg.feasibility
     try:

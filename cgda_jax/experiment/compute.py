@@ -147,6 +147,7 @@ def compute_execution(
             "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,
             "timestep": sim.physics.timestep, "physics_steps": sim.physics_steps,
             "welded_joints": list(sim.physics.welded),
+            "control": sim.physics.control.as_dict(),
         }
     else:
         summary["substeps"] = sim.substeps
@@ -165,13 +166,17 @@ def motion_check(sim, res) -> tuple[dict, dict] | None:
     replay, joint travel) and the commanded profile's arrays (``motion_t``,
     ``motion_q``, ``motion_qd``, ``motion_waypoint_t``) for the figure; None
     when no joints were found."""
+    from cgda_jax.logs import warn_once
     from cgda_jax.sim.motion import motion_profile, motion_report
 
     joints = np.asarray(res.joints, np.float64)
     if joints.size == 0 or not np.all(np.isfinite(joints)):
         return None
     prof = motion_profile(sim, joints)
-    return motion_report(sim, joints), {
+    report = motion_report(sim, joints)
+    if report.get("tracking_note"):  # said once per run, also in report.md
+        warn_once(f"{sim.robot.source}: {report['tracking_note']}")
+    return report, {
         "motion_t": prof.t, "motion_q": prof.q, "motion_qd": prof.qd,
         "motion_waypoint_t": prof.waypoint_t,
         "joint_lower": np.asarray(sim.lower, np.float64),

@@ -107,10 +107,39 @@ class RecognitionConfig:
 
 
 @dataclasses.dataclass
-class RobotConfig:
-    """The robot: MJCF model (built-in name or path), evolved joints, marker site.
+class ControlConfig:
+    """``[robot.control]``: how dynamic mode drives the joints
+    (`cgda_jax.sim.control`).
 
-    ``fixed`` holds joint values in DEGREES (converted to radians for the robot).
+    ``mode``: "auto" (position actuators as the model has them; motors and other
+    actuators through a joint-space PD) or "pd" (every driven joint through the PD,
+    adding one where a joint has no actuator).  ``kp`` [N m/rad], ``kd``
+    [N m s/rad], ``force_limit`` [N m]: the PD's, each one number for every PD joint
+    or a table by joint name (empty: from the model; ``kp`` defaults to the force
+    limit / 0.1 rad, ``kd`` to ``damping_ratio`` x critical damping).
+    ``gravity``: the PD compensates gravity (MuJoCo's ``qfrc_bias`` at rest).
+    """
+
+    mode: str = "auto"
+    kp: Any = dataclasses.field(default_factory=dict)
+    kd: Any = dataclasses.field(default_factory=dict)
+    force_limit: Any = dataclasses.field(default_factory=dict)
+    damping_ratio: float = 1.0
+    gravity: bool = True
+
+
+@dataclasses.dataclass
+class RobotConfig:
+    """The robot: MJCF model (built-in name or path), evolved joints, marker.
+
+    ``model``: a built-in model's name (``teo.xml``) or a file; a relative path in a
+    config file is relative to that file's folder (one given with ``--set``, to the
+    working folder).  ``marker_site``: the site whose position the scenes read;
+    ``marker``: instead of it, ``{ body = "hand", pos = [x, y, z] }`` (a point fixed
+    on a body, metres in its frame) or ``{ site = "..." }``.
+    ``fixed`` holds joint values in DEGREES (converted to radians for the robot;
+    default none: joints neither evolved nor fixed stay at the start posture, welded
+    in dynamic mode).
     ``start``: start values of evolved joints in DEGREES (every execution starts
     there; default the model's ``qpos0`` or the keyframe's).
     ``keyframe``: a ``<key>`` of the model whose qpos is the start posture ("" = the
@@ -124,6 +153,7 @@ class RobotConfig:
     (`cgda_jax.sim.limits.read_limits`): ``velocity`` [rad/s], ``acceleration``
     [rad/s^2], ``effort`` [N m], each a number for every evolved joint or a table
     by joint name (``limits = { velocity = 2.0, effort = { r_elbow = 20.0 } }``).
+    ``control``: ``[robot.control]`` (`ControlConfig`).
     """
 
     model: str = "teo.xml"
@@ -131,9 +161,8 @@ class RobotConfig:
         default_factory=lambda: ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
     )
     marker_site: str = "marker"
-    fixed: dict[str, float] = dataclasses.field(
-        default_factory=lambda: {"r_forearm_rotation": 45.0}
-    )
+    marker: dict[str, Any] = dataclasses.field(default_factory=dict)
+    fixed: dict[str, float] = dataclasses.field(default_factory=dict)
     start: dict[str, float] = dataclasses.field(default_factory=dict)
     mode: str = "kinematic"
     substeps: int = 8
@@ -144,6 +173,7 @@ class RobotConfig:
     move_fraction: float = 0.6
     reduce: bool = True
     limits: dict[str, Any] = dataclasses.field(default_factory=dict)
+    control: ControlConfig = dataclasses.field(default_factory=ControlConfig)
 
 
 @dataclasses.dataclass
@@ -349,10 +379,34 @@ def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
     merge_table(cfg, table)
 
 
+#: Config keys holding a file or folder: a relative one in a file is relative to it.
+PATH_KEYS = (("robot", "model"), ("data", "data_dir"))
+
+
+def _relative_to(cfg: ExperimentConfig, table: Mapping[str, Any],
+                 folder: pathlib.Path) -> None:
+    """The `PATH_KEYS` that ``table`` (a config file's) sets, made relative to the
+    file's ``folder``: a relative path there becomes that folder's (absolute) path,
+    except a bare file name that is not there (a built-in model's name)."""
+    for section, key in PATH_KEYS:
+        raw = (table.get(section) or {}).get(key) if isinstance(
+            table.get(section), Mapping) else None
+        if not isinstance(raw, str) or not raw:
+            continue
+        p = pathlib.Path(raw).expanduser()
+        if p.is_absolute() or raw.startswith("~"):
+            continue
+        beside = (folder / p).resolve()
+        if beside.exists() or p.name != raw:
+            setattr(getattr(cfg, section), key, str(beside))
+
+
 def load_config(
     path: str | os.PathLike | None = None, overrides: Sequence[str] = ()
 ) -> ExperimentConfig:
     """Defaults, then the TOML file at ``path``, then ``key=value`` overrides.
+
+    File and folder names in the file (`PATH_KEYS`) are relative to its folder.
 
     Raises:
         ConfigError: unknown key, wrong type, unparsable file (message names the
@@ -378,6 +432,7 @@ def load_config(
             raise ConfigError(f"{path}: {e}") from None
         if "name" not in table:
             cfg.name = path.stem
+        _relative_to(cfg, table, path.parent)
     for setting in overrides:
         try:
             _apply_override(cfg, setting)

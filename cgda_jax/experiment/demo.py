@@ -15,6 +15,7 @@ DEMO_EXPERIMENTS: dict[str, dict[str, Any]] = {
     "clean_ie": {
         "kind": "execution",
         "data": {"source": "clean_circle"},
+        "robot": {"fixed": {"r_forearm_rotation": 45.0}},
         "scene": {"kind": "marker"},
         "strategy": {"name": "ie", "population_size": 32, "tolerance": 0.02,
                      "max_generations": 200},
@@ -22,6 +23,7 @@ DEMO_EXPERIMENTS: dict[str, dict[str, Any]] = {
     "paint_iet": {
         "kind": "execution",
         "data": {"source": "paint_ramp", "goal_points": 17},
+        "robot": {"fixed": {"r_forearm_rotation": 45.0}},
         "scene": {"kind": "paint"},
         "strategy": {"name": "iet", "population_size": 32, "tolerance": 3.0,
                      "max_generations": 200, "options": {"backtracks": 24}},

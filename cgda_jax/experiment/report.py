@@ -77,7 +77,8 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     dyn = "measured_speed" in motion
     head = ["joint", "peak speed [rad/s]", "limit", "peak acc. [rad/s^2]", "limit"]
     if dyn:
-        head += ["measured speed", "peak effort [N m]", "limit", "tracking [deg]"]
+        head += ["measured speed", "peak effort [N m]", "limit",
+                 "tracking at waypoint ends, max [deg]"]
     head += ["travel [deg]", "largest move [deg]"]
     lines += ["", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
     for j in motion["joints"]:
@@ -92,6 +93,39 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
         row += [f"{motion['travel_deg'][j]:.0f}",
                 f"{motion['largest_step_deg'][j]:.0f}"]
         lines.append("| " + " | ".join(row) + " |")
+    if motion.get("tracking_note"):
+        lines += ["", f"**Tracking:** {motion['tracking_note']}."]
+    return lines
+
+
+def _force(lo, hi) -> str:
+    """A force range; None or +-inf: no bound."""
+    lo, hi = (v if v is not None and math.isfinite(v) else None for v in (lo, hi))
+    if lo is None and hi is None:
+        return "none"
+    if lo is not None and hi is not None and lo == -hi:
+        return f"+-{hi:g}"
+    low = "-inf" if lo is None else f"{lo:g}"
+    return f"[{low}, {'inf' if hi is None else f'{hi:g}'}]"
+
+
+def control_lines(control: dict) -> list[str]:
+    """The report's control section: how dynamic mode drove each held joint
+    (`cgda_jax.sim.control.ControlPlan.as_dict`)."""
+    lines = ["## Control", "",
+             f"`robot.control.mode = \"{control['mode']}\"`, gravity compensation in "
+             f"the PD {'on' if control['gravity'] else 'off'}.", "",
+             "| joint | drive | actuator | kp | kd | force limit [N m] | gravity "
+             "compensated | gains from |", "|---" * 8 + "|"]
+    for d in control["joints"]:
+        drive = "position servo" if d["drive"] == "position" else "joint-space PD"
+        act = (f"{d['actuator']} ({d['actuator_kind']})" if d["actuator"]
+               else "none (added)")
+        src = d.get("sources", {})
+        lines.append(f"| {d['joint']} | {drive} | {act} | {d['kp']:.4g} | "
+                     f"{d['kd']:.4g} | {_force(d['force_lo'], d['force_hi'])} | "
+                     f"{'yes' if d['gravity'] else 'no'} | kp {src.get('kp', '-')}, "
+                     f"kd {src.get('kd', '-')} |")
     return lines
 
 
@@ -156,6 +190,8 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
                 f"{_with_unit(replay['max_point_error'], unit)}, max feature "
                 f"difference {replay['max_feature_difference']:.3g} |",
             ]
+        if phys and phys.get("control"):
+            lines += [""] + control_lines(phys["control"])
         if result.get("motion"):
             lines += [""] + motion_lines(result["motion"],
                                          (result.get("info") or {}).get("feasible"))

@@ -168,7 +168,9 @@ def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
 #: Which config key a robot-building message is about (first matching prefix).
 _ROBOT_KEYS = (("kinematic mode", "robot.mode"), ("model", "robot.model"),
                ("fixed joint", "robot.fixed"), ("joint", "robot.joints"),
-               ("site", "robot.marker_site"), ("keyframe", "robot.keyframe"))
+               ("site", "robot.marker_site"), ("keyframe", "robot.keyframe"),
+               ("marker", "robot.marker"), ("control", "robot.control"),
+               ("physics", "robot.physics"))
 
 
 def _robot_key(message: str) -> str:

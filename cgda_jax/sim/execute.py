@@ -13,16 +13,17 @@ Modes:
         within the scene's ``path_tolerance`` of the curved path
         (`cgda_jax.sim.chain.path_substeps`); other scenes are updated at each
         position.  No dynamics.
-    dynamic: a waypoint lasts ``waypoint_s`` seconds of physics (gravity, position
+    dynamic: a waypoint lasts ``waypoint_s`` seconds of physics (gravity, the
         actuators, joint limits).  The actuators track a smooth reference: a
         minimum-jerk move from the previous waypoint to this one over the first
         ``move_fraction`` of the time, then the waypoint is held while the arm
         settles; the features are read at the end.  The scene sees every physics
-        step (a paint wall: the segments between consecutive steps).  Every
-        evolved joint needs a position actuator; fixed joints are held by theirs;
-        joints neither evolved nor fixed are welded where they start (see
-        `cgda_jax.sim.physics`, ``reduce``).  The physics backend is MJX
-        or MuJoCo C (``physics``); both give the same features.
+        step (a paint wall: the segments between consecutive steps).  The
+        evolved and fixed joints are driven to their targets by position servos
+        or a joint-space PD (``control``, `cgda_jax.sim.control`); joints neither
+        evolved nor fixed are welded where they start (see `cgda_jax.sim.physics`,
+        ``reduce``).  The physics backend is MJX or MuJoCo C (``physics``); both
+        give the same features.
 
 Waypoints outside the joint limits are clipped into them (the robot cannot go there).
 
@@ -55,18 +56,12 @@ import numpy as np
 from flax import struct
 from jax import Array
 
+from cgda_jax.sim.feasibility import scene_obstacles
 from cgda_jax.sim.robot import Robot
 
 __all__ = ["MODES", "SimState", "Simulator", "scene_obstacles"]
 
 MODES = ("kinematic", "dynamic")
-
-
-def scene_obstacles(scene) -> list[dict]:
-    """The obstacles a scene adds to the world (the paint board), as
-    `cgda_jax.sim.collision.Obstacle` dicts; [] for scenes without."""
-    board = getattr(scene, "board", None)
-    return [] if board is None else [board]
 
 
 @struct.dataclass
@@ -122,6 +117,7 @@ class Simulator:
             accelerators), "mjx" or "mujoco" (see `cgda_jax.sim.physics`).
         reduce: dynamic mode: weld joints that are neither evolved nor fixed
             (default True; False simulates every joint).
+        control: dynamic mode: a `cgda_jax.sim.control.Control` (or its table).
         batch_size: dynamic mode, MJX: `execute_population` simulates the population in
             slices of at most this many candidates (``lax.map`` over ``vmap``ped
             slices; the result is the same).  On the CPU, XLA's LAPACK kernels
@@ -154,6 +150,7 @@ class Simulator:
         reduce: bool = True,
         batch_size: int | None = 256,
         feasibility: Any = None,
+        control: Any = None,
     ):
         if mode not in MODES:
             raise ValueError(f"mode={mode!r}; expected one of {MODES}")
@@ -184,7 +181,8 @@ class Simulator:
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
-        self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce}
+        self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce,
+                              "control": control}
         # object scenes read the simulated world (`ObjectScene`), others the marker
         self._world_specs = tuple(getattr(scene, "world_features", ()))
         self._fset = None
@@ -202,9 +200,10 @@ class Simulator:
         self.physics_steps = 0
         if mode == "dynamic":
             from cgda_jax.sim.physics import Physics, make_backend
+            from cgda_jax.sim.timing import approach_profile, reference_profile
 
             self.physics = Physics(robot, timestep=timestep, reduce=reduce,
-                                   features=self._world_specs)
+                                   features=self._world_specs, control=control)
             self._fset = self.physics.features
             self.backend = make_backend(self.physics, physics)
             if physics_steps is None:
@@ -212,9 +211,8 @@ class Simulator:
             self.physics_steps = int(physics_steps)
             if self.backend.name == "mujoco":
                 self.batch_size = None  # C threads, no XLA LAPACK batches to slice
-            k = max(1, round(self.move_fraction * self.physics_steps))
-            tau = np.minimum(np.arange(1, self.physics_steps + 1) / k, 1.0)
-            self._profile = (10 * tau**3 - 15 * tau**4 + 6 * tau**5).astype(np.float32)
+            self._move_steps = max(1, round(self.move_fraction * self.physics_steps))
+            self._profile = reference_profile(self.physics_steps, self._move_steps)
         elif self._world_specs:
             robot.make_data()  # mujoco.mjx and the device model, outside any trace
         # kinematic mode: the timing its feasibility check (and report) assumes
@@ -232,15 +230,10 @@ class Simulator:
             self.approach_s = self.feasibility.approach_s(robot, self.move_s)
         if mode == "dynamic" and self.approach_s > self.move_s:
             # the approach: a min-jerk move over approach_s, then the usual hold
-            dt = self.physics.timestep
-            k = max(1, int(np.ceil(self.approach_s / dt - 1e-9)))
-            hold = self.physics_steps - max(1, round(self.move_fraction
-                                                     * self.physics_steps))
-            self.approach_steps = k + hold
-            self.approach_s = k * dt
-            tau = np.minimum(np.arange(1, self.approach_steps + 1) / k, 1.0)
-            self._approach_profile = (10 * tau**3 - 15 * tau**4
-                                      + 6 * tau**5).astype(np.float32)
+            self.approach_s, self._approach_profile = approach_profile(
+                self.approach_s, self.physics.timestep, self.physics_steps,
+                self._move_steps)
+            self.approach_steps = len(self._approach_profile)
         self.n_traces = 0  # how often execute_population was traced (tests read it)
         self._execute_population = jax.jit(self._execute_batched)
         # eager set-up and replays: one program each, not one per operation

@@ -52,7 +52,7 @@ import numpy as np
 from jax import Array
 
 __all__ = ["DEFAULT_PENALTY", "DEFAULT_PENETRATION", "Feasibility", "penalized",
-           "relevant_pairs"]
+           "relevant_pairs", "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -69,6 +69,13 @@ def penalized(fitness: Array, violation: Array, penalty: float) -> Array:
     ``fitness`` (shapes broadcast).  Finite for finite inputs."""
     v = jnp.asarray(violation, jnp.float32)
     return jnp.where(v > 0, fitness + penalty * (1.0 + v), fitness)
+
+
+def scene_obstacles(scene) -> list[dict]:
+    """The obstacles a scene adds to the world (the paint board), as
+    `cgda_jax.sim.collision.Obstacle` dicts; [] for scenes without."""
+    board = getattr(scene, "board", None)
+    return [] if board is None else [board]
 
 
 class Feasibility:

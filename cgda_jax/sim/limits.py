@@ -15,7 +15,9 @@ c. effort only: the joint's ``actuatorfrcrange`` (``jnt_actfrclimited`` /
    ``jnt_actfrcrange``; the limit is ``max(|lo|, |hi|)``), source
    ``"mjcf actuatorfrcrange"``; else, when every actuator driving the joint (joint
    transmission) is force-limited, the sum of their ``max(|lo|, |hi|) * |gear|``,
-   source ``"mjcf forcerange:ACTUATOR[+ACTUATOR...]"``.
+   source ``"mjcf forcerange:ACTUATOR[+ACTUATOR...]"`` (a motor without a
+   ``forcerange`` is limited by ``|gain| max|ctrlrange|``, source
+   ``"mjcf ctrlrange:ACTUATOR"``).
 d. an MJCF model-wide numeric ``velocity_limit`` (``acceleration_limit``,
    ``effort_limit``), one value for every joint of the model.  Source
    ``"mjcf custom velocity_limit"``.
@@ -177,21 +179,33 @@ def _numeric_value(name: str, data: np.ndarray) -> float:
 
 def _actuator_effort(mj_model: mujoco.MjModel, jid: int) -> tuple[float, str] | None:
     """(summed max |force| * |gear|, source) of the actuators driving joint ``jid``,
-    or None when none drives it or one of them is not force-limited."""
+    or None when none drives it or one of them has no force limit (a
+    ``forcerange``, or a motor's ``gain x ctrlrange``)."""
+    from cgda_jax.sim.control import actuator_kind
+
     total, names = 0.0, []
     for a in range(mj_model.nu):
         if (int(mj_model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT)
                 or int(mj_model.actuator_trnid[a, 0]) != jid):
             continue
-        if not mj_model.actuator_forcelimited[a]:
+        name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_ACTUATOR, a) or f"#{a}"
+        bounds = []
+        if mj_model.actuator_forcelimited[a]:
+            bounds.append((max(abs(float(v)) for v in mj_model.actuator_forcerange[a]),
+                           "forcerange"))
+        if actuator_kind(mj_model, a) == "motor" and mj_model.actuator_ctrllimited[a]:
+            bounds.append((abs(float(mj_model.actuator_gainprm[a, 0])) * max(
+                abs(float(v)) for v in mj_model.actuator_ctrlrange[a]), "ctrlrange"))
+        if not bounds:
             return None
-        lo, hi = (float(v) for v in mj_model.actuator_forcerange[a])
-        total += max(abs(lo), abs(hi)) * abs(float(mj_model.actuator_gear[a, 0]))
-        names.append(mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
-                     or f"#{a}")
+        force, kind = min(bounds)
+        total += force * abs(float(mj_model.actuator_gear[a, 0]))
+        names.append((kind, name))
     if not names:
         return None
-    return total, "mjcf forcerange:" + "+".join(names)
+    if all(kind == "forcerange" for kind, _ in names):
+        return total, "mjcf forcerange:" + "+".join(n for _, n in names)
+    return total, "mjcf " + "+".join(f"{k}:{n}" for k, n in names)
 
 
 def read_limits(

@@ -10,7 +10,9 @@ trust the values the optimiser saw.  It
   simulator did, with every geom of the model colliding
   (`cgda_jax.sim.collision.Collider`, the scene's obstacles included);
 - in dynamic mode, replays the commanded reference on MuJoCo C at ``timestep /
-  factor`` and reads the joints' measured speeds and the actuators' forces;
+  factor`` and reads the joints' measured speeds, the actuators' forces and how far
+  each joint ends each waypoint from its target (`tracking_note`: one sentence when
+  a joint cannot reach its commanded postures, with the reason);
 - measures the joint travel (the summed joint motion) and the largest change of a
   joint between consecutive postures (flailing).
 
@@ -23,7 +25,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["MotionProfile", "motion_profile", "motion_report"]
+__all__ = ["TRACKING_WARNING_DEG", "MotionProfile", "motion_profile", "motion_report",
+           "tracking_note"]
+
+#: A joint ending a waypoint farther than this from its target [deg] (a slide: mm)
+#: cannot reach its commanded postures: the report says so, once.
+TRACKING_WARNING_DEG = 2.0
 
 
 class MotionProfile(NamedTuple):
@@ -98,8 +105,7 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     feas = getattr(sim, "feasibility", None)
     collider = getattr(feas, "collider", None)
     if collider is None:
-        from cgda_jax.sim.execute import scene_obstacles
-        from cgda_jax.sim.feasibility import Feasibility
+        from cgda_jax.sim.feasibility import Feasibility, scene_obstacles
 
         collider = Feasibility(sim.robot, obstacles=scene_obstacles(sim.scene)).collider
         if collider is None:
@@ -128,7 +134,9 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
 
 def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarray]:
     """MuJoCo C replay of the commanded reference at ``timestep / factor``: the
-    evolved joints' measured speeds (T, DoF) and their actuators' forces (T, DoF)."""
+    evolved joints' measured speeds (T, DoF), their actuator forces at the joint
+    (T, DoF; ``qfrc_actuator``, a PD's gravity compensation included), and at each
+    waypoint's end the error from its target and the force (N, DoF)."""
     import mujoco
 
     fine = sim.finer(factor) if factor > 1 else sim
@@ -149,11 +157,9 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
         moving[b] |= moving[m.body_parentid[b]]
     robot_geom = moving[m.geom_bodyid]
     deepest = (np.inf, -1, -1)
-    act_of = {int(q): a for a, q in enumerate(phys.act_qadr)}
-    gene_act = np.array([act_of.get(int(q), -1) for q in phys.gene_qadr])
     profiles = fine.reference_profiles()
     prev = np.asarray(sim.robot.start_genes, np.float64)
-    speeds, forces, ends = [], [], []
+    speeds, forces, ends, end_forces = [], [], [], []
     for i, w in enumerate(np.asarray(joints, np.float64)):
         profile = profiles[min(i, 1)]
         target = np.clip(w, sim.robot.lower, sim.robot.upper)
@@ -166,9 +172,9 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
                 if (robot_geom[c.geom1] or robot_geom[c.geom2]) and c.dist < deepest[0]:
                     deepest = (float(c.dist), int(c.geom1), int(c.geom2))
             speeds.append(d.qvel[gene_dof].copy())
-            forces.append(np.where(gene_act >= 0,
-                                   d.actuator_force[np.maximum(gene_act, 0)], np.nan))
+            forces.append(d.qfrc_actuator[gene_dof].copy())
         ends.append(d.qpos[phys.gene_qadr] - target)
+        end_forces.append(forces[-1])
         prev = target
     contact = None
     if deepest[1] >= 0:
@@ -176,8 +182,62 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
                 for g in deepest[1:]]
         contact = {"deepest_m": max(0.0, -deepest[0]), "pair": pair}
     return {"speed": np.asarray(speeds), "force": np.asarray(forces),
-            "tracking": np.abs(np.asarray(ends)), "timestep": float(m.opt.timestep),
-            "contact": contact}
+            "tracking": np.abs(np.asarray(ends)), "end_force": np.asarray(end_forces),
+            "timestep": float(m.opt.timestep), "contact": contact}
+
+
+def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
+                  threshold_deg: float = TRACKING_WARNING_DEG) -> str | None:
+    """One sentence naming the evolved joint that ends its waypoints farthest from
+    the commanded posture, when that is more than ``threshold_deg`` (radians /
+    metres: ``threshold_deg`` in degrees, or its value in mm for a slide), and why:
+    its force limit (saturation) or not (a load the gain cannot hold: gravity, a
+    contact); None when every joint reaches its commands.
+
+    Args:
+        sim: the dynamic `cgda_jax.sim.execute.Simulator`.
+        tracking: (N, DoF) |error| at each waypoint's end.
+        end_force: (N, DoF) the joint's actuator force there.
+    """
+    import mujoco
+
+    names = list(sim.robot.joint_names)
+    slide = np.array([int(sim.robot.mj_model.jnt_type[j]) == int(
+        mujoco.mjtJoint.mjJNT_SLIDE) for j in sim.robot.joint_ids])
+    scale = np.where(slide, 1e3, np.rad2deg(1.0))  # mm or degrees
+    err = np.asarray(tracking, np.float64) * scale
+    if not np.nanmax(err) > threshold_deg:
+        return None
+    i, j = np.unravel_index(int(np.nanargmax(err)), err.shape)
+    name, unit = names[j], "mm" if slide[j] else "deg"
+    drive = sim.physics.control.drive(name)
+    lo, hi = drive.force if drive is not None else (-np.inf, np.inf)
+    f = float(end_force[i, j])
+    saturated = (np.isfinite(hi) and f >= 0.99 * hi) or (np.isfinite(lo)
+                                                        and f <= 0.99 * lo)
+    servo = drive is not None and drive.kind == "position"
+    how = "its position servo" if servo else "its PD"
+    if saturated:
+        why = (f"{how} is at its force limit ({f:.3g} of [{lo:g}, {hi:g}]); a "
+               "larger limit (robot.control.force_limit for a PD, the model's "
+               "forcerange / ctrlrange) or postures it can hold would reach them")
+    elif servo:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(gravity against its gain, or a contact); robot.control.mode = "
+               "\"pd\" keeps its gains and compensates gravity")
+    elif drive is not None and not drive.gravity:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(gravity against its gain, or a contact); robot.control.gravity = "
+               "true compensates gravity")
+    else:
+        why = (f"{how} holds {f:.3g} within its force limit, short of the target "
+               "(still moving, or a contact); a larger robot.control.kp or a longer "
+               "robot.waypoint_s lets it settle")
+    worse = int(np.sum(err[:, j] > threshold_deg))
+    return (f"the arm cannot reach its commanded postures: joint {name!r} ends "
+            f"waypoint {i + 1} {err[i, j]:.1f} {unit} from its target ({worse} of "
+            f"{len(err)} waypoints beyond {threshold_deg:g} {unit}); {why}. The "
+            "evolved waypoints are commands, not the postures reached")
 
 
 def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -198,7 +258,9 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
     Returns:
         A JSON-ready dict: ``joints`` (names), ``limits`` (`JointLimits.as_dict`),
         per joint ``peak_speed``, ``peak_acceleration`` (commanded profile),
-        ``measured_speed`` / ``peak_effort`` (dynamic replay), ``travel_deg``,
+        ``measured_speed`` / ``peak_effort`` / ``tracking_error_deg`` (the largest
+        at a waypoint's end; per waypoint ``tracking_deg_per_waypoint``) /
+        ``tracking_note`` / ``control`` (dynamic replay), ``travel_deg``,
         ``largest_step_deg``; ``moves_over_max_step`` (moves that change a joint
         by more than ``max_step_deg``, the feasibility's, default 90);
         ``approach_s``, ``move_s``;
@@ -266,6 +328,9 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
                             f"into {b}")
         out["tracking_error_deg"] = dict(zip(names, np.rad2deg(
             rep["tracking"].max(axis=0)).tolist()))  # at the waypoints' ends
+        out["tracking_deg_per_waypoint"] = np.rad2deg(rep["tracking"]).tolist()
+        out["tracking_note"] = tracking_note(sim, rep["tracking"], rep["end_force"])
+        out["control"] = sim.physics.control.as_dict()
         for j, n in enumerate(names):
             if mv[j] > vel[j] * tol:
                 problems.append(f"{n}: measured {mv[j]:.2f} rad/s over its "

@@ -1,10 +1,14 @@
 """Dynamic physics: the model that is stepped, and the backends that step it.
 
-Dynamic mode simulates the robot with gravity, position actuators and joint limits.
+Dynamic mode simulates the robot with gravity, its actuators and joint limits.
 What is simulated (`reduced_model`) is the robot's MJCF rebuilt with ``mujoco.MjSpec``:
 
+- the joints it holds driven as `cgda_jax.sim.control.plan_control` says: position
+  actuators as the model has them; motors and other actuators (or, opted in, every
+  joint) through a joint-space PD with gravity compensation, built into the model so
+  that both backends step the same law;
 - joints that are neither evolved nor needed are **welded**: a hinge or slide joint
-  that is not evolved, is held by a position actuator and starts at its reference
+  that is not evolved, is held by an actuator and starts at its reference
   value (``qpos0``) is deleted together with its actuator, so the body it moved is
   rigidly attached where the joint would hold it (TEO has 14 joints; the paper
   moves 3 and holds one).  Fixed joints at another value, passive joints (an
@@ -81,10 +85,12 @@ def _position_actuated(m: mujoco.MjModel) -> dict[int, int]:
 
 
 def weldable_joints(
-    m: mujoco.MjModel, start_qpos: np.ndarray, keep: Sequence[str]
+    m: mujoco.MjModel, start_qpos: np.ndarray, keep: Sequence[str],
+    held: Sequence[str] = (),
 ) -> list[str]:
     """Joints that `reduced_model` deletes: hinge/slide, not in `keep`, driven by an
-    actuator, and at their reference value (``m.qpos0``) in `start_qpos` (nq,)."""
+    actuator (or named in `held`: joints the control would hold without one), and at
+    their reference value (``m.qpos0``) in `start_qpos` (nq,)."""
     actuated = _position_actuated(m)
     out = []
     for j in range(m.njnt):
@@ -92,7 +98,8 @@ def weldable_joints(
         if not name or name in keep or int(m.jnt_type[j]) not in (_HINGE, _SLIDE):
             continue
         adr = int(m.jnt_qposadr[j])
-        if j in actuated and abs(start_qpos[adr] - m.qpos0[adr]) < 1e-9:
+        if (j in actuated or name in held) and abs(start_qpos[adr]
+                                                   - m.qpos0[adr]) < 1e-9:
             out.append(name)
     return out
 
@@ -104,13 +111,19 @@ def reduced_model(
     weld: Sequence[str] = (),
     timestep: float | None = None,
     features: Sequence = (),
+    control=None,
+    model: mujoco.MjModel | None = None,
 ) -> mujoco.MjModel:
-    """Compile `spec` with the joints `weld` deleted (and their actuators), a
-    ``framepos`` sensor on `marker_site`, the sensors of object `features`
+    """Compile `spec` with the drives of `control` (a
+    `cgda_jax.sim.control.ControlPlan` for `model`, the spec's compiled model), the
+    joints `weld` deleted (and their actuators), a ``framepos`` sensor on
+    `marker_site`, the sensors of object `features`
     (`cgda_jax.sim.features.add_sensors`), autoreset off and an optional timestep.
 
     `spec` is modified (pass a copy you own).
     """
+    if control is not None:
+        control.apply(spec, model)
     weld = set(weld)
     for act in list(spec.actuators):
         if act.target in weld:
@@ -148,27 +161,61 @@ class Physics:
             actuator at its start value).
         features: object features (`FeatureSpec` or dicts) the scene reads; their
             sensors are added and `features` is their `FeatureSet` on `model`.
+        control: how the held joints are driven, a `cgda_jax.sim.control.Control`
+            or a ``[robot.control]`` table (None: the defaults).
 
     Attributes:
         model: the simulated ``MjModel``.
+        control: the `cgda_jax.sim.control.ControlPlan` (one `Drive` per held
+            joint: the evolved ones, the fixed ones not welded, any other simulated
+            joint with an actuator).
         welded: names of the welded (deleted) joints.
         nq, nv, nu, state_size (nq + nv).
         gene_qadr: (DoF,) qpos addresses of the evolved joints in `model`.
-        act_qadr: (nu,) qpos address each actuator of `model` drives.
+        act_qadr: (nu,) qpos address each actuator of `model` drives; act_gear:
+            (nu,) its gear (a position servo's control is ``gear x q``).
         qpos0: (nq,) start posture of `model` (the robot's start values mapped by
             joint name).
         marker_adr: sensordata address of the marker's ``framepos`` sensor.
     """
 
     def __init__(self, robot, *, timestep: float | None = None, reduce: bool = True,
-                 features: Sequence = ()):
+                 features: Sequence = (), control=None):
+        from cgda_jax.sim.control import (
+            Control,
+            actuator_kind,
+            check_transmissions,
+            plan_control,
+        )
+
         full = robot.mj_model
         start = np.asarray(robot.qpos0, np.float64)
         keep = list(robot.joint_names)
-        self.welded = weldable_joints(full, start, keep) if reduce else []
+        if not isinstance(control, Control):
+            control = Control.from_dict(control)
+        pd_holds = list(robot.fixed) if control.mode == "pd" else []
+        self.welded = weldable_joints(full, start, keep, pd_holds) if reduce else []
+        jt = mujoco.mjtObj.mjOBJ_JOINT
+        actuated = _position_actuated(full)
+        held = keep + [n for n in robot.fixed if n not in self.welded]
+        held += [mujoco.mj_id2name(full, jt, j) for j in sorted(actuated)
+                 if int(full.jnt_type[j]) in (_HINGE, _SLIDE)
+                 and mujoco.mj_id2name(full, jt, j) not in {*held, *self.welded}]
+        if None in held or "" in held:  # an unnamed joint: only a servo holds it
+            if any(actuator_kind(full, a) != "position" for j, a in actuated.items()
+                   if not mujoco.mj_id2name(full, jt, j)):
+                raise ValueError(f"control: {robot.source} has an unnamed joint "
+                                 "driven by a motor; name it so that dynamic mode "
+                                 "can drive it with a PD")
+            held = [n for n in held if n]
+        self.control = plan_control(full, start, held, control, robot.source)
         spec = robot.spec()
         self.model = reduced_model(spec, robot.marker_site, weld=self.welded,
-                                   timestep=timestep, features=features)
+                                   timestep=timestep, features=features,
+                                   control=self.control, model=full)
+        check_transmissions(self.model, robot.source)
+        self._spec, self._source = spec, robot.source
+        self.object_bodies = tuple(getattr(robot, "object_bodies", ()))
         self.features = None
         if features:
             from cgda_jax.sim.features import FeatureSet
@@ -178,7 +225,6 @@ class Physics:
         self.nq, self.nv, self.nu = m.nq, m.nv, m.nu
         self.state_size = m.nq + m.nv
         self.timestep = float(m.opt.timestep)
-        jt = mujoco.mjtObj.mjOBJ_JOINT
         # deleting joints keeps the others' order: carry the robot's start values over
         kept = [j for j in range(full.njnt)
                 if mujoco.mj_id2name(full, jt, j) not in self.welded]
@@ -194,27 +240,8 @@ class Physics:
             [m.jnt_qposadr[mujoco.mj_name2id(m, jt, n)] for n in robot.joint_names],
             np.int32,
         )
-        actuated = _position_actuated(m)
-        if len(actuated) != m.nu:
-            names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
-                     for a in range(m.nu) if a not in actuated.values()]
-            raise ValueError(f"dynamic mode: actuators {names} do not drive a joint")
-        self.act_qadr = np.zeros(m.nu, np.int32)
-        for j, a in actuated.items():
-            self.act_qadr[a] = m.jnt_qposadr[j]
-        held = set(self.act_qadr.tolist())
-        missing = [n for n, q in zip(robot.joint_names, self.gene_qadr)
-                   if int(q) not in held]
-        if missing:
-            raise ValueError(
-                f"dynamic mode needs a position actuator on every evolved joint; "
-                f"joints {missing} have none"
-            )
-        loose = [n for n in getattr(robot, "fixed", {}) if n not in self.welded
-                 and int(m.jnt_qposadr[mujoco.mj_name2id(m, jt, n)]) not in held]
-        if loose:
-            raise ValueError(f"dynamic mode: fixed joints {loose} have no position "
-                             "actuator to hold them")
+        self.act_qadr = np.asarray(m.jnt_qposadr[m.actuator_trnid[:, 0]], np.int32)
+        self.act_gear = np.asarray(m.actuator_gear[:, 0], np.float32)
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, _MARKER_SENSOR)
         self.marker_adr = int(m.sensor_adr[sid])
         self.nsensordata = int(m.nsensordata)
@@ -224,6 +251,14 @@ class Physics:
         return (f"Physics(nq={self.nq}, nu={self.nu}, timestep={self.timestep}, "
                 f"welded={len(self.welded)} joints)")
 
+    def mjx_model(self) -> mujoco.MjModel:
+        """`model` ready for MJX: unsupported geom pairs the task does not need
+        turned off (`cgda_jax.sim.mjx_prep.mjx_ready`; an error naming a needed one).
+        """
+        from cgda_jax.sim.mjx_prep import mjx_ready
+
+        return mjx_ready(self.model, self._spec, self.object_bodies, self._source)
+
     def start_state(self, genes: Array) -> Array:
         """(nq + nv,) state at rest with the evolved joints at ``genes`` (DoF,)."""
         qpos = jnp.asarray(self.qpos0, jnp.float32).at[self.gene_qadr].set(genes)
@@ -231,7 +266,7 @@ class Physics:
 
     def ctrl_of(self, qpos: Array) -> Array:
         """(nu,) actuator targets that hold the posture ``qpos`` (..., nq)."""
-        return qpos[..., self.act_qadr]
+        return qpos[..., self.act_qadr] * self.act_gear
 
 
 class MjxBackend:
@@ -243,7 +278,7 @@ class MjxBackend:
         self.physics = physics
         mjx = mjx_module()
         with jax.ensure_compile_time_eval():
-            self.model = mjx.put_model(physics.model, impl="jax")
+            self.model = mjx.put_model(physics.mjx_model(), impl="jax")
             self._data0 = mjx.make_data(self.model, impl="jax")
 
     def _data(self, state):

@@ -2,8 +2,9 @@
 
 `Robot.from_mjcf` parses the model, resolves joint and site names to ids, reads the
 joint limits and puts the MJX model on the device, all once.  Nothing here is specific
-to one robot: any MJCF arm with hinge/slide joints and a marker site works by naming
-its joints and site.
+to one robot: any MJCF arm with hinge/slide joints works by naming its joints and its
+marker, a site or a point fixed on a body (`cgda_jax.sim.marker`).  The start posture
+is `cgda_jax.sim.posture.start_posture`.
 
 Genes are raw ``qpos`` values of the evolved joints (radians for hinges, metres for
 slides), in the order the joints are listed.
@@ -29,42 +30,27 @@ import mujoco
 import numpy as np
 from jax import Array
 
-from cgda_jax.builtin import models_dir
+from cgda_jax.builtin import model_path
 from cgda_jax.sim._mujoco_env import mjx_module
+from cgda_jax.sim.marker import (
+    MARKER_POINT_SITE,
+    Marker,
+    check_marker_point,
+    marker_spec,
+    with_marker_point,
+)
+from cgda_jax.sim.mjx_prep import collision_free
+from cgda_jax.sim.posture import FIXED_RANGE_TOL, start_posture
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
 
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
-_BALL = int(mujoco.mjtJoint.mjJNT_BALL)
-_FREE = int(mujoco.mjtJoint.mjJNT_FREE)
-
-#: A fixed value this far (radians / metres) beyond a limited joint's range is clipped
-#: into it (rounding, e.g. degrees converted to radians); farther is an error.
-FIXED_RANGE_TOL = 1e-6
 
 #: Forward-kinematics back-ends: "chain" folds the marker's kinematic chain into a few
 #: constant transforms (`cgda_jax.sim.chain`); "mjx" runs ``mjx.kinematics`` on the
 #: whole model and reads ``site_xpos``.  Both equal ``mujoco.mj_kinematics``.
 KINEMATICS = ("chain", "mjx")
-
-
-def model_path(name: str) -> pathlib.Path:
-    """Path of a built-in model (the repository's ``models/``, installed with the
-    package as ``cgda_jax._models``).
-
-    Args:
-        name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
-
-    Raises:
-        FileNotFoundError: no such built-in model (the message lists the ones there).
-    """
-    folder = models_dir()
-    path = folder / name
-    if not path.is_file():
-        have = sorted(p.name for p in folder.glob("*.xml"))
-        raise FileNotFoundError(f"no built-in model {name!r} in {folder}; have {have}")
-    return path
 
 
 def _id(
@@ -78,68 +64,10 @@ def _id(
                 mj_model.njnt if kind == mujoco.mjtObj.mjOBJ_JOINT else mj_model.nsite
             )
         ]
-        raise KeyError(f"{what} {name!r} not found in {src}; it has {names}")
+        hint = ("" if kind != mujoco.mjtObj.mjOBJ_SITE else " (or put the marker on "
+                "a body: marker = {body = NAME, pos = [x, y, z]})")
+        raise KeyError(f"{what} {name!r} not found in {src}; it has {names}{hint}")
     return idx
-
-
-def _joint_label(mj_model: mujoco.MjModel, jid: int) -> str:
-    name = mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_JOINT, jid)
-    return repr(name) if name else f"#{jid} (unnamed)"
-
-
-def _fixed_value(
-    mj_model: mujoco.MjModel, jid: int, name: str, value, source: str
-) -> float:
-    """A fixed joint's value, checked: a finite number within the joint's range
-    (clipped into it when within `FIXED_RANGE_TOL`)."""
-    where = f"fixed joint {name!r} in {source}"
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{where}: value {value!r} is not a number") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{where}: value {v} is not finite")
-    if not mj_model.jnt_limited[jid]:
-        return v
-    lo, hi = (float(x) for x in mj_model.jnt_range[jid])
-    if lo - FIXED_RANGE_TOL <= v <= hi + FIXED_RANGE_TOL:
-        return min(max(v, lo), hi)
-    if int(mj_model.jnt_type[jid]) == _HINGE:  # radians, with degrees beside them
-        value = f"{v:g} rad ({math.degrees(v):g} deg)"
-        deg = f"[{math.degrees(lo):g}, {math.degrees(hi):g}] deg"
-        span = f"[{lo:g}, {hi:g}] rad ({deg})"
-    else:
-        value, span = f"{v:g} m", f"[{lo:g}, {hi:g}] m"
-    raise ValueError(f"{where}: value {value} is outside the joint's range {span}")
-
-
-def _valid_quaternions(
-    mj_model: mujoco.MjModel, qpos0: np.ndarray, origin: str, source: str
-) -> np.ndarray:
-    """``qpos0`` with every ball/free joint's quaternion normalized, as
-    ``mj_kinematics`` uses it; a non-finite start value or a zero quaternion (which
-    MuJoCo silently reads as the identity) is an error naming the joint."""
-    qpos0 = np.array(qpos0, dtype=np.float64)
-    for jid in range(mj_model.njnt):
-        jtype, adr = int(mj_model.jnt_type[jid]), int(mj_model.jnt_qposadr[jid])
-        size = {_FREE: 7, _BALL: 4}.get(jtype, 1)
-        values = qpos0[adr : adr + size]
-        kind = mujoco.mjtJoint(jtype).name.removeprefix("mjJNT_").lower()
-        label = f"{kind} joint {_joint_label(mj_model, jid)} in {source}"
-        if not np.all(np.isfinite(values)):
-            raise ValueError(
-                f"{label}: its start value {values.tolist()} in {origin} is not finite"
-            )
-        if jtype in (_BALL, _FREE):
-            q = values[-4:]
-            norm = float(np.linalg.norm(q))
-            if norm < 1e-9:
-                raise ValueError(
-                    f"{label}: its quaternion {q.tolist()} in {origin} is zero, not a "
-                    "rotation; give a unit quaternion [w, x, y, z] such as [1, 0, 0, 0]"
-                )
-            qpos0[adr + size - 4 : adr + size] = q / norm
-    return qpos0
 
 
 class Robot:
@@ -161,15 +89,20 @@ class Robot:
         qpos_adr: (DoF,) qpos addresses of the evolved joints.
         joint_ids: (DoF,) joint ids of the evolved joints.
         site_id: id of the marker site.
-        marker_site: its name.
+        marker_site: its name (`MARKER_POINT_SITE` for a point on a body).
+        marker: the marker as given: a site's name or ``{"body", "pos"}``.
         kinematics: "chain" or "mjx" (see `KINEMATICS`).
+        object_bodies: the bodies of the world's objects (`from_world`; their
+            contacts are the task's, `cgda_jax.sim.mjx_prep`).
     """
+
+    object_bodies: tuple[str, ...] = ()
 
     def __init__(
         self,
         mj_model: mujoco.MjModel,
         joints: Sequence[str],
-        marker_site: str,
+        marker_site: Marker,
         fixed: Mapping[str, float] | None = None,
         *,
         kinematics: str = "chain",
@@ -194,16 +127,26 @@ class Robot:
 
         check_model_numbers(mj_model, source)  # nan / inf / beyond float32, named
         jt = mujoco.mjtObj.mjOBJ_JOINT
-        self.mj_model = mj_model
         self.joint_names = joints
         self.n_dof = len(joints)
         self.joint_ids = np.array(
             [_id(mj_model, jt, j, "joint", source) for j in joints]
         )
-        self.marker_site = marker_site
-        self.site_id = _id(
-            mj_model, mujoco.mjtObj.mjOBJ_SITE, marker_site, "site", source
-        )
+        site, body, pos = marker_spec(marker_site)
+        if body is not None:  # a point on a body: a site of our own there
+            site = MARKER_POINT_SITE
+            if mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SITE, site) < 0:
+                if spec_factory is None:
+                    raise ValueError(
+                        f"marker on body {body!r}: {source} is a compiled model "
+                        "without its MJCF; build the robot with Robot.from_mjcf")
+                spec_factory = with_marker_point(spec_factory, body, pos, source)
+                mj_model = spec_factory().compile()
+            check_marker_point(mj_model, body, pos, source)
+        self.marker = marker_site if body is None else {"body": body, "pos": list(pos)}
+        self.marker_site = site
+        self.site_id = _id(mj_model, mujoco.mjtObj.mjOBJ_SITE, site, "site", source)
+        self.mj_model = mj_model
         self.kinematics = kinematics
 
         lower, upper = [], []
@@ -227,39 +170,9 @@ class Robot:
         self.upper = jax.device_put(np.asarray(upper, dtype=np.float32))
         self.qpos_adr = np.asarray(mj_model.jnt_qposadr[self.joint_ids], dtype=np.int32)
 
-        if keyframe is None:
-            qpos0 = np.array(mj_model.qpos0, dtype=np.float64)
-            origin = "the model's qpos0"
-        else:
-            kid = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_KEY, keyframe)
-            if kid < 0:
-                keys = [mujoco.mj_id2name(mj_model, mujoco.mjtObj.mjOBJ_KEY, i)
-                        for i in range(mj_model.nkey)]
-                raise KeyError(f"keyframe {keyframe!r} not found in {source}; it has "
-                               f"{keys}")
-            qpos0 = np.array(mj_model.key_qpos[kid], dtype=np.float64)
-            origin = f"keyframe {keyframe!r}"
-        qpos0 = _valid_quaternions(mj_model, qpos0, origin, source)
-        for name, value in fixed.items():
-            jid = _id(mj_model, jt, name, "fixed joint", source)
-            if int(mj_model.jnt_type[jid]) not in (_HINGE, _SLIDE):
-                raise ValueError(
-                    f"fixed joint {name!r} in {source} is not a hinge/slide"
-                )
-            qpos0[mj_model.jnt_qposadr[jid]] = _fixed_value(
-                mj_model, jid, name, value, source
-            )
         start = dict(start or {})
-        for name, value in start.items():  # start values of evolved joints
-            if name not in joints:
-                raise ValueError(f"start value for {name!r}: not an evolved joint "
-                                 f"{list(joints)} (hold others with 'fixed')")
-            k = joints.index(name)
-            lo, hi = lower[k], upper[k]
-            if not lo - 1e-9 <= float(value) <= hi + 1e-9:
-                raise ValueError(f"start value {value} of joint {name!r} is outside "
-                                 f"its range [{lo}, {hi}]")
-            qpos0[self.qpos_adr[k]] = float(value)
+        qpos0 = start_posture(mj_model, joints, self.joint_ids, (lower, upper), fixed,
+                              start, keyframe, source)
         self.start = start
         self.fixed = fixed
         self.keyframe = keyframe
@@ -277,7 +190,7 @@ class Robot:
         cls,
         path: str | pathlib.Path,
         joints: Sequence[str],
-        marker_site: str,
+        marker_site: Marker,
         fixed: Mapping[str, float] | None = None,
         *,
         kinematics: str = "chain",
@@ -289,7 +202,11 @@ class Robot:
         Args:
             path: the MJCF file.
             joints: (DoF,) names of the evolved joints, in gene order.
-            marker_site: name of the site whose position the scenes read.
+            marker_site: the marker, the point whose position the scenes read: a
+                site's name (e.g. the tool tip), or a point fixed on a body,
+                ``{"body": name, "pos": [x, y, z]}`` (metres in the body's frame;
+                the robot adds a site `MARKER_POINT_SITE` there), or
+                ``{"site": name}``.
             fixed: joint name -> value (RADIANS / metres) held during execution,
                 finite and within the joint's range if it has one (a value within
                 `FIXED_RANGE_TOL` of the range is clipped into it); joints neither
@@ -298,13 +215,15 @@ class Robot:
             keyframe: name of a ``<key>`` whose ``qpos`` is the start posture (its
                 ball/free quaternions are normalized; a zero one is an error).
             start: evolved joint name -> start value (RADIANS / metres), over the
-                model's ``qpos0`` or the keyframe (default: theirs).
+                model's ``qpos0`` or the keyframe (default: theirs; one of theirs
+                outside the joint's range is moved into it, with a warning).
             kinematics: forward-kinematics back-end, "chain" (default, faster) or
                 "mjx"; both match ``mujoco.mj_kinematics``.
 
         Raises:
             FileNotFoundError: the file does not exist (``~`` is expanded).
-            KeyError: a joint or site name is not in the model (the message names it).
+            KeyError: a joint, site or marker body is not in the model (the message
+                names it).
             ValueError: bad joint types, repeats, an unknown ``kinematics``, a fixed
                 value that is not finite or outside the joint's range, or a zero or
                 non-finite start value (each message names the joint and value).
@@ -312,8 +231,14 @@ class Robot:
         path = pathlib.Path(path).expanduser()
         if not path.is_file():
             raise FileNotFoundError(f"MJCF file not found: {path}")
+        factory = lambda: mujoco.MjSpec.from_file(str(path))  # noqa: E731
+        _, body, pos = marker_spec(marker_site)
         try:
-            mj_model = mujoco.MjModel.from_xml_path(str(path))
+            if body is None:
+                mj_model = mujoco.MjModel.from_xml_path(str(path))
+            else:  # the marker's site added once, here
+                factory = with_marker_point(factory, body, pos, str(path))
+                mj_model = factory().compile()
         except ValueError as err:
             raise ValueError(f"cannot load MJCF {path}: {err}") from err
         return cls(
@@ -324,7 +249,7 @@ class Robot:
             kinematics=kinematics,
             source=str(path),
             keyframe=keyframe,
-            spec_factory=lambda: mujoco.MjSpec.from_file(str(path)),
+            spec_factory=factory,
             start=start,
         )
 
@@ -334,7 +259,7 @@ class Robot:
         path: str | pathlib.Path,
         objects: Sequence[Mapping],
         joints: Sequence[str],
-        marker_site: str,
+        marker_site: Marker,
         fixed: Mapping[str, float] | None = None,
         *,
         contact_geoms: Sequence[str] = (),
@@ -351,7 +276,7 @@ class Robot:
                 `cgda_jax.sim.world.compose_world`).
             contact_geoms: robot geoms that touch the objects (e.g. the hand).
             joints, marker_site, fixed, kinematics, keyframe, start: as in
-                `from_mjcf`.
+                `from_mjcf` (a marker on a body may be on an object's body).
         """
         from cgda_jax.sim.world import compose_world
 
@@ -362,11 +287,19 @@ class Robot:
         def factory() -> mujoco.MjSpec:
             return compose_world(path, objects, contact_geoms)
 
-        mj_model = factory().compile()
         names = ", ".join(str(o.get("name", o.get("piece"))) for o in objects)
-        return cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
-                   source=f"{path} + objects [{names}]", keyframe=keyframe,
-                   spec_factory=factory, start=start)
+        source = f"{path} + objects [{names}]"
+        _, body, pos = marker_spec(marker_site)
+        if body is not None:
+            factory = with_marker_point(factory, body, pos, source)
+        mj_model = factory().compile()
+        robot = cls(mj_model, joints, marker_site, fixed, kinematics=kinematics,
+                    source=source, keyframe=keyframe, spec_factory=factory,
+                    start=start)
+        own = compose_world(path, [], contact_geoms).compile().nbody  # then objects
+        robot.object_bodies = tuple(mj_model.body(b).name
+                                    for b in range(own, mj_model.nbody))
+        return robot
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
         if kinematics == "chain":
@@ -385,7 +318,7 @@ class Robot:
 
     def __repr__(self) -> str:
         return (
-            f"Robot(joints={self.joint_names}, marker={self.marker_site!r}, "
+            f"Robot(joints={self.joint_names}, marker={self.marker!r}, "
             f"kinematics={self.kinematics!r})"
         )
 
@@ -413,7 +346,8 @@ class Robot:
         nor the model transfer is paid unless dynamic mode or "mjx" FK asks."""
         if self._mjx_model is None:
             with jax.ensure_compile_time_eval():  # concrete arrays even inside a trace
-                self._mjx_model = mjx_module().put_model(self.mj_model, impl="jax")
+                self._mjx_model = mjx_module().put_model(  # kinematics: no contacts
+                    collision_free(self.mj_model, self._spec_factory), impl="jax")
         return self._mjx_model
 
     def make_data(self, qpos: Array | None = None):
@@ -435,10 +369,10 @@ class Robot:
 
     def with_kinematics(self, kinematics: str) -> Robot:
         """The same robot with another forward-kinematics back-end."""
-        return Robot(
+        other = Robot(
             self.mj_model,
             self.joint_names,
-            self.marker_site,
+            self.marker,
             self.fixed,
             kinematics=kinematics,
             source=self.source,
@@ -446,6 +380,8 @@ class Robot:
             spec_factory=self._spec_factory,
             start=self.start,
         )
+        other.object_bodies = self.object_bodies
+        return other
 
     @property
     def start_genes(self) -> np.ndarray:

@@ -60,6 +60,26 @@ PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
 
 
 # -- the minimum-jerk move -------------------------------------------------------------
+def reference_profile(steps: int, move_steps: int) -> np.ndarray:
+    """The share of a minimum-jerk move done after each of ``steps`` physics steps
+    when the move takes ``move_steps`` of them (then 1: the hold), (steps,) float32."""
+    tau = np.minimum(np.arange(1, steps + 1) / max(1, move_steps), 1.0)
+    return (10 * tau**3 - 15 * tau**4 + 6 * tau**5).astype(np.float32)
+
+
+def approach_profile(approach_s: float, dt: float, steps: int, move_steps: int
+                     ) -> tuple[float, np.ndarray]:
+    """The first move's reference: a minimum-jerk move over ``approach_s`` (rounded
+    up to whole ``dt`` steps), then the hold of the other moves (``steps`` physics
+    steps of which ``move_steps`` move).
+
+    Returns:
+        (the approach's move time [s], its profile (steps,) float32).
+    """
+    k = max(1, int(np.ceil(approach_s / dt - 1e-9)))
+    return k * dt, reference_profile(k + steps - move_steps, k)
+
+
 def min_jerk(tau: Array) -> Array:
     """Minimum-jerk profile ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``, 0 -> 1.
 
