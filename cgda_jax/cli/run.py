@@ -7,7 +7,7 @@ import pathlib
 import time
 
 from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
-from cgda_jax.cli.trials import run_trials_command
+from cgda_jax.cli.trials import check_processes, run_trials_command
 
 RUN_EXAMPLES = """\
 examples:
@@ -87,6 +87,7 @@ def cmd_run(args) -> int:
         plan_folder,
     )
 
+    check_processes(args)
     cfg = load_config(resolve_config(args.config), args.overrides)
     if args.trials is not None:
         from cgda_jax.experiment.trials import check_trials
