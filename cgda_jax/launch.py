@@ -52,8 +52,9 @@ class _Lines:
     the moments before the job ends can still be dropped (`mute`)."""
 
     def __init__(self, hold_s: float = 0.0,
-                 drop: Callable[[str], bool] | None = None):
-        self.hold_s, self.drop = hold_s, drop
+                 drop: Callable[[str], bool] | None = None,
+                 keep: Callable[[str], bool] | None = None):
+        self.hold_s, self.drop, self.keep = hold_s, drop, keep
         self.lock = threading.Lock()
         self.muted: set[int] = set()
         self.pending: collections.deque = collections.deque()
@@ -65,14 +66,16 @@ class _Lines:
         if self.drop is not None and self.drop(line):
             return
         text = f"{prefix}{line}\n"
+        kept = self.keep is not None and self.keep(line)
         with self.lock:
-            if i in self.muted:
+            if i in self.muted and not kept:
                 return
             if self.hold_s <= 0:
                 stream.write(text)
                 stream.flush()
             else:
-                self.pending.append((time.monotonic() + self.hold_s, i, stream, text))
+                self.pending.append(
+                    (time.monotonic() + self.hold_s, i, stream, text, kept))
 
     def mute(self, keep: int | None, n: int) -> None:
         with self.lock:
@@ -82,8 +85,8 @@ class _Lines:
         """Write the lines due by ``until`` (all without it), muted ones dropped."""
         with self.lock:
             while self.pending and (until is None or self.pending[0][0] <= until):
-                _, i, stream, text = self.pending.popleft()
-                if i not in self.muted:
+                _, i, stream, text, kept = self.pending.popleft()
+                if kept or i not in self.muted:
                     stream.write(text)
                     stream.flush()
 
@@ -206,8 +209,8 @@ def start_job(n_processes: int, argv: Sequence[str], *,
               env: dict[str, str] | None = None, host: str = "127.0.0.1",
               stdout: TextIO | None = None, stderr: TextIO | None = None,
               prefix: bool = True, mute_on_end: bool = False,
-              hold_s: float = 0.0, drop: Callable[[str], bool] | None = None
-              ) -> JobEnd:
+              hold_s: float = 0.0, drop: Callable[[str], bool] | None = None,
+              keep: Callable[[str], bool] | None = None) -> JobEnd:
     """`launch`, saying nothing itself: how the job ended, as a `JobEnd`.
 
     Args:
@@ -220,6 +223,9 @@ def start_job(n_processes: int, argv: Sequence[str], *,
             others noticed a process die) are dropped too.
         drop: ``drop(line)`` True: the line is not shown (e.g. a library's
             chatter on stdout).
+        keep: ``keep(line)`` True: the line is shown even from a muted process
+            (e.g. the program's own error line, printed by a process that ended
+            just after another one failed).
         (the rest as in `launch`)
     """
     n = int(n_processes)
@@ -235,7 +241,7 @@ def start_job(n_processes: int, argv: Sequence[str], *,
             ENV_NUM_PROCESSES: str(n), ENV_LAUNCHER_PID: str(os.getpid()),
             "PYTHONUNBUFFERED": "1"}
     base.pop(ENV_CLUSTER, None)
-    lines = _Lines(hold_s, drop)
+    lines = _Lines(hold_s, drop, keep)
     procs: list[subprocess.Popen] = []
     pumps: list[threading.Thread] = []
 

@@ -19,7 +19,7 @@ from cgda_jax.cli.output import (
 )
 from cgda_jax.cli.plot import add_plot_parser, cmd_plot
 from cgda_jax.cli.run import RUN_EXAMPLES, cmd_run
-from cgda_jax.cli.trials import add_trials_arguments, join_job
+from cgda_jax.cli.trials import add_trials_arguments, job_member, join_job
 
 def _version() -> str:
     from cgda_jax import __version__
@@ -128,5 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             return interrupted(None, getattr(e, "signum", signal.SIGINT))
         log_warnings()
         args.argv = sys.argv[1:] if argv is None else list(argv)  # a job's workers
+        if job_member(args):
+            signals.default()  # until the job's SignalWatcher (join_job)
         return _dispatch(args, signals)
 

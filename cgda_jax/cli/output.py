@@ -17,6 +17,8 @@ import tempfile
 import threading
 import traceback
 
+from cgda_jax.job import ENV_LAUNCHER_PID
+
 #: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
 
@@ -80,6 +82,15 @@ class Signals:
         for sig, handler in self.old.items():
             signal.signal(sig, handler)
 
+    def default(self) -> None:
+        """SIGINT and SIGTERM end the process at once, the system's way (a process
+        of a multi-process job until its `SignalWatcher` runs: it holds nothing to
+        clean up yet, and a Python exception in the middle of joining the job
+        could leave JAX's runtime threads to crash the exit)."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in EXIT_SIGNAL:
+                signal.signal(sig, signal.SIG_DFL)
+
 
 def save_traceback() -> str:
     """The current exception's traceback in a temporary log file; its path (or why
@@ -111,8 +122,15 @@ def interrupted_text(args, signum: int) -> str:
     return f"cgda: interrupted ({name}){where}"
 
 
+def launched_worker() -> bool:
+    """This process is a worker of `cgda_jax.launch` (its launcher says what ended
+    the job, so the worker does not)."""
+    return bool(os.environ.get(ENV_LAUNCHER_PID, "").strip())
+
+
 def interrupted(args, signum: int) -> int:
-    print(interrupted_text(args, signum), file=sys.stderr)
+    if not launched_worker():
+        print(interrupted_text(args, signum), file=sys.stderr)
     return EXIT_SIGNAL.get(signum, 128 + signum)
 
 

@@ -3,11 +3,13 @@ with ``--trials N``, many seeds of it: `cgda_jax.cli.trials`)."""
 
 from __future__ import annotations
 
+import os
 import pathlib
 import time
 
 from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
 from cgda_jax.cli.trials import check_processes, run_trials_command
+from cgda_jax.job import ENV_JOB_WORK
 
 RUN_EXAMPLES = """\
 examples:
@@ -93,7 +95,8 @@ def cmd_run(args) -> int:
         from cgda_jax.experiment.trials import check_trials
 
         check_trials(cfg, args.trials)
-    facts = check_experiment(cfg)
+    # a worker of `--processes P`: its launcher made these checks, on the same files
+    facts = None if os.environ.get(ENV_JOB_WORK) else check_experiment(cfg)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
     if args.dry_run:

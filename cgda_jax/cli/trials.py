@@ -39,11 +39,11 @@ from cgda_jax.cli.output import (
     JobFailed,
     SignalWatcher,
     failure,
+    launched_worker,
 )
 from cgda_jax.job import (
     ENV_JOB_FOLDER,
     ENV_JOB_WORK,
-    ENV_LAUNCHER_PID,
     job_from_env,
 )
 
@@ -85,6 +85,16 @@ def _launching(args) -> bool:
             and job_from_env() is None)
 
 
+def job_member(args) -> bool:
+    """This command runs as one process of a multi-process job (it will join it)."""
+    if args.command != "run" or getattr(args, "trials", None) is None:
+        return False
+    try:
+        return job_from_env() is not None
+    except ValueError:  # said by join_job
+        return False
+
+
 def join_job(args) -> bool:
     """Joins the multi-process job the environment describes (before any JAX
     computation); False when there is none. A job's process ends at once on SIGINT
@@ -100,7 +110,7 @@ def join_job(args) -> bool:
     job_from_env()  # a half-described job is an error here, not a silent single run
     joined = distributed.initialize()
     if joined:
-        SignalWatcher(args, quiet=bool(os.environ.get(ENV_LAUNCHER_PID))).start()
+        SignalWatcher(args, quiet=launched_worker()).start()
         if not distributed.is_writer():
             args.quiet = True
     return joined
@@ -182,7 +192,7 @@ def _take_folder(stack, args, open_folder, chosen, writer: bool):
             args.run_folder = rf
             chosen(rf)
             work = rf.work
-        except Exception as e:
+        except Exception as e:  # noqa: BLE001 - shared with the others, raised below
             err = e
     if jax.process_count() > 1:
         payload = None if err is None else failure(args, err)[0]
@@ -265,7 +275,7 @@ def _launch(cfg, args, open_folder, chosen) -> int:
                "CGDA_LAUNCHED_PROCESSES": str(p)}
         # status 1 is not a failure of a worker; every process exits like process 0
         end = start_job(p, cmd, ok_codes=(0, 1), env=env, mute_on_end=True,
-                        hold_s=LINE_HOLD_S, drop=_chatter)
+                        hold_s=LINE_HOLD_S, drop=_chatter, keep=_own_line)
         if end.reason == "interrupted":
             raise Interrupted(end.signum)
         if end.reason != "ok":
@@ -282,6 +292,11 @@ def _launch(cfg, args, open_folder, chosen) -> int:
 def _chatter(line: str) -> bool:
     """gloo's own line on stdout as it connects the processes."""
     return line.startswith("[Gloo] ")
+
+
+def _own_line(line: str) -> bool:
+    """A worker's own ``cgda: ...`` line (its error): shown whoever ends first."""
+    return line.startswith("cgda: ")
 
 
 def _worker_ended(end, rf) -> tuple[int, str | None]:
