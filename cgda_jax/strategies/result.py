@@ -159,7 +159,7 @@ class ExecutionResult:
             final_fitness=_number(meta["final_fitness"]),
             info=info,
             invalid_evaluations=meta.get("invalid_evaluations", 0),
-            **arrays,
+            **{k: arrays[k] for k in _ARRAYS},  # a run's folder holds more
         )
 
 
