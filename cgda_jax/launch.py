@@ -213,6 +213,8 @@ def start_job(n_processes: int, argv: Sequence[str], *,
               keep: Callable[[str], bool] | None = None) -> JobEnd:
     """`launch`, saying nothing itself: how the job ended, as a `JobEnd`.
 
+    The arguments not listed below are those of `launch`.
+
     Args:
         mute_on_end: once the job is decided to end (a failure, the timeout, an
             interrupt), drop the lines of the processes being stopped (the failed
@@ -226,7 +228,6 @@ def start_job(n_processes: int, argv: Sequence[str], *,
         keep: ``keep(line)`` True: the line is shown even from a muted process
             (e.g. the program's own error line, printed by a process that ended
             just after another one failed).
-        (the rest as in `launch`)
     """
     n = int(n_processes)
     if n < 1:

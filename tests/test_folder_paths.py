@@ -234,12 +234,16 @@ def truncate(path: pathlib.Path) -> None:
     path.write_bytes(data[: len(data) // 2])
 
 
+def single_array(path: pathlib.Path) -> None:
+    with open(path, "wb") as f:  # a .npy file under the name arrays.npz
+        np.save(f, np.zeros(3))
+
+
 CORRUPT = {
     # case -> (how, words the error must hold)
     "npz-truncated": (lambda f: truncate(f / "arrays.npz"),
                       ["arrays.npz", "damaged or truncated"]),
-    "npz-not-an-archive": (lambda f: np.save(open(f / "arrays.npz", "wb"),
-                                             np.zeros(3)),
+    "npz-not-an-archive": (lambda f: single_array(f / "arrays.npz"),
                            ["arrays.npz", "not an archive"]),
     "npz-array-missing": (lambda f: np.savez(f / "arrays.npz", joints=np.zeros((4, 3))),
                           ["arrays.npz", "missing", "features"]),
