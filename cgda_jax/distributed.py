@@ -40,14 +40,18 @@ by `initialize`; on GPU through NCCL, on TPU through the interconnect, unchanged
 
 from __future__ import annotations
 
+import ctypes
 import os
 import pickle
+import signal
+import sys
 from collections.abc import Sequence
 from typing import Any
 
 from cgda_jax.job import (
     ENV_CLUSTER,
     ENV_COORDINATOR,
+    ENV_LAUNCHER_PID,
     ENV_LOCAL_DEVICE_IDS,
     ENV_NUM_PROCESSES,
     ENV_PROCESS_ID,
@@ -62,21 +66,29 @@ __all__ = [
     "ENV_PROCESS_ID",
     "allgather_objects",
     "distributed_trials",
+    "follow_launcher",
     "initialize",
     "is_writer",
     "launch",
     "share",
 ]
 
-def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100) -> bool:
+def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100,
+               preemption_service: bool = False) -> bool:
     """Join the multi-process job the environment describes (module docstring).
 
     Call it first, before any JAX computation (``jax.distributed.initialize`` must
-    precede the backends). Also selects gloo for CPU collectives.
+    precede the backends). Also selects gloo for CPU collectives. A worker started
+    by `cgda_jax.launch` also ends when its launcher ends, even by SIGKILL (Linux:
+    the parent-death signal), so no worker outlives its job.
 
     Args:
         timeout_s: how long to wait for every process to connect.
         heartbeat_timeout_s: how soon the others notice a process that died.
+        preemption_service: keep JAX's preemption service, whose notifier takes
+            SIGTERM for itself (it reports "SIGTERM caught" and the process goes
+            on); off by default, so that SIGTERM reaches the program's own handler
+            (``cgda`` ends the process and cleans its results folder up).
 
     Returns:
         True when a job was joined (``jax.process_count()`` processes), False when
@@ -84,7 +96,7 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100) -> bool:
         process already joined.
 
     Raises:
-        ValueError: malformed CGDA_* variables.
+        ValueError: malformed or incomplete CGDA_* variables (named).
         RuntimeError: JAX already ran a computation in this process, or the job
             could not be joined (the message names the coordinator).
     """
@@ -93,8 +105,11 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100) -> bool:
     job = job_from_env()
     if job is None or jax.distributed.is_initialized():
         return False
+    follow_launcher()
     if "jax_cpu_collectives_implementation" in jax.config.values:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    if "jax_enable_preemption_service" in jax.config.values:
+        jax.config.update("jax_enable_preemption_service", bool(preemption_service))
     try:
         jax.distributed.initialize(
             **job,
@@ -108,6 +123,25 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100) -> bool:
             f"could not join the multi-process job ({where}): "
             f"{str(err).strip().splitlines()[0] if str(err).strip() else err!r}"
         ) from err
+    return True
+
+
+def follow_launcher() -> bool:
+    """When this process is a worker of `cgda_jax.launch` (``CGDA_LAUNCHER_PID``),
+    have the kernel kill it when the launcher dies (Linux ``PR_SET_PDEATHSIG``);
+    exits at once when the launcher is already gone. True when set up."""
+    pid = os.environ.get(ENV_LAUNCHER_PID, "").strip()
+    if not pid.isdigit() or not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        if libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) != 0:
+            return False
+    except (OSError, AttributeError):  # pragma: no cover - no prctl
+        return False
+    if os.getppid() != int(pid):  # the launcher died before prctl
+        os._exit(128 + int(signal.SIGKILL))
     return True
 
 

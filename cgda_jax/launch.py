@@ -3,7 +3,8 @@
 `launch` gives each copy the variables `cgda_jax.distributed.initialize` reads
 (``CGDA_COORDINATOR=127.0.0.1:<free port>``, ``CGDA_NUM_PROCESSES``,
 ``CGDA_PROCESS_ID``), streams their output prefixed ``[p0]``, ``[p1]``, ..., stops
-them all when one fails, on a timeout or on Ctrl-C, and returns the job's status.
+them all when one fails, on a timeout or on Ctrl-C, and returns the job's status
+(`start_job`: the same, saying how it ended as a `JobEnd`).
 From a shell::
 
     python -m cgda_jax.launch -n 4 [--timeout S] -- python my_trials.py ...
@@ -15,6 +16,8 @@ scheduler starts the processes instead (README, "Several processes and machines"
 from __future__ import annotations
 
 import argparse
+import collections
+import dataclasses
 import os
 import signal
 import socket
@@ -22,19 +25,18 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import TextIO
 
 from cgda_jax.job import (
     ENV_CLUSTER,
     ENV_COORDINATOR,
+    ENV_LAUNCHER_PID,
     ENV_NUM_PROCESSES,
     ENV_PROCESS_ID,
 )
 
-__all__ = ["free_port", "launch", "main", "without_option"]
-
-
+__all__ = ["JobEnd", "free_port", "launch", "main", "start_job", "without_option"]
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -44,31 +46,91 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
-def _pump(pipe, out: TextIO, prefix: str, lock: threading.Lock) -> None:
+class _Lines:
+    """The workers' lines on their way to our streams: written at once, or (with
+    ``hold_s``) each held that long first, so that lines printed by a process in
+    the moments before the job ends can still be dropped (`mute`)."""
+
+    def __init__(self, hold_s: float = 0.0,
+                 drop: Callable[[str], bool] | None = None,
+                 keep: Callable[[str], bool] | None = None):
+        self.hold_s, self.drop, self.keep = hold_s, drop, keep
+        self.lock = threading.Lock()
+        self.muted: set[int] = set()
+        self.pending: collections.deque = collections.deque()
+        self.wake = threading.Event()
+        if hold_s > 0:
+            threading.Thread(target=self._forward, daemon=True).start()
+
+    def add(self, i: int, stream: TextIO, line: str, prefix: str) -> None:
+        if self.drop is not None and self.drop(line):
+            return
+        text = f"{prefix}{line}\n"
+        kept = self.keep is not None and self.keep(line)
+        with self.lock:
+            if i in self.muted and not kept:
+                return
+            if self.hold_s <= 0:
+                stream.write(text)
+                stream.flush()
+            else:
+                self.pending.append(
+                    (time.monotonic() + self.hold_s, i, stream, text, kept))
+
+    def mute(self, keep: int | None, n: int) -> None:
+        with self.lock:
+            self.muted |= {i for i in range(n) if i != keep}
+
+    def flush(self, until: float | None = None) -> None:
+        """Write the lines due by ``until`` (all without it), muted ones dropped."""
+        with self.lock:
+            while self.pending and (until is None or self.pending[0][0] <= until):
+                _, i, stream, text, kept = self.pending.popleft()
+                if kept or i not in self.muted:
+                    stream.write(text)
+                    stream.flush()
+
+    def _forward(self) -> None:
+        while not self.wake.wait(0.05):
+            self.flush(time.monotonic())
+
+
+def _pump(pipe, out: TextIO, prefix: str, i: int, lines: _Lines) -> None:
     for raw in iter(pipe.readline, b""):
         line = raw.decode(errors="replace").rstrip("\r\n")
-        with lock:
-            out.write(f"{prefix}{line}\n")
-            out.flush()
+        lines.add(i, out, line, prefix)  # read on when muted: no full pipe
     pipe.close()
 
 
-def _stop(procs: Iterable[subprocess.Popen], grace_s: float = 5.0) -> None:
-    """SIGTERM each running worker's process group, SIGKILL what is left after
-    `grace_s`."""
-    procs = [p for p in procs if p.poll() is None]
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        for p in procs:
+def _signal_all(procs: Iterable[subprocess.Popen], sig: int) -> None:
+    for p in procs:
+        if p.poll() is None:
             try:
                 os.killpg(p.pid, sig)
             except (ProcessLookupError, PermissionError):
                 pass
-        deadline = time.monotonic() + grace_s
-        while time.monotonic() < deadline and any(p.poll() is None for p in procs):
-            time.sleep(0.05)
-        procs = [p for p in procs if p.poll() is None]
-        if not procs:
-            return
+
+
+def _wait(procs: list[subprocess.Popen], timeout_s: float) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while any(p.poll() is None for p in procs):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def _stop(procs: Sequence[subprocess.Popen], grace_s: float = 3.0) -> None:
+    """Stop every running worker's process group: SIGTERM, then SIGKILL what is
+    left after `grace_s`. Processes 1 .. N-1 first, process 0 (which hosts JAX's
+    coordination service) once they are gone: a worker whose coordinator vanished
+    first would abort with a C++ stack of its own."""
+    procs = list(procs)
+    for group in (procs[1:], procs[:1]):
+        _signal_all(group, signal.SIGTERM)
+        if not _wait(group, grace_s):
+            _signal_all(group, signal.SIGKILL)
+            _wait(group, grace_s)
 
 
 def _status(code: int) -> int:
@@ -77,6 +139,29 @@ def _status(code: int) -> int:
 
 class _Terminated(Exception):
     pass
+
+
+@dataclasses.dataclass(frozen=True)
+class JobEnd:
+    """How a job started by `start_job` ended.
+
+    Attributes:
+        status: the job's exit status (as `launch` returns it).
+        reason: ``"ok"`` (every process ended with an ok status), ``"failed"``
+            (a process did not), ``"timeout"`` or ``"interrupted"`` (the launcher
+            got SIGINT or SIGTERM).
+        process: the failed process (``"failed"``), else None.
+        code: its raw exit code (negative: killed by that signal), else None.
+        signum: the signal that interrupted the launcher (``"interrupted"``).
+        message: what happened, in words (`launch` prints it after ``launch:``).
+    """
+
+    status: int
+    reason: str
+    process: int | None = None
+    code: int | None = None
+    signum: int | None = None
+    message: str = ""
 
 
 def launch(n_processes: int, argv: Sequence[str], *,
@@ -90,8 +175,9 @@ def launch(n_processes: int, argv: Sequence[str], *,
     and ``CGDA_PROCESS_ID`` (its script calls `initialize`). Their stdout and
     stderr go to ours line by line, prefixed ``[p<i>] ``. When one exits with a
     status not in `ok_codes` (or is killed), the others are stopped at once
-    (SIGTERM, then SIGKILL after 5 s), as on `timeout_s` and on Ctrl-C / SIGTERM
-    to the launcher: no worker outlives it.
+    (SIGTERM, then SIGKILL after 3 s), as on `timeout_s` and on Ctrl-C / SIGTERM
+    to the launcher: no worker outlives it (nor a SIGKILL of the launcher: each
+    worker's `initialize` asks the kernel to end it with its launcher).
 
     Args:
         n_processes: N >= 1.
@@ -109,6 +195,40 @@ def launch(n_processes: int, argv: Sequence[str], *,
         otherwise the first failure's status (a signal n as 128 + n), 124 on the
         timeout, 130 / 143 when the launcher was interrupted (SIGINT / SIGTERM).
     """
+    err = stderr or sys.stderr
+    end = start_job(n_processes, argv, timeout_s=timeout_s, ok_codes=ok_codes,
+                    env=env, host=host, stdout=stdout, stderr=stderr, prefix=prefix)
+    if end.message:
+        err.write(f"launch: {end.message}\n")
+        err.flush()
+    return end.status
+
+
+def start_job(n_processes: int, argv: Sequence[str], *,
+              timeout_s: float | None = None, ok_codes: Iterable[int] = (0,),
+              env: dict[str, str] | None = None, host: str = "127.0.0.1",
+              stdout: TextIO | None = None, stderr: TextIO | None = None,
+              prefix: bool = True, mute_on_end: bool = False,
+              hold_s: float = 0.0, drop: Callable[[str], bool] | None = None,
+              keep: Callable[[str], bool] | None = None) -> JobEnd:
+    """`launch`, saying nothing itself: how the job ended, as a `JobEnd`.
+
+    The arguments not listed below are those of `launch`.
+
+    Args:
+        mute_on_end: once the job is decided to end (a failure, the timeout, an
+            interrupt), drop the lines of the processes being stopped (the failed
+            one's last lines still come): what they print while dying (a JAX
+            runtime's complaint that its coordinator left) is noise.
+        hold_s: hold each line that long before writing it, so that with
+            `mute_on_end` the lines a process printed just before the end (as the
+            others noticed a process die) are dropped too.
+        drop: ``drop(line)`` True: the line is not shown (e.g. a library's
+            chatter on stdout).
+        keep: ``keep(line)`` True: the line is shown even from a muted process
+            (e.g. the program's own error line, printed by a process that ended
+            just after another one failed).
+    """
     n = int(n_processes)
     if n < 1:
         raise ValueError(f"n_processes must be >= 1; got {n_processes}")
@@ -119,11 +239,20 @@ def launch(n_processes: int, argv: Sequence[str], *,
     err = stderr or sys.stderr
     address = f"{host}:{free_port(host)}"
     base = {**os.environ, **(env or {}), ENV_COORDINATOR: address,
-            ENV_NUM_PROCESSES: str(n), "PYTHONUNBUFFERED": "1"}
+            ENV_NUM_PROCESSES: str(n), ENV_LAUNCHER_PID: str(os.getpid()),
+            "PYTHONUNBUFFERED": "1"}
     base.pop(ENV_CLUSTER, None)
-    lock = threading.Lock()
+    lines = _Lines(hold_s, drop, keep)
     procs: list[subprocess.Popen] = []
     pumps: list[threading.Thread] = []
+
+    def end_all(keep: int | None = None) -> None:
+        if mute_on_end:
+            lines.mute(keep, n)
+        _stop(procs)
+        _join(pumps)  # the failed one's last lines (its error) come first
+        lines.flush()
+
     old_term = None
     in_main = threading.current_thread() is threading.main_thread()
     if in_main:
@@ -138,7 +267,8 @@ def launch(n_processes: int, argv: Sequence[str], *,
             procs.append(p)
             tag = f"[p{i}] " if prefix else ""
             for pipe, stream in ((p.stdout, out), (p.stderr, err)):
-                t = threading.Thread(target=_pump, args=(pipe, stream, tag, lock),
+                t = threading.Thread(target=_pump,
+                                     args=(pipe, stream, tag, i, lines),
                                      daemon=True)
                 t.start()
                 pumps.append(t)
@@ -149,31 +279,32 @@ def launch(n_processes: int, argv: Sequence[str], *,
                       if c is not None and c not in ok]
             if failed:
                 i, c = failed[0]
-                _stop(procs)
-                _join(pumps)  # their last lines (a traceback) come first
-                _note(err, lock, f"process {i} exited with status {_status(c)}; "
-                      "stopped the others")
-                return _status(c) or 1
+                end_all(keep=i)
+                return JobEnd(_status(c) or 1, "failed", i, c, message=(
+                    f"process {i} exited with status {_status(c)}; stopped the "
+                    "others"))
             if all(c is not None for c in codes):
-                return _status(codes[0])
-            if deadline is not None and time.monotonic() > deadline:
-                _stop(procs)
                 _join(pumps)
-                _note(err, lock, f"timed out after {timeout_s:g} s; stopped all "
-                      f"{n} processes")
-                return 124
+                lines.flush()
+                return JobEnd(_status(codes[0]), "ok")
+            if deadline is not None and time.monotonic() > deadline:
+                end_all()
+                return JobEnd(124, "timeout", message=(
+                    f"timed out after {timeout_s:g} s; stopped all {n} processes"))
             time.sleep(0.05)
     except KeyboardInterrupt:
-        _stop(procs)
-        _note(err, lock, "interrupted (SIGINT); stopped all processes")
-        return 130
+        end_all()
+        return JobEnd(130, "interrupted", signum=int(signal.SIGINT),
+                      message="interrupted (SIGINT); stopped all processes")
     except _Terminated:
-        _stop(procs)
-        _note(err, lock, "interrupted (SIGTERM); stopped all processes")
-        return 143
+        end_all()
+        return JobEnd(143, "interrupted", signum=int(signal.SIGTERM),
+                      message="interrupted (SIGTERM); stopped all processes")
     finally:
         _stop(procs)
         _join(pumps)
+        lines.flush()
+        lines.wake.set()
         if in_main:
             signal.signal(signal.SIGTERM, old_term)
 
@@ -181,12 +312,6 @@ def launch(n_processes: int, argv: Sequence[str], *,
 def _join(pumps: list[threading.Thread]) -> None:
     for t in pumps:
         t.join(timeout=2.0)
-
-
-def _note(stream: TextIO, lock: threading.Lock, text: str) -> None:
-    with lock:
-        stream.write(f"launch: {text}\n")
-        stream.flush()
 
 
 def without_option(argv: Sequence[str], option: str) -> list[str]:

@@ -10,21 +10,16 @@ import sys
 from cgda_jax.cli.demo import DEMO_EXAMPLES
 from cgda_jax.cli.list import cmd_list
 from cgda_jax.cli.output import (
-    EXIT_DIVERGED,
-    EXIT_FAILURE,
-    EXIT_USAGE,
+    JobFailed,
     Signals,
-    diverged,
     enable_compilation_cache,
-    first_line,
+    failure,
     interrupted,
     log_warnings,
-    save_traceback,
-    user_error,
 )
 from cgda_jax.cli.plot import add_plot_parser, cmd_plot
 from cgda_jax.cli.run import RUN_EXAMPLES, cmd_run
-from cgda_jax.cli.trials import add_trials_arguments, join_job, launch_if_asked
+from cgda_jax.cli.trials import add_trials_arguments, job_member, join_job
 
 def _version() -> str:
     from cgda_jax import __version__
@@ -106,19 +101,16 @@ def _dispatch(args, signals: Signals) -> int:
         return cmd_demo(args)
     except KeyboardInterrupt as e:
         return interrupted(args, getattr(e, "signum", signal.SIGINT))
+    except JobFailed as e:  # a multi-process job: said here, or elsewhere
+        if e.line:
+            print(e.line, file=sys.stderr)
+        return e.status
     except Exception as e:  # noqa: BLE001 - every failure: one line
         if signals.received is not None:  # an interrupt wrapped by a library
             return interrupted(args, signals.received)
-        if user_error(args, e):
-            print(f"cgda: error: {first_line(e)}", file=sys.stderr)
-            return EXIT_USAGE
-        if diverged(e):
-            print(f"cgda: error: {first_line(e)}", file=sys.stderr)
-            return EXIT_DIVERGED
-        where = save_traceback()
-        print(f"cgda: error: {type(e).__name__}: {first_line(e)} ({where})",
-              file=sys.stderr)
-        return EXIT_FAILURE
+        status, line = failure(args, e)
+        print(line, file=sys.stderr)
+        return status
     finally:
         signals.active = False  # a signal from here on only ends the process
 
@@ -135,8 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt as e:
             return interrupted(None, getattr(e, "signum", signal.SIGINT))
         log_warnings()
-        launched = launch_if_asked(args, sys.argv[1:] if argv is None else list(argv))
-        if launched is not None:
-            return launched
+        args.argv = sys.argv[1:] if argv is None else list(argv)  # a job's workers
+        if job_member(args):
+            signals.default()  # until the job's SignalWatcher (join_job)
         return _dispatch(args, signals)
 

@@ -6,14 +6,18 @@ compilation cache, exit statuses and failures: which errors are bad input
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import pathlib
 import signal
+import socket
 import sys
 import tempfile
 import threading
 import traceback
+
+from cgda_jax.job import ENV_LAUNCHER_PID
 
 #: Errors that mean bad input while a config is read and checked (status 2).
 USER_ERRORS = (ValueError, FileNotFoundError, KeyError, NotADirectoryError)
@@ -78,6 +82,15 @@ class Signals:
         for sig, handler in self.old.items():
             signal.signal(sig, handler)
 
+    def default(self) -> None:
+        """SIGINT and SIGTERM end the process at once, the system's way (a process
+        of a multi-process job until its `SignalWatcher` runs: it holds nothing to
+        clean up yet, and a Python exception in the middle of joining the job
+        could leave JAX's runtime threads to crash the exit)."""
+        if threading.current_thread() is threading.main_thread():
+            for sig in EXIT_SIGNAL:
+                signal.signal(sig, signal.SIG_DFL)
+
 
 def save_traceback() -> str:
     """The current exception's traceback in a temporary log file; its path (or why
@@ -96,17 +109,98 @@ def first_line(err: BaseException) -> str:
     return text.strip().splitlines()[0] if text.strip() else type(err).__name__
 
 
-def interrupted(args, signum: int) -> int:
+def interrupted_text(args, signum: int) -> str:
+    """The line that says ``cgda`` was interrupted, and what became of the folder."""
     name = signal.Signals(signum).name
     rf = getattr(args, "run_folder", None)
-    if rf is None:
+    if rf is None or rf.path is None:
         where = ""
     elif rf.committed:
         where = f" after the results were written to {rf.path}"
     else:
         where = f"; nothing written ({rf.path} left as it was)"
-    print(f"cgda: interrupted ({name}){where}", file=sys.stderr)
+    return f"cgda: interrupted ({name}){where}"
+
+
+def launched_worker() -> bool:
+    """This process is a worker of `cgda_jax.launch` (its launcher says what ended
+    the job, so the worker does not)."""
+    return bool(os.environ.get(ENV_LAUNCHER_PID, "").strip())
+
+
+def interrupted(args, signum: int) -> int:
+    if not launched_worker():
+        print(interrupted_text(args, signum), file=sys.stderr)
     return EXIT_SIGNAL.get(signum, 128 + signum)
+
+
+class JobFailed(Exception):
+    """A multi-process job ends with ``status``: ``line`` says why on this process,
+    or is None where another process said it (or the launcher did)."""
+
+    def __init__(self, status: int, line: str | None = None):
+        super().__init__(line or f"status {status}")
+        self.status, self.line = status, line
+
+
+def failure(args, err: Exception) -> tuple[int, str]:
+    """The exit status and the one line for ``err`` (an unexpected one's traceback
+    saved to a log file named on the line)."""
+    if user_error(args, err):
+        return EXIT_USAGE, f"cgda: error: {first_line(err)}"
+    if diverged(err):
+        return EXIT_DIVERGED, f"cgda: error: {first_line(err)}"
+    where = save_traceback()
+    return EXIT_FAILURE, f"cgda: error: {type(err).__name__}: {first_line(err)} ({where})"
+
+
+class SignalWatcher:
+    """SIGINT and SIGTERM in a process of a multi-process job: they end it at once,
+    from a thread of its own, even while the main thread waits inside JAX (a
+    collective, a compile), where a Python handler would run only once it returns.
+
+    The thread is woken through `signal.set_wakeup_fd` (the Python handlers left
+    do nothing); it abandons the results folder this process holds
+    (``args.run_folder``: `~cgda_jax.run_folder.RunFolder.abandon`), says the one
+    line unless ``quiet`` (a launched worker: its launcher speaks) and exits with
+    130 / 143 through `os._exit`, skipping JAX's exit-time shutdown, which would
+    wait for the other processes.
+    """
+
+    def __init__(self, args, quiet: bool = False):
+        self.args, self.quiet = args, quiet
+        self._recv, self._send = socket.socketpair()
+
+    def start(self) -> None:
+        """Install (main thread only)."""
+        self._send.setblocking(False)
+        for sig in EXIT_SIGNAL:
+            signal.signal(sig, _noted)
+        signal.set_wakeup_fd(self._send.fileno(), warn_on_full_buffer=False)
+        threading.Thread(target=self._watch, name="cgda-signals", daemon=True).start()
+
+    def _watch(self) -> None:
+        while True:
+            data = self._recv.recv(1)
+            if not data:  # pragma: no cover - closed
+                return
+            if data[0] in EXIT_SIGNAL:
+                break
+        signum = data[0]
+        rf = getattr(self.args, "run_folder", None)
+        if rf is not None:
+            rf.abandon()
+        if not self.quiet:
+            with contextlib.suppress(Exception):
+                sys.stderr.write(interrupted_text(self.args, signum) + "\n")
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(EXIT_SIGNAL[signum])
+
+
+def _noted(signum, frame) -> None:
+    """A Python-level handler that does nothing: `SignalWatcher` acts."""
 
 
 def user_error(args, err: Exception) -> bool:
@@ -131,9 +225,10 @@ def say(args, text: str) -> None:
 
 
 def say_chosen(args, label: str, rf) -> None:
-    """Say where the results go when the folder asked for was taken."""
-    if rf.path != rf.target:
-        say(args, f"[{label}] {rf.target} is taken: results go to {rf.path}")
+    """Say where the results go when it is not the folder asked for (taken, or a
+    symbolic link followed)."""
+    if rf.note:
+        say(args, f"[{label}] {rf.note}")
 
 
 def _cache_dir() -> pathlib.Path:
@@ -151,7 +246,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     """
     import jax
 
-    from cgda_jax.experiment.results import FolderError, check_writable
+    from cgda_jax.folders import FolderError, check_writable
 
     path = path or _cache_dir()
     what = f"compilation cache folder {path} ($CGDA_JAX_CACHE)"

@@ -3,11 +3,13 @@ with ``--trials N``, many seeds of it: `cgda_jax.cli.trials`)."""
 
 from __future__ import annotations
 
+import os
 import pathlib
 import time
 
 from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
-from cgda_jax.cli.trials import run_trials_command
+from cgda_jax.cli.trials import check_processes, run_trials_command
+from cgda_jax.job import ENV_JOB_WORK
 
 RUN_EXAMPLES = """\
 examples:
@@ -107,13 +109,16 @@ def cmd_run(args) -> int:
         plan_folder,
     )
 
+    check_processes(args)
     cfg = load_config(resolve_config(args.config), args.overrides)
     if args.trials is not None:
         from cgda_jax.experiment.trials import check_trials
 
         check_trials(cfg, args.trials)
     processes, local = _job_size(args)
-    facts = check_experiment(cfg, trials=args.trials, processes=processes, local=local)
+    # a worker of `--processes P`: its launcher made these checks, on the same files
+    facts = None if os.environ.get(ENV_JOB_WORK) else check_experiment(
+        cfg, trials=args.trials, processes=processes, local=local)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
     if args.dry_run:

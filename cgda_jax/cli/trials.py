@@ -1,23 +1,56 @@
 """``cgda run CONFIG --trials N [--processes P]``: the success rate of N seeds.
 
 The N seeds (``strategy.seed``, +1, ...) run in one batched call
-(`cgda_jax.experiment.trials`); with ``--processes P`` (P > 1) the command starts P
-local copies of itself as one `jax.distributed` job (`cgda_jax.launch`), each runs
-its share of the seeds (`cgda_jax.distributed.share`), the per-seed records are
-gathered to every process, and process 0 alone writes the results folder. On a
-cluster the same job comes from the environment instead (``CGDA_COORDINATOR``,
+(`cgda_jax.experiment.trials`). With ``--processes P`` (P > 1) this process checks
+the config and takes the results folder (lock, temporary folder: a folder that is
+not empty, in use or not writable is refused before any worker starts), then starts
+P local copies of itself as one `jax.distributed` job (`cgda_jax.launch`); each
+runs its share of the seeds (`cgda_jax.distributed.share`), the per-seed records
+are gathered to every process, process 0 writes them into the temporary folder, and
+this process moves it into place once every worker ended well, then prints the
+summary line. Whatever ends the job first (a worker's failure, its death, Ctrl-C or
+SIGTERM to this process) ends every process within seconds, with one line and the
+documented status, and nothing is moved into place.
+
+On a cluster the same job comes from the environment instead (``CGDA_COORDINATOR``,
 ``CGDA_NUM_PROCESSES``, ``CGDA_PROCESS_ID``, or ``CGDA_CLUSTER=auto`` under SLURM):
-run ``cgda run CONFIG --trials N`` once per process; see `cgda_jax.distributed`.
-Argument handling and messages only.
+run ``cgda run CONFIG --trials N`` once per process; process 0 takes the folder and
+the others learn at once when it was refused. In every process of a job a failure
+is shared at the gather (the process where it happened says it; all end with its
+status), and SIGINT / SIGTERM end the process at once (`SignalWatcher`, JAX's
+preemption notifier off). Argument handling and messages only.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import pathlib
+import signal
 import sys
 import time
 
-from cgda_jax.cli.output import EXIT_MET, EXIT_USAGE
-from cgda_jax.job import ENV_PROCESS_ID
+from cgda_jax.cli.output import (
+    EXIT_FAILURE,
+    EXIT_MET,
+    EXIT_SIGNAL,
+    EXIT_USAGE,
+    Interrupted,
+    JobFailed,
+    SignalWatcher,
+    failure,
+    launched_worker,
+)
+from cgda_jax.job import (
+    ENV_JOB_FOLDER,
+    ENV_JOB_WORK,
+    job_from_env,
+)
+
+#: How long the launching process holds a worker's line before showing it: what a
+#: worker prints in the moments before the job ends (a JAX runtime's C++ complaint
+#: that process 0 vanished) is dropped, not shown.
+LINE_HOLD_S = 0.5
 
 
 def add_trials_arguments(run) -> None:
@@ -32,47 +65,86 @@ def add_trials_arguments(run) -> None:
                      "cluster set CGDA_* variables instead (README)")
 
 
-def launch_if_asked(args, argv: list[str]) -> int | None:
-    """Starts the ``--processes P`` job and returns its status, or None to go on
-    in this process (P == 1, a worker, or a ``--dry-run``)."""
+def check_processes(args) -> None:
+    """``--processes P``: P >= 1, and only with ``--trials``.
+
+    Raises:
+        ValueError: naming the option.
+    """
     p = getattr(args, "processes", 1)
-    if args.command != "run" or p == 1 or args.dry_run:
-        return None
     if p < 1:
-        print(f"cgda: error: --processes must be >= 1; got {p}", file=sys.stderr)
-        return EXIT_USAGE
-    if args.trials is None:
-        print("cgda: error: --processes needs --trials N (the seeds are what is "
-              "split over the processes)", file=sys.stderr)
-        return EXIT_USAGE
-    import os
+        raise ValueError(f"--processes must be >= 1; got {p}")
+    if p > 1 and args.trials is None:
+        raise ValueError("--processes needs --trials N (the seeds are what is split "
+                         "over the processes)")
 
-    if os.environ.get(ENV_PROCESS_ID) is not None:
-        return None  # already a worker of a job: run our share
-    from cgda_jax.launch import launch, without_option
 
-    cmd = [sys.executable, "-m", "cgda_jax.cli", *without_option(argv, "--processes")]
-    # status 1 is not a failure of a worker; every process exits like process 0
-    return launch(p, cmd, ok_codes=(0, 1), env={"CGDA_LAUNCHED_PROCESSES": str(p)})
+def _launching(args) -> bool:
+    """This process starts the ``--processes P`` job (it is no worker of one)."""
+    return (getattr(args, "processes", 1) > 1 and not args.dry_run
+            and job_from_env() is None)
+
+
+def job_member(args) -> bool:
+    """This command runs as one process of a multi-process job (it will join it)."""
+    if args.command != "run" or getattr(args, "trials", None) is None:
+        return False
+    try:
+        return job_from_env() is not None
+    except ValueError:  # said by join_job
+        return False
 
 
 def join_job(args) -> bool:
     """Joins the multi-process job the environment describes (before any JAX
-    computation); False when there is none. Workers other than 0 go quiet."""
+    computation); False when there is none. A job's process ends at once on SIGINT
+    or SIGTERM (`SignalWatcher`); workers other than 0 go quiet.
+
+    Raises:
+        ValueError: a partial or malformed job environment (names the variables).
+    """
     if args.command != "run" or getattr(args, "trials", None) is None:
         return False
     from cgda_jax import distributed
 
+    job_from_env()  # a half-described job is an error here, not a silent single run
     joined = distributed.initialize()
-    if joined and not distributed.is_writer():
-        args.quiet = True
+    if joined:
+        SignalWatcher(args, quiet=launched_worker()).start()
+        if not distributed.is_writer():
+            args.quiet = True
     return joined
 
 
+class FolderElsewhere:
+    """``args.run_folder`` of a process whose job's results folder another process
+    holds (the launcher, or process 0): the run has started (a failure is no longer
+    bad input, as in `~cgda_jax.cli.output.user_error`), nothing is committed here
+    and there is nothing to abandon."""
+
+    committed = False
+
+    def __init__(self, path: pathlib.Path | None = None,
+                 work: pathlib.Path | None = None):
+        self.path, self.work = path, work
+
+    def abandon(self) -> bool:
+        return False
+
+
+def summary_line(cfg, s: dict, report: pathlib.Path) -> str:
+    lo, hi = s["wilson95"]
+    return (f"[{cfg.name}] {s['successes']}/{s['trials']} seeds met the goal: success "
+            f"rate {s['success_rate']:.0%} (Wilson 95% {lo:.0%} to {hi:.0%}), median "
+            f"max point error {s['median_max_point_error']:.4g} "
+            f"({s['total_time_s']:.1f} s) -> {report}")
+
+
 def run_trials_command(cfg, args, open_folder, say, chosen) -> int:
-    """``--trials N`` after the config was checked: process 0 opens the results
-    folder (so a taken folder fails before any work), every process runs its
-    seeds, the records are gathered and process 0 writes them.
+    """``--trials N`` after the config was checked: the folder is taken first (by
+    the launching process, or process 0), so a taken folder fails before any work;
+    every process runs its seeds, the records are gathered and process 0 writes
+    them.
 
     Args:
         open_folder: ``open_folder()`` gives the `RunFolder` context manager.
@@ -83,27 +155,62 @@ def run_trials_command(cfg, args, open_folder, say, chosen) -> int:
     from cgda_jax.experiment.trials import check_trials
 
     n = check_trials(cfg, args.trials)
-    if not distributed.is_writer():
-        _run_share(cfg, args, n, say)
-        return EXIT_MET
-    with open_folder() as rf:
-        args.run_folder = rf
-        chosen(rf)
+    if _launching(args):
+        return _launch(cfg, args, open_folder, chosen)
+    given = os.environ.get(ENV_JOB_WORK) or None  # launched: the launcher's folder
+    writer = distributed.is_writer()
+    with contextlib.ExitStack() as stack:
+        if given:
+            args.run_folder = FolderElsewhere(
+                pathlib.Path(os.environ.get(ENV_JOB_FOLDER, given)), pathlib.Path(given))
+            work = args.run_folder.work
+        else:
+            work = _take_folder(stack, args, open_folder, chosen, writer)
         t0 = time.perf_counter()
         records, procs = _run_share(cfg, args, n, say)
-        rf.work.mkdir(exist_ok=True)
-        s = write_trials_folder(cfg, records, rf.work, t0, procs)
-    lo, hi = s["wilson95"]
-    # the summary line goes to stdout even with --quiet: it is the result
-    print(f"[{cfg.name}] {s['successes']}/{s['trials']} seeds met the goal: success "
-          f"rate {s['success_rate']:.0%} (Wilson 95% {lo:.0%} to {hi:.0%}), median "
-          f"max point error {s['median_max_point_error']:.4g} "
-          f"({s['total_time_s']:.1f} s) -> {rf.path / 'report.md'}")
+        if not writer:
+            return EXIT_MET
+        s = write_trials_folder(cfg, records, work, t0, procs)
+    if given is None:  # the folder is in place: say so (launched: the launcher does)
+        # the summary line goes to stdout even with --quiet: it is the result
+        print(summary_line(cfg, s, args.run_folder.path / "report.md"))
     return EXIT_MET
 
 
+def _take_folder(stack, args, open_folder, chosen, writer: bool):
+    """Process 0 takes the results folder; in a job, every process learns at once
+    whether it could (one small gather), so a refusal ends them all. Returns the
+    folder to write into (None on the others)."""
+    import jax
+
+    from cgda_jax import distributed
+
+    err, work = None, None
+    if writer:
+        try:
+            rf = stack.enter_context(open_folder())
+            args.run_folder = rf
+            chosen(rf)
+            work = rf.work
+        except Exception as e:  # noqa: BLE001 - shared with the others, raised below
+            err = e
+    if jax.process_count() > 1:
+        payload = None if err is None else failure(args, err)[0]
+        refused = [s for s in distributed.allgather_objects(payload) if s is not None]
+        if refused and err is None:
+            raise JobFailed(refused[0])  # process 0 says why
+    if err is not None:
+        raise err
+    if not writer:
+        args.run_folder = FolderElsewhere()  # process 0 holds it
+    return work
+
+
 def _run_share(cfg, args, n: int, say) -> tuple[list[dict], int]:
-    """This process's seeds in one batch, then every process's records."""
+    """This process's seeds in one batch, then every process's records. In a job a
+    failure on any process is shared at the gather: it is raised where it happened
+    and ends the others with its status (`JobFailed`), so no process waits for
+    one that gave up."""
     import jax
 
     from cgda_jax import distributed
@@ -117,13 +224,26 @@ def _run_share(cfg, args, n: int, say) -> tuple[list[dict], int]:
     say(f"[{cfg.name}] {cfg.strategy.name.upper()} execution, {n} seeds in one "
         f"batch{where} ...")
     bar = ProgressLine(cfg.name, quiet=args.quiet)
+    err = None
     try:
         records = trial_records(cfg, mine, bar) if mine else []
+    except Exception as e:
+        if procs == 1:
+            raise
+        err, records = e, []
     finally:
         bar.close()
-    if procs > 1:
-        records = [r for part in distributed.allgather_objects(records) for r in part]
-    return records, procs
+    if procs == 1:
+        return records, procs
+    if err is not None:
+        status, line = failure(args, err)
+        distributed.allgather_objects(("error", status))
+        raise JobFailed(status, line)
+    gathered = distributed.allgather_objects(("ok", records))
+    for kind, value in gathered:
+        if kind == "error":
+            raise JobFailed(value)  # the failing process says why
+    return [r for _, part in gathered for r in part], procs
 
 
 def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
@@ -131,3 +251,67 @@ def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
 
     return write_trials(cfg, records, folder,
                         {"total_time_s": time.perf_counter() - t0, "processes": procs})
+
+
+# ---------------------------------------------------------------------------
+# The launching process of ``--processes P``
+# ---------------------------------------------------------------------------
+
+
+def _launch(cfg, args, open_folder, chosen) -> int:
+    """Take the folder, start the P workers, move their folder into place once all
+    ended well; a failure, a worker's death or an interrupt discards it."""
+    from cgda_jax.files import read_json
+    from cgda_jax.folders import MARKER
+    from cgda_jax.launch import start_job, without_option
+
+    p = args.processes
+    cmd = [sys.executable, "-m", "cgda_jax.cli", *without_option(args.argv,
+                                                                 "--processes")]
+    with open_folder() as rf:
+        args.run_folder = rf
+        chosen(rf)
+        env = {ENV_JOB_WORK: str(rf.work), ENV_JOB_FOLDER: str(rf.path),
+               "CGDA_LAUNCHED_PROCESSES": str(p)}
+        # status 1 is not a failure of a worker; every process exits like process 0
+        end = start_job(p, cmd, ok_codes=(0, 1), env=env, mute_on_end=True,
+                        hold_s=LINE_HOLD_S, drop=_chatter, keep=_own_line)
+        if end.reason == "interrupted":
+            raise Interrupted(end.signum)
+        if end.reason != "ok":
+            raise JobFailed(*_worker_ended(end, rf))
+        if not (rf.work / MARKER).is_file():
+            raise JobFailed(EXIT_FAILURE, (
+                f"cgda: error: every process ended well but process 0 wrote no "
+                f"results; nothing written ({rf.path} left as it was)"))
+        s = read_json(rf.work / MARKER)
+    print(summary_line(cfg, s, rf.path / "report.md"))
+    return EXIT_MET
+
+
+def _chatter(line: str) -> bool:
+    """gloo's own line on stdout as it connects the processes."""
+    return line.startswith("[Gloo] ")
+
+
+def _own_line(line: str) -> bool:
+    """A worker's own ``cgda: ...`` line (its error): shown whoever ends first."""
+    return line.startswith("cgda: ")
+
+
+def _worker_ended(end, rf) -> tuple[int, str | None]:
+    """The job's status and line when a worker ended it: a status of ``cgda``'s own
+    (2, 3) was said by that worker; a signal is named here."""
+    i, code = end.process, end.code
+    kept = f"nothing written ({rf.path} left as it was)"
+    if code in (EXIT_USAGE, EXIT_FAILURE):
+        return code, None
+    signum = -code if code < 0 else next(
+        (s for s, c in EXIT_SIGNAL.items() if c == code), None)
+    if signum in EXIT_SIGNAL:  # stopped from outside (a worker's SIGTERM, ...)
+        name = signal.Signals(signum).name
+        return EXIT_SIGNAL[signum], (f"cgda: interrupted ({name} to process {i}); "
+                                     f"stopped the others; {kept}")
+    how = (f"was killed by {signal.Signals(signum).name}" if code < 0 and signum
+           else f"exited with status {end.status}")
+    return EXIT_FAILURE, f"cgda: error: process {i} {how}; stopped the others; {kept}"

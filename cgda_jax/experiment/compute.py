@@ -113,7 +113,8 @@ def compute_execution(
     progress_fn: Callable[[dict], None] | None = None,
 ) -> Computed:
     """Build the goal and the simulator, run the strategy and replay its result;
-    ``result.json`` (the strategy's) and ``arrays.npz`` are written into ``out``."""
+    ``arrays.npz`` is written into ``out`` (``result.json`` by the caller, from the
+    returned summary)."""
     goal, demos, gen = build_goal(cfg)
     waypoint_s = default_waypoint_s(demos, len(goal))
     sim = build_simulator(cfg, waypoint_s, goal)
@@ -128,15 +129,14 @@ def compute_execution(
         tolerance=s.tolerance, max_generations=s.max_generations, seed=s.seed,
         chunk_size=s.chunk_size, progress_fn=progress_fn, **s.options,
     )
-    res.save(out)  # result.json + arrays.npz from the strategy
-    summary = json.loads((out / "result.json").read_text())
+    # the strategy's summary as result.json holds it (through JSON) and its arrays
+    summary = json.loads(json.dumps(res.summary()))
     labels = feature_labels(cfg, sim.feature_names)
     summary.update({"kind": "execution", "name": cfg.name,
                     "feature_names": list(sim.feature_names),
                     "feature_labels": labels, "error_unit": error_unit(labels),
                     "build": {"waypoint_s": waypoint_s}})
-    with np.load(out / "arrays.npz") as z:
-        arrays = {k: z[k] for k in z.files}
+    arrays = {k: np.asarray(v) for k, v in res.arrays().items()}
     if gen is not None:  # the generalization and demonstrations, in the goal's units
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)
         arrays["knots"] = np.asarray(gen.knots, np.float64) * cfg.data.scale

@@ -36,6 +36,7 @@ import numpy as np
 
 from cgda_jax.experiment.config import ExperimentConfig, load_config
 from cgda_jax.experiment.results import MARKER, FolderError, expand
+from cgda_jax.files import check_fields, read_json, read_npz
 
 __all__ = ["Run", "load_run"]
 
@@ -136,11 +137,90 @@ class Run:
         return ExecutionResult.load(self.folder)
 
 
+#: result.json of a run, by kind: key -> type (`cgda_jax.files`); keys it does not
+#: name are accepted. Non-finite numbers are written null.
+RUN_FIELDS = {
+    "kind": "str", "name": "str", "success": "bool", "feature_labels": "list[str]",
+    "demo_feature_labels": "list[str]", "plots": "list[str]",
+    "total_time_s": "number|null", "wall_time_s": "number|null",
+}
+#: An execution's, beside the strategy's own (`cgda_jax.ExecutionResult`'s
+#: ``RESULT_FIELDS``).
+EXECUTION_FIELDS = {
+    "feature_names": "list[str]", "error_unit": "str|null", "build": "object",
+    "replay": "object", "motion": "object", "physics": "object", "substeps": "int",
+    "render": "object|null",
+}
+RECOGNITION_FIELDS = {
+    "features": "list[str]", "metric": "str", "actions": "list[str]",
+    "queries": "list[str]", "truth": "list[str]", "recognized": "list[str]",
+    "cost_matrix": "list[list[number|null]]", "accuracy": "number",
+}
+#: What each kind's result.json and arrays.npz must hold.
+REQUIRED_KEYS = {
+    "execution": ("kind", "name", "success", "strategy", "points", "point_errors",
+                  "max_point_error", "evaluations", "generations"),
+    "recognition": ("kind", "name", "success", "actions", "recognized",
+                    "cost_matrix", "accuracy"),
+}
+REQUIRED_ARRAYS = {
+    "execution": ("joints", "features", "goal", "point_errors", "fitness_history"),
+    "recognition": ("cost_matrix",),
+}
+
+
+def _read_result(path: pathlib.Path) -> dict[str, Any]:
+    result = read_json(path, RUN_FIELDS, ("kind",))
+    kind = result["kind"]
+    if kind not in REQUIRED_KEYS:
+        hint = (" (a `cgda run --trials` folder: its records are in trials.json)"
+                if kind == "trials" else "")
+        raise FolderError(f"{path}: 'kind' is {kind!r}; a run is 'execution' or "
+                          f"'recognition'{hint}")
+    if kind == "execution":
+        from cgda_jax.strategies.result import RESULT_FIELDS
+
+        schema = RESULT_FIELDS | EXECUTION_FIELDS
+    else:
+        schema = RECOGNITION_FIELDS
+    return check_fields(result, RUN_FIELDS | schema, REQUIRED_KEYS[kind], path)
+
+
+def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict,
+                    arrays: dict[str, np.ndarray]) -> None:
+    """The three files describe one run (not files of two runs mixed)."""
+    if config.kind != result["kind"]:
+        raise FolderError(
+            f"{folder}: config.toml is a {config.kind} experiment but result.json "
+            f"a {result['kind']} run: files of different runs")
+    if result["kind"] == "execution":
+        n = arrays["goal"].shape[0] if arrays["goal"].ndim else 0
+        if result["points"] != n or len(result["point_errors"]) != n:
+            raise FolderError(
+                f"{folder}: result.json has {result['points']} points and "
+                f"{len(result['point_errors'])} point errors, arrays.npz a goal of "
+                f"{n} points: files of different runs")
+    else:
+        shape = arrays["cost_matrix"].shape
+        rows = (len(result.get("queries", result["recognized"])),
+                len(result["actions"]))
+        if tuple(shape) != rows:
+            raise FolderError(
+                f"{folder}: arrays.npz's cost_matrix is {shape}, result.json has "
+                f"{rows[0]} queries x {rows[1]} actions: files of different runs")
+
+
 def load_run(folder: str | os.PathLike) -> Run:
     """Read a results folder written by ``cgda run`` / `run_experiment`.
 
+    Every file is checked as it is read, and a failure names the file: result.json
+    against its schema (`RUN_FIELDS` and those of its kind), arrays.npz readable
+    and holding its kind's arrays, config.toml a valid config of the same kind, and
+    the three of one run (the points, or the recognition's table, agree).
+
     Raises:
-        FolderError: not a folder, or not a results folder (a file missing: named).
+        FolderError: not a folder, not a results folder (a file missing: named), or
+            a file damaged, truncated or not of its schema (named).
         ConfigError: its ``config.toml`` no longer loads (e.g. a key since renamed).
     """
     folder = expand(folder)
@@ -154,13 +234,10 @@ def load_run(folder: str | os.PathLike) -> Run:
                 else "")
         raise FolderError(f"{folder} is not a results folder: {', '.join(missing)} "
                           f"missing{hint}")
-    try:
-        result = json.loads((folder / MARKER).read_text())
-    except json.JSONDecodeError as err:
-        raise FolderError(f"{folder / MARKER}: not valid JSON ({err})") from None
+    result = _read_result(folder / MARKER)
     config = load_config(folder / "config.toml")
-    with np.load(folder / "arrays.npz") as z:
-        arrays = {k: z[k] for k in z.files}
+    arrays = read_npz(folder / "arrays.npz", REQUIRED_ARRAYS[result["kind"]])
+    _check_together(folder, config, result, arrays)
     return Run(folder, config, result, arrays)
 
 

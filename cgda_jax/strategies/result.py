@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import pathlib
 from typing import Any
 
@@ -102,34 +103,99 @@ class ExecutionResult:
             "info": self.info,
         }
 
-    def save(self, directory: str | pathlib.Path) -> pathlib.Path:
-        """Writes ``result.json`` (summary) and ``arrays.npz`` into `directory`."""
-        d = pathlib.Path(directory)
-        d.mkdir(parents=True, exist_ok=True)
-        (d / "result.json").write_text(json.dumps(self.summary(), indent=2) + "\n")
-        np.savez(d / "arrays.npz", **{k: getattr(self, k) for k in _ARRAYS})
-        return d
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The arrays `save` writes to arrays.npz, by name."""
+        return {k: getattr(self, k) for k in _ARRAYS}
+
+    def save(self, directory: str | os.PathLike, *, overwrite: bool = False
+             ) -> pathlib.Path:
+        """Writes ``result.json`` (summary) and ``arrays.npz`` as the folder
+        `directory`, by the rules of ``cgda run``'s results folders
+        (`cgda_jax.run_folder.RunFolder`): written aside and moved into place
+        whole, so the folder holds this result or what it held before; a missing
+        or empty folder is taken, an existing results folder (one holding a
+        result.json) is refused unless ``overwrite``, which replaces it whole
+        (no file of the old one is left); a symbolic link is followed.
+
+        Returns:
+            The folder written.
+
+        Raises:
+            FolderError: `directory` is not empty (without ``overwrite``), holds
+                something other than results, is in use or cannot be written.
+        """
+        from cgda_jax.run_folder import RunFolder
+
+        with RunFolder(directory, overwrite=overwrite) as rf:
+            (rf.work / "result.json").write_text(
+                json.dumps(self.summary(), indent=2) + "\n")
+            np.savez(rf.work / "arrays.npz", **self.arrays())
+        return rf.path
 
     @classmethod
-    def load(cls, directory: str | pathlib.Path) -> ExecutionResult:
-        """Reads a result written by `save`."""
-        d = pathlib.Path(directory)
-        for name in ("result.json", "arrays.npz"):
-            if not (d / name).is_file():
-                raise FileNotFoundError(f"{d / name} not found (not a saved result?)")
-        meta = json.loads((d / "result.json").read_text())
-        with np.load(d / "arrays.npz") as z:
-            arrays = {k: z[k] for k in _ARRAYS}
+    def load(cls, directory: str | os.PathLike) -> ExecutionResult:
+        """Reads a result written by `save` (or an execution run's folder).
+
+        Raises:
+            FolderError: a file missing, damaged or not of its schema (result.json:
+                `RESULT_FIELDS`; arrays.npz: every array of `save`, of consistent
+                shapes); the message names the file.
+        """
+        from cgda_jax.files import read_json, read_npz
+
+        d = pathlib.Path(directory).expanduser()
+        meta = read_json(d / "result.json", RESULT_FIELDS, RESULT_REQUIRED)
+        arrays = read_npz(d / "arrays.npz", _ARRAYS)
+        _check_shapes(arrays, d / "arrays.npz")
+        info = meta.get("info", {})
         return cls(
             strategy=meta["strategy"],
             evaluations=meta["evaluations"],
             generations=meta["generations"],
-            wall_time_s=meta["wall_time_s"],
-            compile_time_s=meta["compile_time_s"],
+            wall_time_s=float(meta["wall_time_s"]),
+            compile_time_s=float(meta["compile_time_s"]),
             success=meta["success"],
-            tolerance=meta["tolerance"],
-            final_fitness=meta["final_fitness"],
-            info=meta.get("info", {}),
+            tolerance=_number(meta["tolerance"]),
+            final_fitness=_number(meta["final_fitness"]),
+            info=info,
             invalid_evaluations=meta.get("invalid_evaluations", 0),
-            **arrays,
+            **{k: arrays[k] for k in _ARRAYS},  # a run's folder holds more
         )
+
+
+#: result.json of a saved `ExecutionResult`: key -> type (`cgda_jax.files`).
+RESULT_FIELDS = {
+    "strategy": "str", "points": "int", "success": "bool",
+    "tolerance": "number|null", "max_point_error": "number|null",
+    "point_errors": "list[number|null]", "final_fitness": "number|null",
+    "evaluations": "int", "invalid_evaluations": "int", "generations": "int",
+    "wall_time_s": "number", "compile_time_s": "number", "info": "object",
+}
+#: The keys `ExecutionResult.load` needs.
+RESULT_REQUIRED = ("strategy", "success", "tolerance", "final_fitness", "evaluations",
+                   "generations", "wall_time_s", "compile_time_s")
+
+
+def _number(value: float | None) -> float:
+    """A JSON number back; null stands for a non-finite one (JSON has none)."""
+    return float("inf") if value is None else float(value)
+
+
+def _check_shapes(arrays: dict[str, np.ndarray], where: pathlib.Path) -> None:
+    """The ranks of `ExecutionResult`'s arrays, and the goal's points against the
+    point errors and the features' width."""
+    from cgda_jax.folders import FolderError
+
+    ranks = {"joints": (2,), "features": (2,), "goal": (2,), "point_errors": (1,),
+             "fitness_history": (1, 2)}
+    for name, allowed in ranks.items():
+        if arrays[name].ndim not in allowed:
+            raise FolderError(f"{where}: {name} has shape {arrays[name].shape}; "
+                              f"expected {' or '.join(f'{r}-D' for r in allowed)}")
+    goal = arrays["goal"]
+    if arrays["point_errors"].shape[0] != goal.shape[0]:
+        raise FolderError(f"{where}: point_errors has {arrays['point_errors'].shape[0]} "
+                          f"values for a goal of {goal.shape[0]} points")
+    if arrays["features"].shape[1] != goal.shape[1]:
+        raise FolderError(f"{where}: features have {arrays['features'].shape[1]} "
+                          f"columns, the goal {goal.shape[1]}")
