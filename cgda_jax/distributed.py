@@ -8,7 +8,9 @@ on CPU through gloo). No array ever spans processes, so no kernel changes.
 
 - `initialize`: join the job. Reads the environment (see below) and calls
   ``jax.distributed.initialize`` before anything else touches JAX; a no-op returning
-  False when no job is described (a plain single-process run).
+  False when no job is described (a plain single-process run). JAX's preemption
+  notifier (which takes SIGTERM for itself) stays off unless asked for, and a
+  launched worker dies with its launcher (`follow_launcher`).
 - `launch` (`cgda_jax.launch`; ``python -m cgda_jax.launch -n N -- CMD``): start N
   copies of a command on this machine (a localhost coordinator on a free port),
   stream their output prefixed ``[p0]``, ``[p1]``, ..., stop them all when one
@@ -128,8 +130,10 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100,
 
 def follow_launcher() -> bool:
     """When this process is a worker of `cgda_jax.launch` (``CGDA_LAUNCHER_PID``),
-    have the kernel kill it when the launcher dies (Linux ``PR_SET_PDEATHSIG``);
-    exits at once when the launcher is already gone. True when set up."""
+    have the kernel kill it when the launcher dies (Linux ``PR_SET_PDEATHSIG``;
+    strictly: when the launcher's thread that started it ends, so call `launch`
+    from a thread that outlives the job); exits at once when the launcher is
+    already gone. True when set up."""
     pid = os.environ.get(ENV_LAUNCHER_PID, "").strip()
     if not pid.isdigit() or not sys.platform.startswith("linux"):
         return False

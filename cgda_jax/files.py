@@ -22,7 +22,12 @@ import numpy as np
 
 from cgda_jax.folders import FolderError
 
-__all__ = ["check_fields", "read_json", "read_npz"]
+__all__ = ["FileMissing", "check_fields", "read_json", "read_npz"]
+
+
+class FileMissing(FolderError, FileNotFoundError):
+    """A file to read back is not there (a `FolderError` and a
+    `FileNotFoundError`)."""
 
 
 def _split_alternatives(spec: str) -> list[str]:
@@ -94,14 +99,14 @@ def read_json(path: str | os.PathLike, schema: Mapping[str, str] | None = None,
     """The JSON object in ``path``, checked by `check_fields` when a schema is given.
 
     Raises:
-        FolderError: not found, unreadable, not JSON, not an object, or not of the
-            schema; the message starts with the path.
+        FolderError: not found (`FileMissing`), unreadable, not JSON, not an
+            object, or not of the schema; the message starts with the path.
     """
     path = pathlib.Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise FolderError(f"{path}: not found") from None
+        raise FileMissing(f"{path}: not found") from None
     except UnicodeDecodeError:
         raise FolderError(f"{path}: not a text file (damaged?)") from None
     except OSError as err:
@@ -123,13 +128,13 @@ def read_npz(path: str | os.PathLike, required: Iterable[str] = ()
     """Every array of the NPZ file ``path``, by name (no pickled objects).
 
     Raises:
-        FolderError: not found, not an NPZ file, truncated or damaged (any array
-            that cannot be read), or an array of ``required`` missing; the message
-            starts with the path.
+        FolderError: not found (`FileMissing`), not an NPZ file, truncated or
+            damaged (any array that cannot be read), or an array of ``required``
+            missing; the message starts with the path.
     """
     path = pathlib.Path(path)
     if not path.is_file():
-        raise FolderError(f"{path}: not found")
+        raise FileMissing(f"{path}: not found")
     try:
         loaded = np.load(path, allow_pickle=False)
         if not hasattr(loaded, "files"):  # np.load read a single .npy array

@@ -255,6 +255,15 @@ if os.environ.get("CGDA_PROCESS_ID") is not None:  # the job's workers only
                  "trials_in_batch": len(seeds)} for s in seeds]
 
     trials.trial_records = trial_records
+    if os.environ.get("FAIL_AT") == "alone":  # before the processes' first step
+        check_trials = trials.check_trials
+
+        def check_alone(cfg, n):
+            if os.environ["CGDA_PROCESS_ID"] == os.environ["FAIL_ON"]:
+                raise ValueError("planned failure of process " + os.environ["FAIL_ON"])
+            return check_trials(cfg, n)
+
+        trials.check_trials = check_alone
 '''
 
 
@@ -267,16 +276,26 @@ def planned(env, tmp_path):
     return {**env, "PYTHONPATH": os.pathsep.join([str(site), env["PYTHONPATH"]])}
 
 
-def test_a_worker_s_failure_ends_every_process_with_its_line(planned, tmp_path, tag):
+@pytest.mark.parametrize("at", ["share", "alone"])
+def test_a_worker_s_failure_ends_every_process_with_its_line(
+        at, planned, tmp_path, tag):
+    """In its share of the seeds (the others learn of it at the gather; a failure
+    once the run started: status 3 and its traceback in a log), or alone before
+    the processes' first common step (process 0 waits there for it: the failing
+    one must leave at once rather than wait in JAX's exit for the others)."""
     out = tmp_path / "out"
     t0 = time.monotonic()
-    proc = cgda({**planned, "FAIL_ON": "1"}, "run", CLEAN, "--trials", "3",
-                "--processes", "2", "--out", out, "--quiet", *sets(LONG))
+    proc = cgda({**planned, "FAIL_ON": "1", "FAIL_AT": at}, "run", CLEAN, "--trials",
+                "3", "--processes", "2", "--out", out, "--quiet", *sets(LONG))
     wall = time.monotonic() - t0
     none_left(tag)
-    line = one_line(proc.stderr, "[p1] cgda: error: ValueError: planned failure of "
-                    "process 1 (traceback in ")
-    assert proc.returncode == 3, line
+    if at == "share":
+        line = one_line(proc.stderr, "[p1] cgda: error: ValueError: planned failure "
+                        "of process 1 (traceback in ")
+        assert proc.returncode == 3, line
+    else:
+        line = one_line(proc.stderr, "[p1] cgda: error: planned failure of process 1")
+        assert proc.returncode == 2, line
     assert proc.stdout == ""
     assert not out.exists()
     no_leftovers(out)

@@ -15,11 +15,13 @@ from cgda_jax.cli.output import (
     enable_compilation_cache,
     failure,
     interrupted,
+    leave_job,
     log_warnings,
 )
 from cgda_jax.cli.plot import add_plot_parser, cmd_plot
 from cgda_jax.cli.run import RUN_EXAMPLES, cmd_run
 from cgda_jax.cli.trials import add_trials_arguments, job_member, join_job
+
 
 def _version() -> str:
     from cgda_jax import __version__
@@ -100,17 +102,17 @@ def _dispatch(args, signals: Signals) -> int:
 
         return cmd_demo(args)
     except KeyboardInterrupt as e:
-        return interrupted(args, getattr(e, "signum", signal.SIGINT))
+        return leave_job(args, interrupted(args, getattr(e, "signum", signal.SIGINT)))
     except JobFailed as e:  # a multi-process job: said here, or elsewhere
         if e.line:
             print(e.line, file=sys.stderr)
-        return e.status
+        return leave_job(args, e.status)
     except Exception as e:  # noqa: BLE001 - every failure: one line
         if signals.received is not None:  # an interrupt wrapped by a library
-            return interrupted(args, signals.received)
+            return leave_job(args, interrupted(args, signals.received))
         status, line = failure(args, e)
         print(line, file=sys.stderr)
-        return status
+        return leave_job(args, status)
     finally:
         signals.active = False  # a signal from here on only ends the process
 

@@ -199,6 +199,19 @@ class SignalWatcher:
         os._exit(EXIT_SIGNAL[signum])
 
 
+def leave_job(args, status: int) -> int:
+    """``status``; but a process of a multi-process job that ends alone, before
+    the step all its processes take together (``args.job_open``), exits here and
+    now (`os._exit`): JAX's exit-time shutdown would wait for the others, who wait
+    at that step for it. Its launcher (or scheduler) then stops the others."""
+    if getattr(args, "job_open", False):
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(status)
+    return status
+
+
 def _noted(signum, frame) -> None:
     """A Python-level handler that does nothing: `SignalWatcher` acts."""
 

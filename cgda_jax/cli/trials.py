@@ -110,6 +110,9 @@ def join_job(args) -> bool:
     job_from_env()  # a half-described job is an error here, not a silent single run
     joined = distributed.initialize()
     if joined:
+        # until the processes' last gather, one that fails alone leaves at once
+        # (`leave_job`): JAX's exit would wait for the others, who wait for it
+        args.job_open = True
         SignalWatcher(args, quiet=launched_worker()).start()
         if not distributed.is_writer():
             args.quiet = True
@@ -197,6 +200,8 @@ def _take_folder(stack, args, open_folder, chosen, writer: bool):
     if jax.process_count() > 1:
         payload = None if err is None else failure(args, err)[0]
         refused = [s for s in distributed.allgather_objects(payload) if s is not None]
+        if refused:
+            args.job_open = False  # every process knows: all may end
         if refused and err is None:
             raise JobFailed(refused[0])  # process 0 says why
     if err is not None:
@@ -238,8 +243,10 @@ def _run_share(cfg, args, n: int, say) -> tuple[list[dict], int]:
     if err is not None:
         status, line = failure(args, err)
         distributed.allgather_objects(("error", status))
+        args.job_open = False
         raise JobFailed(status, line)
     gathered = distributed.allgather_objects(("ok", records))
+    args.job_open = False  # the last step all processes take together
     for kind, value in gathered:
         if kind == "error":
             raise JobFailed(value)  # the failing process says why

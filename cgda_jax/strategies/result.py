@@ -137,7 +137,8 @@ class ExecutionResult:
         """Reads a result written by `save` (or an execution run's folder).
 
         Raises:
-            FolderError: a file missing, damaged or not of its schema (result.json:
+            FolderError: a file missing (`~cgda_jax.files.FileMissing`, also a
+                `FileNotFoundError`), damaged or not of its schema (result.json:
                 `RESULT_FIELDS`; arrays.npz: every array of `save`, of consistent
                 shapes); the message names the file.
         """
