@@ -337,13 +337,18 @@ def test_sigint_to_start_job_stops_every_worker_and_says_how_it_ended(tag):
     from cgda_jax.launch import start_job
 
     env = {"CGDA_TEST_TAG": tag}
+    # Python's own SIGINT handling (KeyboardInterrupt), whatever an earlier test in
+    # this process left installed (the full suite once swallowed the signal here)
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
     timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
     try:
         end = start_job(2, [sys.executable, "-c", "import time; time.sleep(60)"],
-                        env=env, stdout=io.StringIO(), stderr=io.StringIO())
+                        env=env, stdout=io.StringIO(), stderr=io.StringIO(),
+                        timeout_s=30)
     finally:
         timer.cancel()
+        signal.signal(signal.SIGINT, old)
     assert (end.status, end.reason, end.signum) == (130, "interrupted", signal.SIGINT)
     none_left(tag)
 

@@ -27,6 +27,7 @@ duration_s = 3.0
 model = "tiny_arm.xml"
 joints = ["yaw", "shoulder", "elbow"]
 fixed = {}
+mode = "dynamic"  # only contact moves the box (kinematic mode refuses the feature)
 [world]
 contact_geoms = []
 [[world.objects]]
