@@ -436,3 +436,18 @@ def test_iet_stagnation_ends_a_stuck_evolution_early(paint_sim):
     assert stuck.info["stagnation"] == 5 and not stuck.success
     with pytest.raises(ValueError, match="stagnation"):
         run_iet(paint_sim, goal, stagnation=0, **kw)
+
+
+@pytest.mark.parametrize("run", [run_ie, run_iet, run_oet, run_fte])
+@pytest.mark.parametrize("bad", [0, -3, 2.5, True, "10"])
+def test_every_strategy_refuses_a_bad_stagnation_by_value(sim, goal, run, bad):
+    # one check (base.check_stagnation) for every strategy: the value is named
+    with pytest.raises(ValueError, match=f"stagnation must be .*got {bad!r}"):
+        run(sim, goal[:2], population_size=8, max_generations=2, stagnation=bad)
+
+
+def test_check_stagnation_takes_whole_numbers_of_any_type():
+    from cgda_jax.strategies.base import check_stagnation
+
+    assert check_stagnation(None) is None and check_stagnation(7.0) == 7
+    assert isinstance(check_stagnation(np.int64(3)), int)

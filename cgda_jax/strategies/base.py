@@ -23,6 +23,7 @@ References:
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from typing import Any
 
@@ -119,6 +120,21 @@ def check_config(
 
 
 # --------------------------------------------------------------------------- plans
+def check_stagnation(stagnation: Any) -> int | None:
+    """A strategy's ``stagnation``: None (off) or a whole number >= 1, as an int.
+
+    Raises ValueError naming the value otherwise (a bool, 0, 2.5, "10").
+    """
+    if stagnation is None:
+        return None
+    ok = (not isinstance(stagnation, (bool, str)) and isinstance(stagnation, numbers.Real)
+          and float(stagnation) == int(stagnation) and int(stagnation) >= 1)
+    if not ok:
+        raise ValueError(f"stagnation must be a whole number >= 1 or None; got "
+                         f"{stagnation!r}")
+    return int(stagnation)
+
+
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
     """Stacks 1-D rows of different lengths into (len(rows), longest or 1), NaN-padded."""
     out = np.full((len(rows), max([len(r) for r in rows] + [1])), np.nan)
@@ -156,6 +172,7 @@ class PlanBase:
         algorithm_params: dict[str, Any] | None = None,
         info: dict[str, Any] | None = None,
         sharding: NamedSharding | None = None,
+        stagnation: int | None = None,
     ):
         self.sim, self.goal = sim, goal
         self.sharding = sharding
@@ -167,6 +184,7 @@ class PlanBase:
         self.tolerance = float(tolerance)
         self.max_generations = int(max_generations)
         self.max_generations_total = self.max_generations
+        self.stagnation = check_stagnation(stagnation)
         kwargs = dict(algorithm_kwargs or {})
         if isinstance(algorithm, (str, type)):  # built here: defaults that fit genes
             kwargs = {**default_kwargs(algorithm_name(algorithm)), **kwargs}
@@ -299,6 +317,13 @@ class PlanBase:
         return (evo.best_fitness < self.tolerance) | (
             evo.generation >= self.max_generations
         )
+
+    def stalled(self, evo: Evolution) -> jax.Array:
+        """The evolution went `stagnation` generations without improving its best
+        (never, when `stagnation` is None)."""
+        if self.stagnation is None:
+            return jnp.zeros(jnp.shape(evo.stall), bool)
+        return evo.stall >= self.stagnation
 
     # ---- plan functions shared by several strategies
     def done(self, carry: Any) -> jax.Array:

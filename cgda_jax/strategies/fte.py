@@ -157,8 +157,8 @@ class FTEPlan(PlanBase):
                  min_improvement=0.0, init="middle", init_samples=INIT_SAMPLES,
                  init_std=INIT_STD, refine="none", refine_steps=100,
                  refine_gamma=REFINE_GAMMA, **kwargs):
-        if int(stagnation) < 1:
-            raise ValueError(f"stagnation must be >= 1; got {stagnation}")
+        if stagnation is None:
+            raise ValueError("FTE needs stagnation (a whole number >= 1); got None")
         if int(restarts) < 0:
             raise ValueError(f"restarts must be >= 0; got {restarts}")
         if not 0 <= float(min_improvement) < 1:
@@ -190,8 +190,7 @@ class FTEPlan(PlanBase):
         user_params = dict(kwargs.get("algorithm_params") or {})
         info = {**(kwargs.pop("info", None) or {}), "init": init, "refine": refine}
         super().__init__(sim, goal, goal.shape[0] * int(sim.n_dof), info=info,
-                         **kwargs)
-        self.stagnation = int(stagnation)
+                         stagnation=stagnation, **kwargs)
         self.distance_name = distance if isinstance(distance, str) else None
         self.distance = resolve_distance(distance)
         self.restarts = int(restarts)
@@ -282,7 +281,7 @@ class FTEPlan(PlanBase):
         stall = jnp.where(gain, 0, s.stall + 1)
         ref = jnp.where(gain, worst, s.ref)
         met = self._met(errors) & (self.restarts > 0)
-        try_end = evo.done | (evo.stall >= self.stagnation)
+        try_end = evo.done | self.stalled(evo)
         if self.restarts > 0:
             try_end = try_end | (stall >= self.stagnation)
         spent = s.generations + evo.generation >= self.max_generations

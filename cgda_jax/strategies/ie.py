@@ -121,12 +121,12 @@ class IEPlan(PlanBase):
                 f"{getattr(sim, 'mode', '?')} with {type(sim.scene).__name__}")
         info = {**(kwargs.pop("info", None) or {}),
                 "sequential_context": self.sequential, "refine": refine}
-        super().__init__(sim, goal, int(sim.n_dof), info=info, **kwargs)
+        super().__init__(sim, goal, int(sim.n_dof), info=info, stagnation=stagnation,
+                         **kwargs)
         self.keys = keys
         self.refine, self.refine_steps = refine, int(refine_steps)
-        if int(restarts) < 0 or (stagnation is not None and int(stagnation) < 1):
-            raise ValueError(f"restarts must be >= 0 and stagnation >= 1 or None; got "
-                             f"{restarts}, {stagnation}")
+        if int(restarts) < 0:
+            raise ValueError(f"restarts must be >= 0; got {restarts}")
         self.restarts = int(restarts)
         if int(restart_samples) < 0:
             raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
@@ -136,7 +136,6 @@ class IEPlan(PlanBase):
         self.restart_samples = (0 if not points_independent(sim) or self.restarts == 0
                                 else int(restart_samples))
         self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
-        self.stagnation = None if stagnation is None else int(stagnation)
         self.max_generations_total = self.max_generations * (1 + self.restarts)
         self.unreachable = np.zeros(self.n_points, bool)
         self.reach_genes = np.zeros((self.n_points, self.n_dof), np.float32)
@@ -171,10 +170,7 @@ class IEPlan(PlanBase):
 
     def _stop(self, evo: Evolution) -> jax.Array:
         """One try of a point stops: tolerance met, its budget spent, or stalled."""
-        stop = self.stop(evo)
-        if self.stagnation is not None:
-            stop = stop | (evo.stall >= self.stagnation)
-        return stop
+        return self.stop(evo) | self.stalled(evo)
 
     def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None):
         """Try ``t`` of a point. Try 0 starts from the mid-range mean with the point

@@ -137,11 +137,7 @@ class IETPlan(PlanBase):
 
     def __init__(self, sim, goal, *, restarts=0, backtracks=0, warm_start=False,
                  restart_samples=RESTART_SAMPLES, stagnation=None, **kwargs):
-        super().__init__(sim, goal, int(sim.n_dof), **kwargs)
-        if stagnation is not None and (isinstance(stagnation, bool)
-                                       or int(stagnation) < 1):
-            raise ValueError(f"stagnation must be >= 1 or None; got {stagnation!r}")
-        self.stagnation = None if stagnation is None else int(stagnation)
+        super().__init__(sim, goal, int(sim.n_dof), stagnation=stagnation, **kwargs)
         if int(restart_samples) < 0:
             raise ValueError(f"restart_samples must be >= 0; got {restart_samples}")
         self.restart_samples = (int(restart_samples) if points_independent(sim)
@@ -166,10 +162,8 @@ class IETPlan(PlanBase):
 
         def stop(evo):
             own_sq = evo.best_fitness**2 - prefix_sq
-            out = (own_sq < tol_sq) | (evo.generation >= self.max_generations)
-            if self.stagnation is not None:
-                out = out | (evo.stall >= self.stagnation)
-            return out
+            return ((own_sq < tol_sq) | (evo.generation >= self.max_generations)
+                    | self.stalled(evo))
 
         return stop
 

@@ -119,14 +119,12 @@ class OETPlan(PlanBase):
             raise ValueError(f"max_steps must be >= 1; got {max_steps}")
         if int(lookahead) < 1:
             raise ValueError(f"lookahead must be >= 1; got {lookahead}")
-        if int(restarts) < 0 or (stagnation is not None and int(stagnation) < 1):
-            raise ValueError(f"restarts must be >= 0 and stagnation >= 1 or None; got "
-                             f"{restarts}, {stagnation}")
-        super().__init__(sim, goal, int(sim.n_dof), **kwargs)
+        if int(restarts) < 0:
+            raise ValueError(f"restarts must be >= 0; got {restarts}")
+        super().__init__(sim, goal, int(sim.n_dof), stagnation=stagnation, **kwargs)
         self.max_steps = max_steps
         self.lookahead = int(lookahead)
         self.restarts = int(restarts)
-        self.stagnation = None if stagnation is None else int(stagnation)
         self.max_generations_total = (self.max_steps * self.max_generations
                                       * (1 + self.restarts))
 
@@ -173,11 +171,8 @@ class OETPlan(PlanBase):
         as IE's), or after `stagnation` generations without improvement."""
 
         def stop(evo):
-            out = ((evo.best_fitness < self.tolerance)
-                   | (evo.generation >= self.max_generations))
-            if self.stagnation is not None:
-                out = out | (evo.stall >= self.stagnation)
-            return out
+            return ((evo.best_fitness < self.tolerance)
+                    | (evo.generation >= self.max_generations) | self.stalled(evo))
 
         return stop
 
