@@ -50,7 +50,7 @@ _LAZY.update({
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
 _LAZY.update({
-    "SimState": "cgda_jax.sim.execute",
+    "SimState": "cgda_jax.sim.sim_state",
     "Simulator": "cgda_jax.sim.execute",
     "render_trajectory": "cgda_jax.sim.render",
     "FeatureSet": "cgda_jax.sim.features",
@@ -155,7 +155,8 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.recognize import (  # noqa: F401
         ActionLibrary, Recognition, cost_matrix, recognize,
     )
-    from cgda_jax.sim.execute import SimState, Simulator  # noqa: F401
+    from cgda_jax.sim.execute import Simulator  # noqa: F401
+    from cgda_jax.sim.sim_state import SimState  # noqa: F401
     from cgda_jax.sim.features import FeatureSet, FeatureSpec  # noqa: F401
     from cgda_jax.sim.render import render_trajectory  # noqa: F401
     from cgda_jax.sim.robot import Robot, model_path  # noqa: F401

@@ -8,8 +8,8 @@
 import importlib as _importlib
 
 _LAZY = {
-    "MODES": "cgda_jax.sim.execute",
-    "SimState": "cgda_jax.sim.execute",
+    "MODES": "cgda_jax.sim.sim_state",
+    "SimState": "cgda_jax.sim.sim_state",
     "Simulator": "cgda_jax.sim.execute",
     "render_trajectory": "cgda_jax.sim.render",
     "FeatureSet": "cgda_jax.sim.features",

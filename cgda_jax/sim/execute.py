@@ -53,42 +53,19 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import struct
 from jax import Array
 
 from cgda_jax.sim.feasibility import scene_obstacles
 from cgda_jax.sim.robot import Robot
+from cgda_jax.sim.sim_state import (
+    MODES,
+    SimState,
+    check_settings,
+    check_waypoints,
+    scene_along,
+)
 
 __all__ = ["MODES", "SimState", "Simulator", "scene_obstacles"]
-
-MODES = ("kinematic", "dynamic")
-
-
-@struct.dataclass
-class SimState:
-    """What the simulator carries between waypoints.
-
-    Attributes:
-        genes: (DoF,) the last waypoint (kinematic mode: the posture; dynamic mode:
-            the last commanded target, which the next move starts from).
-        scene: the scene's state (e.g. painted (S,) bool).
-        data: dynamic mode: the physics state ``concat(qpos, qvel)`` of the simulated
-            model (see `cgda_jax.sim.physics.Physics`); ``None`` in kinematic mode.
-        marker: (3,) the marker's last position, where the next move's swept path
-            starts (None: recomputed from ``genes``).
-        violation: with feasibility: the summed violation of every move so far
-            (scalar, 0 = feasible); None without.
-        move_violation: with feasibility: the last move's violation; None without.
-        first: with feasibility: True until the first move (the approach) is made.
-    """
-
-    genes: Array
-    scene: Any
-    data: Any = None
-    marker: Any = None
-    violation: Any = None
-    move_violation: Any = None
-    first: Any = None
 
 
 class Simulator:
@@ -152,18 +129,9 @@ class Simulator:
         feasibility: Any = None,
         control: Any = None,
     ):
-        if mode not in MODES:
-            raise ValueError(f"mode={mode!r}; expected one of {MODES}")
-        if int(substeps) < 1:
-            raise ValueError(f"substeps must be >= 1, got {substeps}")
-        if not (np.isfinite(waypoint_s) and waypoint_s > 0):
-            raise ValueError(f"waypoint_s must be > 0 seconds, got {waypoint_s}")
-        if physics_steps is not None and int(physics_steps) < 1:
-            raise ValueError(f"physics_steps must be >= 1, got {physics_steps}")
-        if not 0 < move_fraction <= 1:
-            raise ValueError(f"move_fraction must be in (0, 1], got {move_fraction}")
-        if batch_size is not None and int(batch_size) < 1:
-            raise ValueError(f"batch_size must be >= 1 or None, got {batch_size}")
+        check_settings(mode=mode, substeps=substeps, waypoint_s=waypoint_s,
+                       physics_steps=physics_steps, move_fraction=move_fraction,
+                       batch_size=batch_size)
         self.robot = robot
         self.scene = scene
         self.mode = mode
@@ -329,7 +297,7 @@ class Simulator:
         alphas = jnp.asarray(self._alphas)[:, None]
         path = state.genes + alphas * (target - state.genes)  # (K, DoF)
         markers = jax.vmap(self.robot.marker_position)(path)  # (K, 3)
-        scene_state = self._paint(state, markers)
+        scene_state = scene_along(self.scene, state.scene, self._from(state), markers)
         if self._fset is not None:  # objects: forward kinematics of the whole world
             data = self.robot.kinematics_data(self.robot.qpos(target))
             features = self._fset.from_data(data)
@@ -338,22 +306,11 @@ class Simulator:
         new = state.replace(genes=target, scene=scene_state, marker=markers[-1])
         return self._judge(state, new), features
 
-    def _paint(self, state: SimState, markers: Array):
-        """The scene state after the marker moved from ``state.marker`` through
-        ``markers`` (K, 3): `sweep` along the polyline where the scene has it, else
-        `update` at each position."""
-        sweep = getattr(self.scene, "sweep", None)
-        if sweep is not None:
-            start = state.marker
-            if start is None:
-                start = self.robot.marker_position(state.genes)
-            start = jnp.asarray(start, markers.dtype)
-            return sweep(state.scene, jnp.concatenate([start[None], markers]))
-
-        def paint(scene_state, marker):
-            return self.scene.update(scene_state, marker), None
-
-        return jax.lax.scan(paint, state.scene, markers)[0]
+    def _from(self, state: SimState) -> Array:
+        """The marker where the next move starts (from ``genes`` when not carried)."""
+        if state.marker is None:
+            return self.robot.marker_position(state.genes)
+        return state.marker
 
     def reference_profiles(self) -> tuple[np.ndarray, np.ndarray]:
         """Dynamic mode: the min-jerk share of the move at each physics step of the
@@ -373,7 +330,7 @@ class Simulator:
         ctrl = c0 + jnp.asarray(profile)[:, None] * (c1 - c0)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
         path = sens[:, phys.marker_adr:phys.marker_adr + 3]
-        scene_state = self._paint(state, path)
+        scene_state = scene_along(self.scene, state.scene, self._from(state), path)
         if self._fset is not None:  # objects: the world's sensors at the end
             features = self._fset.from_sensordata(sens[-1])
         else:
@@ -395,16 +352,6 @@ class Simulator:
         # read back; the motion report replays them on MuJoCo C)
         return self._judge(state, new), features
 
-    def _check_waypoints(self, waypoints: Array, batched: bool = False) -> None:
-        shape = tuple(jnp.shape(waypoints))
-        want = "(P, N, DoF)" if batched else "(N, DoF)"
-        ndim = 3 if batched else 2
-        if len(shape) != ndim or shape[-1] != self.n_dof or 0 in shape:
-            raise ValueError(
-                f"waypoints has shape {shape}, expected {want} with DoF = {self.n_dof} "
-                f"(joints {self.robot.joint_names})"
-            )
-
     def rollout(
         self, waypoints: Array, state: SimState | None = None
     ) -> tuple[Array, SimState]:
@@ -417,7 +364,7 @@ class Simulator:
         Returns:
             (features (N, F), final state).
         """
-        self._check_waypoints(waypoints)
+        check_waypoints(waypoints, self.robot)
         return self._rollout(waypoints, state)
 
     def _rollout_checked(
@@ -476,5 +423,5 @@ class Simulator:
         Returns:
             (P, N, F) features.
         """
-        self._check_waypoints(population, batched=True)
+        check_waypoints(population, self.robot, batched=True)
         return self._execute_population(jnp.asarray(population, jnp.float32))

@@ -234,8 +234,10 @@ def render_frames(
         ValueError: waypoints of the wrong shape.
         RuntimeError: no offscreen OpenGL (see the module doc for ``MUJOCO_GL``).
     """
+    from cgda_jax.sim.sim_state import check_waypoints
+
     waypoints = np.asarray(waypoints, dtype=np.float64)
-    sim._check_waypoints(waypoints)
+    check_waypoints(waypoints, sim.robot)
     frames_per_waypoint = int(frames_per_waypoint or sim.substeps)
     model = _model(sim)
     data = mujoco.MjData(model)
