@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
@@ -60,60 +59,11 @@ from jax import Array
 
 from cgda_jax.sim.chain import body_chain_ops
 from cgda_jax.sim.distance_fns import KINDS, error_bound, pair_distance, swap_needed
+from cgda_jax.sim.geoms import GEOM_KINDS, Obstacle, geom_radius, geom_reach, quat_mat
 
 __all__ = ["GEOM_KINDS", "Collider", "Obstacle", "geom_radius", "geom_reach"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
-#: MuJoCo geom type id -> the supported kind name (`distance_fns.KINDS`).
-GEOM_KINDS = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
-_SIZE_LEN = {"sphere": 1, "capsule": 2, "box": 3, "cylinder": 2, "plane": 0}
-
-
-@dataclass(frozen=True)
-class Obstacle:
-    """An extra world primitive that is not in the model (e.g. a paint board).
-
-    Attributes:
-        name: its name in `Collider.pair_names` (and for ``exclude``).
-        type: "box", "sphere", "capsule", "cylinder" or "plane".
-        pos: (3,) centre in the robot's world frame (m).
-        size: MuJoCo's size for the type: box half sizes (3,), sphere (r,), capsule
-            and cylinder (r, half length) along the local z axis; plane: ignored
-            (the half-space below its local z = 0).
-        quat: (4,) orientation [w, x, y, z] (normalized here).
-    """
-
-    name: str
-    type: str
-    pos: tuple
-    size: tuple = ()
-    quat: tuple = (1.0, 0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        if self.type not in KINDS:
-            raise ValueError(f"obstacle {self.name!r}: type {self.type!r} is not one "
-                             f"of {KINDS}")
-        n = _SIZE_LEN[self.type]
-        size = np.asarray(self.size, float).ravel()
-        if size.size < n or not np.all(np.isfinite(size)) or np.any(size[:n] <= 0):
-            raise ValueError(f"obstacle {self.name!r}: a {self.type} needs {n} "
-                             f"positive size value(s), got {self.size!r}")
-        if np.shape(self.pos) != (3,) or not np.all(np.isfinite(self.pos)):
-            raise ValueError(f"obstacle {self.name!r}: pos must be 3 finite numbers")
-        q = np.asarray(self.quat, float)
-        if q.shape != (4,) or not np.linalg.norm(q) > 0:
-            raise ValueError(f"obstacle {self.name!r}: quat must be 4 numbers, not 0")
-
-    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(rotation (3, 3), centre (3,), size (3,)) as float64."""
-        R = np.zeros(9)
-        mujoco.mju_quat2Mat(R, np.asarray(self.quat, float) / np.linalg.norm(self.quat))
-        size = np.zeros(3)
-        n = np.asarray(self.size, float).ravel()[:3]
-        size[: n.size] = n
-        return R.reshape(3, 3), np.asarray(self.pos, float), size
-
-
 def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
     """Compose folded chain ops (`cgda_jax.sim.chain.ChainOp`) onto a frame."""
     for op in ops:
@@ -306,7 +256,7 @@ class Collider:
                                     np.int32)
         self._mov_pos = np.asarray([m.geom_pos[mov[a]] for a in used], np.float32)
         self._mov_rot = np.asarray(
-            [_quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
+            [quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
         self._const_R = np.asarray(c_R, np.float32).reshape(-1, 3, 3)
         self._const_p = np.asarray(c_p, np.float32).reshape(-1, 3)
 
@@ -410,46 +360,3 @@ def _worst(d: Array) -> tuple[Array, Array]:
     per_pair = jnp.min(d, axis=0)
     i = jnp.argmin(per_pair).astype(jnp.int32)
     return per_pair[i], i
-
-
-def geom_radius(kind: int, size: np.ndarray) -> float:
-    """Radius (m) of a ball about a geom's centre that holds the geom."""
-    kind = GEOM_KINDS.get(int(kind), "")
-    size = np.asarray(size, float)
-    if kind == "sphere":
-        return float(size[0])
-    if kind == "capsule":
-        return float(size[0] + size[1])
-    if kind in ("box", "cylinder"):
-        return float(np.linalg.norm(size[:3] if kind == "box" else size[:2]))
-    return 0.0
-
-
-def geom_reach(m: mujoco.MjModel, qpos0: np.ndarray, joint_ids: Sequence[int],
-               geom: int) -> np.ndarray:
-    """(DoF,) how far (m) any point of ``geom`` moves per unit change of each gene,
-    bounded over every posture: for a hinge, the sum of the chain's translation
-    lengths from the joint to the geom's centre plus the geom's radius (a bound on
-    the point's distance from the axis); for a slide, 1 (and its travel adds to
-    the hinges above it)."""
-    ops = body_chain_ops(m, qpos0, joint_ids, int(m.geom_bodyid[geom]))
-    bound = float(np.linalg.norm(m.geom_pos[geom])) + geom_radius(
-        m.geom_type[geom], m.geom_size[geom])
-    lo = m.jnt_range[np.asarray(joint_ids)]
-    travel = np.maximum(np.abs(lo[:, 0]), np.abs(lo[:, 1]))
-    out = np.zeros(len(joint_ids))
-    for op in reversed(ops):
-        if op.kind == "const":
-            bound += float(np.linalg.norm(op.vec))
-        elif op.kind == "hinge":
-            out[op.gene] = max(out[op.gene], bound)
-        else:  # slide: unit motion per metre; its travel lengthens what is above
-            out[op.gene] = max(out[op.gene], 1.0)
-            bound += float(travel[op.gene] + abs(op.offset))
-    return out
-
-
-def _quat_mat(q) -> np.ndarray:
-    R = np.zeros(9)
-    mujoco.mju_quat2Mat(R, np.asarray(q, float))
-    return R.reshape(3, 3)

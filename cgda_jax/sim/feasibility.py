@@ -247,7 +247,7 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     Returns:
         (kept pair names, overlapping pair names).
     """
-    from cgda_jax.sim.collision import GEOM_KINDS, geom_radius
+    from cgda_jax.sim.geoms import GEOM_KINDS, geom_radius
 
     if collider.n_pairs == 0:
         return [], []
