@@ -22,10 +22,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import struct
 
 from cgda_jax.strategies.base import (
-    Evolution,
     PlanBase,
     freeze,
     from_joints,
@@ -33,6 +31,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.ie import STAGNATION
+from cgda_jax.strategies.iet_state import IETState, tree_at, tree_set
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
@@ -44,67 +43,6 @@ BACKTRACKS = 8
 #: the initial search width of a restart from one, relative to the algorithm's.
 RESTART_SAMPLES = 4096
 LOCAL_STD = 0.15
-
-
-@struct.dataclass
-class IETState:
-    """Carry of an IET run.
-
-    Attributes:
-        evo: evolution of the current point (one restart of it).
-        key: the run's key; evolution ``t`` of point i uses
-            ``fold_in(fold_in(key, i), t)``.
-        point: index of the point being evolved (N once finished).
-        tries: evolutions started so far per point (N,) (restarts and revisits after a
-            backtrack); the next one of point i is number ``tries[i]``.
-        restart: restarts of the current point since it was (re)entered.
-        backtracks: backtracks spent.
-        stuck, depth: the point that made the last backtrack and how many points
-            back it went (a point that keeps missing goes back further each time).
-        best_u, best_fitness: best genes / fitness over the tries of the current
-            point since it was (re)entered (its restarts); the committed posture.
-        sim_states: simulator state before each point (stacked, N + 1).
-        prefix_sq: summed squared feature error of the frozen prefix before each point
-            (N + 1,).
-        joints: frozen postures (N, DoF); features: their features (N, F).
-        point_fitness: fitness (Euclidean over points 0..i) at commit (N,).
-        point_generations, point_evaluations: spent per point (N,), restarts and
-            revisits included.
-        point_invalid: how many of those evaluations were invalid (N,).
-        stopped: the run stopped at `point`: none of its evolutions (restarts,
-            backtracks) found a valid candidate, so there is no posture to commit.
-        samples: (N, K, D) the sampled postures nearest each goal point (K = 0
-            without restart samples), restart means.
-    """
-
-    evo: Evolution
-    key: jax.Array
-    point: jax.Array
-    tries: jax.Array
-    restart: jax.Array
-    backtracks: jax.Array
-    stuck: jax.Array
-    depth: jax.Array
-    best_u: jax.Array
-    best_fitness: jax.Array
-    sim_states: Any
-    prefix_sq: jax.Array
-    joints: jax.Array
-    features: jax.Array
-    point_fitness: jax.Array
-    point_generations: jax.Array
-    point_evaluations: jax.Array
-    point_invalid: jax.Array
-    stopped: jax.Array
-    samples: jax.Array
-
-
-def _at(tree: Any, i: jax.Array) -> Any:
-    return jax.tree.map(lambda x: x[i], tree)
-
-
-def _set(tree: Any, i: jax.Array, value: Any) -> Any:
-    return jax.tree.map(lambda x, v: x.at[i].set(v), tree, value)
 
 
 class IETPlan(PlanBase):
@@ -190,7 +128,7 @@ class IETPlan(PlanBase):
             mean = jnp.where(local, nearest, mean)
         prefix_sq = s.prefix_sq[p]
         evo = self.start(
-            k_evo, self._fitness(_at(s.sim_states, p), prefix_sq, point), mean=mean,
+            k_evo, self._fitness(tree_at(s.sim_states, p), prefix_sq, point), mean=mean,
             std_scale=jnp.where(local, LOCAL_STD, 1.0))
         # a restart keeps the best of the point's earlier tries (same prefix); a new
         # point or a revisit after a backtrack (new prefix) starts from this try's
@@ -243,7 +181,7 @@ class IETPlan(PlanBase):
             point_invalid=s.point_invalid.at[i].add(s.evo.invalid),
         )
         q = self.joints(best_u)
-        sim_state, feats = self.sim.step(_at(s.sim_states, i), q)
+        sim_state, feats = self.sim.step(tree_at(s.sim_states, i), q)
         own_sq = jnp.sum((feats - self.goal[i]) ** 2)
         met = own_sq < self.tolerance**2
         found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try
@@ -253,7 +191,7 @@ class IETPlan(PlanBase):
         def commit(s):
             nxt = i + 1
             s = s.replace(
-                sim_states=_set(s.sim_states, nxt, sim_state),
+                sim_states=tree_set(s.sim_states, nxt, sim_state),
                 prefix_sq=s.prefix_sq.at[nxt].set(s.prefix_sq[i] + own_sq),
                 joints=s.joints.at[i].set(q),
                 features=s.features.at[i].set(feats),
@@ -286,7 +224,7 @@ class IETPlan(PlanBase):
         finished = self.done(s)
         p = jnp.minimum(s.point, self.n_points - 1)
         prefix_sq = s.prefix_sq[p]
-        fit = self._fitness(_at(s.sim_states, p), prefix_sq, s.point)
+        fit = self._fitness(tree_at(s.sim_states, p), prefix_sq, s.point)
         evo, metrics = self.evolve(s.evo, fit, self._stop(prefix_sq))
         new = s.replace(evo=evo)
         new = jax.lax.cond(evo.done, self._end_evolution, lambda x: x, new)
