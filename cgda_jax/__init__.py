@@ -92,6 +92,18 @@ _LAZY.update({
 })
 
 
+# --- from simulation to a robot (export, replay) ------------------------------
+_LAZY.update({
+    "ExportedTrajectory": "cgda_jax.reality.export",
+    "time_parameterize": "cgda_jax.reality.export",
+    "load_trajectory": "cgda_jax.reality.files",
+    "save_trajectory": "cgda_jax.reality.files",
+    "replay_trajectory": "cgda_jax.reality.replay",
+    "export_trajectory": "cgda_jax.experiment.export",
+    "check_exported": "cgda_jax.experiment.export",
+})
+
+
 _SUBMODULES = ("checks", "datasets", "sizes")
 
 __all__: list[str] = ["__version__", *_LAZY, *_SUBMODULES]

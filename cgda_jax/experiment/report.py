@@ -129,6 +129,27 @@ def control_lines(control: dict) -> list[str]:
     return lines
 
 
+def export_rows(export: dict | None, unit: str | None) -> list[str]:
+    """The report's row of the exported trajectory replayed on MuJoCo C
+    (`cgda_jax.experiment.compute.export_check`)."""
+    if not export:
+        return []
+    if not export.get("exported"):
+        return [f"| exported trajectory | not exported: {export.get('reason')} |"]
+    rep = export["replay"]
+    where = (f"timestep {rep['timestep']:g} s" if "timestep" in rep
+             else f"{rep['substeps']} sub-steps per move")
+    lim = export["limit_ratio"]
+    within = max(lim.values()) <= 1 + 1e-6
+    return [(f"| exported trajectory ({export['method']}, {export['rate_hz']:g} Hz, "
+            f"{export['samples']} samples, {export['duration_s']:.2f} s) replayed on "
+            f"MuJoCo C at {where} | success {export['success']}, max point error "
+            f"{_with_unit(export['max_point_error'], unit)}, max feature difference "
+            f"{export['max_feature_difference']:.3g}; samples "
+            f"{'within' if within else 'OVER'} the limits (peak / limit: velocity "
+            f"{lim['velocity']:.2f}, acceleration {lim['acceleration']:.2f}) |")]
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -190,6 +211,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
                 f"{_with_unit(replay['max_point_error'], unit)}, max feature "
                 f"difference {replay['max_feature_difference']:.3g} |",
             ]
+        lines += export_rows(result.get("export"), unit)
         if phys and phys.get("control"):
             lines += [""] + control_lines(phys["control"])
         if result.get("motion"):
