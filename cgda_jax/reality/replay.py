@@ -29,7 +29,47 @@ import numpy as np
 
 from cgda_jax.reality.export import ExportedTrajectory
 
-__all__ = ["replay_trajectory", "scene_features"]
+__all__ = ["SceneTracker", "replay_trajectory", "scene_features"]
+
+
+class SceneTracker:
+    """A scene's state carried along a marker path given piece by piece (a paint
+    wall remembers what was painted): `advance` takes the next positions and
+    returns the features at the last one.
+
+    Args:
+        scene: the run's scene.
+        start: (3,) the marker at the start posture.
+    """
+
+    def __init__(self, scene, start):
+        import jax
+        import jax.numpy as jnp
+
+        self.scene = scene
+        self.state = scene.update(scene.init_state(), jnp.asarray(start, jnp.float32))
+        self.last = np.asarray(start, np.float64)
+        self._sweep = getattr(scene, "sweep", None)
+        if self._sweep is None:
+            def go(st, path):
+                return jax.lax.scan(lambda s, m: (scene.update(s, m), None), st,
+                                    path)[0]
+            self._advance = jax.jit(go)
+        else:
+            self._advance = jax.jit(self._sweep)
+
+    def advance(self, markers: np.ndarray) -> np.ndarray:
+        """Move the marker through ``markers`` (K, 3), K >= 1 (a paint wall sweeps
+        the segments from the last position on); the features (F,) at the end."""
+        import jax.numpy as jnp
+
+        markers = np.asarray(markers, np.float64).reshape(-1, 3)
+        path = (np.concatenate([self.last[None], markers]) if self._sweep is not None
+                else markers)
+        self.state = self._advance(self.state, jnp.asarray(path, jnp.float32))
+        self.last = markers[-1]
+        return np.asarray(self.scene.features(self.state, jnp.asarray(
+            self.last, jnp.float32)), np.float64)
 
 
 def scene_features(scene, markers: np.ndarray, ends: np.ndarray, world=None):
@@ -47,26 +87,13 @@ def scene_features(scene, markers: np.ndarray, ends: np.ndarray, world=None):
     Returns:
         (N, F) float64.
     """
-    import jax
-    import jax.numpy as jnp
-
     if world is not None:
         return np.asarray(world, np.float64)
-    state = scene.init_state()
-    state = scene.update(state, jnp.asarray(markers[0], jnp.float32))
-    sweep = getattr(scene, "sweep", None)
-    if sweep is None:
-        def go(st, path):
-            return jax.lax.scan(lambda s, m: (scene.update(s, m), None), st, path)[0]
-        advance = jax.jit(go)
-    else:
-        advance = jax.jit(sweep)
+    tracker = SceneTracker(scene, markers[0])
     out, prev = [], 0
     for e in np.asarray(ends, np.int64):
-        path = markers[prev:e + 1] if sweep is not None else markers[prev + 1:e + 1]
-        state = advance(state, jnp.asarray(path, jnp.float32))
-        out.append(np.asarray(scene.features(state, jnp.asarray(markers[e],
-                                                                jnp.float32))))
+        out.append(tracker.advance(markers[prev + 1:e + 1]) if e > prev
+                   else np.asarray(scene.features(tracker.state, markers[e])))
         prev = e
     return np.asarray(out, np.float64)
 
