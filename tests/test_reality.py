@@ -124,3 +124,51 @@ def test_a_measurement_of_the_wrong_shape_is_reported(sim):
     traj = trajectory_of(sim, WAYPOINTS)
     with pytest.raises(RealityError, match="expected \\(3, 3\\) and \\(3, 3\\)"):
         measure(_Fake("ok"), traj)
+
+
+TINY = ["kind=execution", "data.source=clean_circle", "scene.kind=marker",
+        "strategy.feasibility=false", "robot.model=tiny_arm.xml",
+        'robot.joints=["yaw", "shoulder", "elbow"]', "robot.fixed={}",
+        "robot.mode=dynamic"]
+
+
+def test_the_reality_table_is_checked_and_seeded():
+    from cgda_jax.experiment import ConfigError, load_config
+    from cgda_jax.experiment.rules import validate_config
+
+    cfg = load_config(None, TINY + ["reality.enabled=true", "reality.seed=4",
+                                    "reality.joint_offset_deg=[-3, 3]",
+                                    "reality.mass_scale=2.0", "reality.noise=0.002"])
+    validate_config(cfg)
+    assert Mismatch.from_dict(cfg.reality.mismatch_table()).draw(3)["mass_scale"] == 2
+    with pytest.raises(ConfigError, match="unknown key 'reality.masses'"):
+        load_config(None, TINY + ["reality.masses=2"])
+    for bad, match in (("reality.friction_scale=0", "friction_scale = 0.0: must be"),
+                       ("reality.delay_s=[0.2, 0.1]", "low > high")):
+        with pytest.raises(ConfigError, match=match):
+            validate_config(load_config(None, TINY + [bad]))
+    with pytest.raises(ConfigError, match="needs robot.mode"):
+        validate_config(load_config(None, TINY + ["robot.mode=kinematic",
+                                                  "reality.enabled=true"]))
+
+
+def test_open_loop_on_the_mismatched_world_is_judged_per_point(sim):
+    import types
+
+    from cgda_jax.experiment.compute import reality_check
+    from cgda_jax.experiment.report import reality_rows
+
+    feats = np.asarray(sim.execute(WAYPOINTS), np.float64)
+    res = types.SimpleNamespace(strategy="ie", joints=WAYPOINTS, goal=feats,
+                                features=feats, tolerance=0.01)
+    same = reality_check(sim, res, {})
+    assert same["executed"] and same["success"] and same["max_point_error"] < 2e-3
+    off = reality_check(sim, res, {"joint_offset_deg": 3.0})
+    # independent: the model at the offset joints, against the same goal
+    want = np.linalg.norm(np.asarray(sim.execute(
+        WAYPOINTS + np.float32(np.deg2rad(3.0))), np.float64) - feats, axis=1)
+    np.testing.assert_allclose(off["point_errors"], want, atol=2e-3)
+    assert not off["success"]
+    row = reality_rows(off, "m")[0]
+    assert row.startswith("| open loop on the mismatched world (seed 0")
+    assert "success False" in row

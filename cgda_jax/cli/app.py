@@ -60,6 +60,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="check everything the run would check (config, files, "
                      "robot, scene, algorithm, sizes, results folder) and print the "
                      "resolved config; compiles no simulation, runs nothing")
+    run.add_argument("--reality", action="store_true", help="also execute the result "
+                     "open loop on the config's mismatched world ([reality] table)")
     add_trials_arguments(run)
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",

@@ -163,6 +163,34 @@ def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4) -> dict:
     }
 
 
+def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
+    """The reported joints executed OPEN LOOP on a mismatched world
+    (`cgda_jax.reality.mismatch.MismatchedWorld` with the ``[reality]`` values
+    ``table``): the exported trajectory sent as it is, the world's features
+    measured at each waypoint and judged against the goal per point."""
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
+    from cgda_jax.reality.protocol import measure
+
+    world = MismatchedWorld(sim, Mismatch.from_dict(table))
+    out = {"mismatch": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
+                        for k, v in world.drawn.items()}, "seed": world.mismatch.seed}
+    try:
+        traj = trajectory_of(sim, res.joints, rate=rate)
+    except ValueError as e:
+        return out | {"executed": False, "reason": str(e), "success": False}
+    measure(world)
+    got = measure(world, traj)
+    errors = point_errors(res.strategy, got.features, res.goal, res.tolerance)
+    return out | {
+        "executed": True, "loop": "open",
+        "point_errors": errors.tolist(),
+        "max_point_error": float(errors.max()),
+        "max_feature_difference": float(np.abs(got.features - res.features).max()),
+        "success": bool(np.all(errors < res.tolerance)),
+    }
+
+
 def compute_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
@@ -208,6 +236,8 @@ def compute_execution(
         summary["substeps"] = sim.substeps
     summary["replay"] = replay_check(sim, res)
     summary["export"] = export_check(sim, res)
+    if cfg.reality.enabled:
+        summary["reality"] = reality_check(sim, res, cfg.reality.mismatch_table())
     motion = motion_check(sim, res)
     if motion is not None:
         summary["motion"], profile = motion

@@ -1,6 +1,6 @@
 """A run's result as a trajectory file a robot controller can take (``cgda export``).
 
-    >>> traj = cgda_jax.export_trajectory("results/paint_iet", rate=100)  # doctest: +SKIP
+    >>> traj = cgda_jax.export_trajectory("results/paint_iet")  # doctest: +SKIP
     >>> cgda_jax.save_trajectory(traj, "paint.json")   # a ROS JointTrajectory inside
     >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
 

@@ -150,6 +150,23 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
             f"{lim['velocity']:.2f}, acceleration {lim['acceleration']:.2f}) |")]
 
 
+def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
+    """The report's row of the result executed open loop on the mismatched world
+    (`cgda_jax.experiment.compute.reality_check`)."""
+    if not reality:
+        return []
+    drawn = ", ".join(
+        f"{k} {[round(x, 4) for x in v] if isinstance(v, list) else v}"
+        for k, v in reality["mismatch"].items())
+    if not reality.get("executed"):
+        return [f"| open loop on the mismatched world | not executed: "
+                f"{reality.get('reason')} |"]
+    per = ", ".join(f"{e:.3g}" for e in reality["point_errors"])
+    return [(f"| open loop on the mismatched world (seed {reality['seed']}: {drawn}) "
+             f"| success {reality['success']}, max point error "
+             f"{_with_unit(reality['max_point_error'], unit)}; per point: {per} |")]
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -212,6 +229,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
                 f"difference {replay['max_feature_difference']:.3g} |",
             ]
         lines += export_rows(result.get("export"), unit)
+        lines += reality_rows(result.get("reality"), unit)
         if phys and phys.get("control"):
             lines += [""] + control_lines(phys["control"])
         if result.get("motion"):
