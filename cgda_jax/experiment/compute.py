@@ -148,13 +148,13 @@ def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4) -> dict:
     for kind, values in (("velocity", traj.qd), ("acceleration", traj.qdd)):
         lim = traj.limits[kind]
         peak = np.abs(values).max(axis=0)
-        ratio = np.where(np.isfinite(lim), peak / np.where(np.isfinite(lim), lim, 1), 0)
-        over[kind] = float(ratio.max())
+        finite = np.isfinite(lim)
+        over[kind] = float((peak[finite] / lim[finite]).max()) if finite.any() else None
     return {
         "exported": True, "rate_hz": traj.rate, "samples": traj.n_samples,
         "duration_s": traj.duration, "method": "ruckig " + str(traj.info["ruckig"]),
         "stretched_moves": len(traj.info["stretched"]),
-        "limit_ratio": over,  # largest |sample| / limit, per kind (<= 1: within)
+        "limit_ratio": over,  # largest |sample| / limit per kind (None: no limit)
         "replay": ({"timestep": sim.physics.timestep / factor}
                    if sim.mode == "dynamic" else {"substeps": sim.substeps * factor}),
         "max_feature_difference": float(np.abs(feats - res.features).max()),

@@ -139,15 +139,16 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
     rep = export["replay"]
     where = (f"timestep {rep['timestep']:g} s" if "timestep" in rep
              else f"{rep['substeps']} sub-steps per move")
-    lim = export["limit_ratio"]
-    within = max(lim.values()) <= 1 + 1e-6
+    lim = {k: "no limit" if v is None else f"{v:.2f}"
+           for k, v in export["limit_ratio"].items()}
+    within = all(v is None or v <= 1 + 1e-6 for v in export["limit_ratio"].values())
     return [(f"| exported trajectory ({export['method']}, {export['rate_hz']:g} Hz, "
             f"{export['samples']} samples, {export['duration_s']:.2f} s) replayed on "
             f"MuJoCo C at {where} | success {export['success']}, max point error "
             f"{_with_unit(export['max_point_error'], unit)}, max feature difference "
             f"{export['max_feature_difference']:.3g}; samples "
             f"{'within' if within else 'OVER'} the limits (peak / limit: velocity "
-            f"{lim['velocity']:.2f}, acceleration {lim['acceleration']:.2f}) |")]
+            f"{lim['velocity']}, acceleration {lim['acceleration']}) |")]
 
 
 def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
