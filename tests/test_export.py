@@ -148,7 +148,7 @@ def _wall():
     robot = _robot()
     centres = [np.asarray(robot.marker_position((BENT[i] + BENT[i + 1]) / 2))
                for i in range(2)]
-    return PaintWall(np.array(centres), radius=0.02, size=0.03, path_tolerance=0.002)
+    return PaintWall(np.array(centres), radius=0.02, size=0.03, path_tolerance=0.005)
 
 
 CASES = {  # strategy: (runner, mode, scene, goal, options)
@@ -160,7 +160,11 @@ CASES = {  # strategy: (runner, mode, scene, goal, options)
 }
 
 
-@pytest.mark.parametrize("strategy", sorted(CASES))
+# FTE (paint) and IET (dynamic) compile for 15-20 s each on 2 cores: slow (`-m slow`);
+# the swept paint path is also checked by test_a_bent_path_would_be_caught
+@pytest.mark.parametrize("strategy", [
+    pytest.param("fte", marks=pytest.mark.slow), "ie",
+    pytest.param("iet", marks=pytest.mark.slow), "oet"])
 def test_the_exported_file_replayed_on_mujoco_gives_the_run_s_features(strategy,
                                                                        tmp_path):
     runner, mode, scene, goal, opts = CASES[strategy]
