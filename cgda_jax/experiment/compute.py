@@ -173,8 +173,9 @@ def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
     from cgda_jax.reality.protocol import measure
 
     world = MismatchedWorld(sim, Mismatch.from_dict(table))
-    out = {"mismatch": {k: (v.tolist() if isinstance(v, np.ndarray) else v)
-                        for k, v in world.drawn.items()}, "seed": world.mismatch.seed}
+    drawn = dict(world.drawn)  # the offsets in degrees, as the config gives them
+    drawn["joint_offset_deg"] = np.rad2deg(drawn.pop("joint_offset")).tolist()
+    out = {"mismatch": drawn, "seed": world.mismatch.seed}
     try:
         traj = trajectory_of(sim, res.joints, rate=rate)
     except ValueError as e:
