@@ -92,6 +92,23 @@ _LAZY.update({
 })
 
 
+# --- from simulation to a robot (export, replay) ------------------------------
+_LAZY.update({
+    "ExportedTrajectory": "cgda_jax.reality.export",
+    "time_parameterize": "cgda_jax.reality.export",
+    "load_trajectory": "cgda_jax.reality.files",
+    "save_trajectory": "cgda_jax.reality.files",
+    "replay_trajectory": "cgda_jax.reality.replay",
+    "Reality": "cgda_jax.reality.protocol",
+    "Measurement": "cgda_jax.reality.protocol",
+    "RealityError": "cgda_jax.reality.protocol",
+    "Mismatch": "cgda_jax.reality.mismatch",
+    "MismatchedWorld": "cgda_jax.reality.mismatch",
+    "export_trajectory": "cgda_jax.experiment.export",
+    "check_exported": "cgda_jax.experiment.export",
+})
+
+
 _SUBMODULES = ("checks", "datasets", "sizes")
 
 __all__: list[str] = ["__version__", *_LAZY, *_SUBMODULES]
@@ -148,10 +165,16 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.experiment import (  # noqa: F401
         ExperimentConfig, load_config, run_experiment,
     )
+    from cgda_jax.experiment.export import check_exported, export_trajectory  # noqa: F401
     from cgda_jax.experiment.load import Run, load_run  # noqa: F401
     from cgda_jax.generalize import (  # noqa: F401
         GeneralizedAction, generalize, rbf_interpolate,
     )
+    from cgda_jax.reality.export import ExportedTrajectory, time_parameterize  # noqa: F401
+    from cgda_jax.reality.files import load_trajectory, save_trajectory  # noqa: F401
+    from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld  # noqa: F401
+    from cgda_jax.reality.protocol import Measurement, Reality, RealityError  # noqa: F401
+    from cgda_jax.reality.replay import replay_trajectory  # noqa: F401
     from cgda_jax.recognize import (  # noqa: F401
         ActionLibrary, Recognition, cost_matrix, recognize,
     )

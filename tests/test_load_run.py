@@ -93,3 +93,28 @@ def test_cgda_plot_redraws_the_figures(clean_run, tmp_path, capsys):
     assert cli.main(["plot", str(tmp_path / "nope"), "--no-cache"]) == cli.EXIT_USAGE
     err = capsys.readouterr().err
     assert err.startswith("cgda: error: results folder") and "Traceback" not in err
+
+
+def test_cgda_export_writes_the_file_its_report_row_checked(clean_run, tmp_path,
+                                                           capsys):
+    """`cgda export` writes the trajectory of the run's joints; read back and
+    replayed on MuJoCo C it gives what the run's report says of its export."""
+    _, folder = clean_run
+    run = cg.load_run(folder)
+    export = run.result["export"]
+    assert export["exported"] and export["rate_hz"] == 100
+    assert export["max_feature_difference"] < 1e-4
+    assert export["success"] == run.result["success"]
+    assert "| exported trajectory (ruckig" in (folder / "report.md").read_text()
+    out = tmp_path / "clean.csv"
+    rc = cli.main(["export", str(folder), "--out", str(out), "--rate", "50",
+                   "--no-cache"])
+    assert rc == (cli.EXIT_MET if run.result["success"] else cli.EXIT_NOT_MET)
+    err = capsys.readouterr().err
+    assert f"-> {out}" in err and "replayed on MuJoCo C" in err
+    traj = cg.load_trajectory(out)
+    assert traj.rate == 50 and traj.joint_names == tuple(run.config.robot.joints)
+    np.testing.assert_allclose(traj.waypoints, run.arrays["joints"], atol=1e-6)
+    assert cli.main(["export", str(folder), "--rate", "0", "--no-cache"]) == \
+        cli.EXIT_USAGE
+    assert capsys.readouterr().err.startswith("cgda: error: --rate must be > 0")

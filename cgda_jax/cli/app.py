@@ -8,6 +8,7 @@ import signal
 import sys
 
 from cgda_jax.cli.demo import DEMO_EXAMPLES
+from cgda_jax.cli.export import add_export_parser, cmd_export
 from cgda_jax.cli.list import cmd_list
 from cgda_jax.cli.output import (
     JobFailed,
@@ -38,7 +39,7 @@ def _parser() -> argparse.ArgumentParser:
         "`cgda run --help` lists the options.",
     )
     p.add_argument("--version", action="version", version=f"cgda {_version()}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list,plot}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list,plot,export}")
     fmt = argparse.RawDescriptionHelpFormatter
     run = sub.add_parser("run", help="run one experiment: a built-in one by name "
                          "(`cgda list`) or a config file (TOML)",
@@ -59,6 +60,8 @@ def _parser() -> argparse.ArgumentParser:
                      help="check everything the run would check (config, files, "
                      "robot, scene, algorithm, sizes, results folder) and print the "
                      "resolved config; compiles no simulation, runs nothing")
+    run.add_argument("--reality", action="store_true", help="also execute the result "
+                     "open loop on the config's mismatched world ([reality] table)")
     add_trials_arguments(run)
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",
@@ -75,6 +78,7 @@ def _parser() -> argparse.ArgumentParser:
                    description="The built-in experiments: `cgda run NAME` runs one; "
                    "`cgda run NAME --dry-run` prints its config.")
     add_plot_parser(sub, fmt)
+    add_export_parser(sub, fmt)
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -98,6 +102,8 @@ def _dispatch(args, signals: Signals) -> int:
             return cmd_run(args)
         if args.command == "plot":
             return cmd_plot(args)
+        if args.command == "export":
+            return cmd_export(args)
         from cgda_jax.cli.demo import cmd_demo
 
         return cmd_demo(args)

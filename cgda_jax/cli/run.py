@@ -110,7 +110,8 @@ def cmd_run(args) -> int:
     )
 
     check_processes(args)
-    cfg = load_config(resolve_config(args.config), args.overrides)
+    extra = ["reality.enabled=true"] if getattr(args, "reality", False) else []
+    cfg = load_config(resolve_config(args.config), [*args.overrides, *extra])
     if args.trials is not None:
         from cgda_jax.experiment.trials import check_trials
 

@@ -34,11 +34,13 @@ another's ``_private`` name:
    into place when complete, locked, never mixing two runs).
 8. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
 9. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-10. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+10. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+    (`export_trajectory`, `check_exported`; ``cgda export``).
+11. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
-11. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
+12. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-12. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+13. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
     trials``).
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
@@ -75,6 +77,10 @@ from cgda_jax.experiment.config import (
 from cgda_jax.experiment.demo import (
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
+)
+from cgda_jax.experiment.export import (
+    check_exported as check_exported,
+    export_trajectory as export_trajectory,
 )
 from cgda_jax.experiment.figures import (
     draw_figures as draw_figures,

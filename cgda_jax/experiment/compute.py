@@ -108,6 +108,90 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
     }
 
 
+#: The control rate of the exported trajectory a run checks [Hz].
+EXPORT_RATE = 100.0
+
+
+def point_errors(strategy: str, features: np.ndarray, goal: np.ndarray,
+                 tolerance: float) -> np.ndarray:
+    """Each goal point's error as ``strategy`` judges it: IE / IET / FTE the
+    distance of point i's features to goal point i; OET the goal followed in order
+    by its executed steps (`cgda_jax.strategies.oet.ordered_point_errors`)."""
+    features, goal = np.asarray(features, np.float64), np.asarray(goal, np.float64)
+    if strategy == "oet":
+        from cgda_jax.strategies.oet import ordered_point_errors
+
+        dist = np.linalg.norm(goal[:, None, :] - features[None, :, :], axis=-1)
+        return ordered_point_errors(dist, tolerance)
+    return np.linalg.norm(features - goal, axis=-1)
+
+
+def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4) -> dict:
+    """The reported joints exported as a controller's trajectory
+    (`cgda_jax.reality.export.trajectory_of`, ``rate`` Hz), written as its JSON file
+    and read back (`cgda_jax.reality.files`), then replayed on MuJoCo C
+    (`cgda_jax.reality.replay.replay_trajectory`, ``factor`` x finer): its features
+    against the goal and the run's features, and its samples against the limits.
+    A result without postures to export (NaN joints) says why instead."""
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.files import from_json_dict, to_json_dict
+    from cgda_jax.reality.replay import replay_trajectory
+
+    try:
+        traj = trajectory_of(sim, res.joints, rate=rate)
+    except ValueError as e:
+        return {"exported": False, "reason": str(e), "success": False}
+    traj = from_json_dict(json.loads(json.dumps(to_json_dict(traj))))  # the file
+    feats = replay_trajectory(sim, traj, factor)
+    errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
+    over = {}
+    for kind, values in (("velocity", traj.qd), ("acceleration", traj.qdd)):
+        lim = traj.limits[kind]
+        peak = np.abs(values).max(axis=0)
+        finite = np.isfinite(lim)
+        over[kind] = float((peak[finite] / lim[finite]).max()) if finite.any() else None
+    return {
+        "exported": True, "rate_hz": traj.rate, "samples": traj.n_samples,
+        "duration_s": traj.duration, "method": "ruckig " + str(traj.info["ruckig"]),
+        "stretched_moves": len(traj.info["stretched"]),
+        "limit_ratio": over,  # largest |sample| / limit per kind (None: no limit)
+        "replay": ({"timestep": sim.physics.timestep / factor}
+                   if sim.mode == "dynamic" else {"substeps": sim.substeps * factor}),
+        "max_feature_difference": float(np.abs(feats - res.features).max()),
+        "max_point_error": float(errors.max()),
+        "success": bool(np.all(errors < res.tolerance)),
+    }
+
+
+def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
+    """The reported joints executed OPEN LOOP on a mismatched world
+    (`cgda_jax.reality.mismatch.MismatchedWorld` with the ``[reality]`` values
+    ``table``): the exported trajectory sent as it is, the world's features
+    measured at each waypoint and judged against the goal per point."""
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
+    from cgda_jax.reality.protocol import measure
+
+    world = MismatchedWorld(sim, Mismatch.from_dict(table))
+    drawn = dict(world.drawn)  # the offsets in degrees, as the config gives them
+    drawn["joint_offset_deg"] = np.rad2deg(drawn.pop("joint_offset")).tolist()
+    out = {"mismatch": drawn, "seed": world.mismatch.seed}
+    try:
+        traj = trajectory_of(sim, res.joints, rate=rate)
+    except ValueError as e:
+        return out | {"executed": False, "reason": str(e), "success": False}
+    measure(world)
+    got = measure(world, traj)
+    errors = point_errors(res.strategy, got.features, res.goal, res.tolerance)
+    return out | {
+        "executed": True, "loop": "open",
+        "point_errors": errors.tolist(),
+        "max_point_error": float(errors.max()),
+        "max_feature_difference": float(np.abs(got.features - res.features).max()),
+        "success": bool(np.all(errors < res.tolerance)),
+    }
+
+
 def compute_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
@@ -152,6 +236,9 @@ def compute_execution(
     else:
         summary["substeps"] = sim.substeps
     summary["replay"] = replay_check(sim, res)
+    summary["export"] = export_check(sim, res)
+    if cfg.reality.enabled:
+        summary["reality"] = reality_check(sim, res, cfg.reality.mismatch_table())
     motion = motion_check(sim, res)
     if motion is not None:
         summary["motion"], profile = motion

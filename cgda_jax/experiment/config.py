@@ -276,6 +276,34 @@ class OutputConfig:
 
 
 @dataclasses.dataclass
+class RealityConfig:
+    """A mismatched world the result is also executed on (`cgda_jax.reality.mismatch`,
+    dynamic mode only), when ``enabled`` (``cgda run CONFIG --reality``).
+
+    Each perturbation is a number or a ``[low, high]`` range drawn with ``seed``:
+    ``mass_scale`` (object bodies' masses; every body without objects),
+    ``friction_scale`` (sliding friction), ``joint_offset_deg`` (per evolved joint),
+    ``damping_scale`` (the evolved joints'), ``gain_scale`` (actuator kp),
+    ``noise`` (feature noise, standard deviation in feature units), ``delay_s``
+    (feature latency).
+    """
+
+    enabled: bool = False
+    seed: int = 0
+    mass_scale: Any = 1.0
+    friction_scale: Any = 1.0
+    joint_offset_deg: Any = 0.0
+    damping_scale: Any = 1.0
+    gain_scale: Any = 1.0
+    noise: Any = 0.0
+    delay_s: Any = 0.0
+
+    def mismatch_table(self) -> dict[str, Any]:
+        """The `cgda_jax.reality.mismatch.Mismatch` keys and values."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if k != "enabled"}
+
+
+@dataclasses.dataclass
 class ExperimentConfig:
     """A whole experiment (see the module docstring)."""
 
@@ -291,6 +319,7 @@ class ExperimentConfig:
     feasibility: FeasibilityConfig = dataclasses.field(
         default_factory=FeasibilityConfig)
     output: OutputConfig = dataclasses.field(default_factory=OutputConfig)
+    reality: RealityConfig = dataclasses.field(default_factory=RealityConfig)
 
 
 def _type_name(tp) -> str:

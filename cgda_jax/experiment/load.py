@@ -148,7 +148,8 @@ RUN_FIELDS = {
 #: ``RESULT_FIELDS``).
 EXECUTION_FIELDS = {
     "feature_names": "list[str]", "error_unit": "str|null", "build": "object",
-    "replay": "object", "motion": "object", "physics": "object", "substeps": "int",
+    "replay": "object", "export": "object", "reality": "object", "motion": "object",
+    "physics": "object", "substeps": "int",
     "render": "object|null",
 }
 RECOGNITION_FIELDS = {

@@ -129,6 +129,45 @@ def control_lines(control: dict) -> list[str]:
     return lines
 
 
+def export_rows(export: dict | None, unit: str | None) -> list[str]:
+    """The report's row of the exported trajectory replayed on MuJoCo C
+    (`cgda_jax.experiment.compute.export_check`)."""
+    if not export:
+        return []
+    if not export.get("exported"):
+        return [f"| exported trajectory | not exported: {export.get('reason')} |"]
+    rep = export["replay"]
+    where = (f"timestep {rep['timestep']:g} s" if "timestep" in rep
+             else f"{rep['substeps']} sub-steps per move")
+    lim = {k: "no limit" if v is None else f"{v:.2f}"
+           for k, v in export["limit_ratio"].items()}
+    within = all(v is None or v <= 1 + 1e-6 for v in export["limit_ratio"].values())
+    return [(f"| exported trajectory ({export['method']}, {export['rate_hz']:g} Hz, "
+            f"{export['samples']} samples, {export['duration_s']:.2f} s) replayed on "
+            f"MuJoCo C at {where} | success {export['success']}, max point error "
+            f"{_with_unit(export['max_point_error'], unit)}, max feature difference "
+            f"{export['max_feature_difference']:.3g}; samples "
+            f"{'within' if within else 'OVER'} the limits (peak / limit: velocity "
+            f"{lim['velocity']}, acceleration {lim['acceleration']}) |")]
+
+
+def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
+    """The report's row of the result executed open loop on the mismatched world
+    (`cgda_jax.experiment.compute.reality_check`)."""
+    if not reality:
+        return []
+    drawn = ", ".join(
+        f"{k} {[round(x, 4) for x in v] if isinstance(v, list) else v}"
+        for k, v in reality["mismatch"].items())
+    if not reality.get("executed"):
+        return [f"| open loop on the mismatched world | not executed: "
+                f"{reality.get('reason')} |"]
+    per = ", ".join(f"{e:.3g}" for e in reality["point_errors"])
+    return [(f"| open loop on the mismatched world (seed {reality['seed']}: {drawn}) "
+             f"| success {reality['success']}, max point error "
+             f"{_with_unit(reality['max_point_error'], unit)}; per point: {per} |")]
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -190,6 +229,8 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
                 f"{_with_unit(replay['max_point_error'], unit)}, max feature "
                 f"difference {replay['max_feature_difference']:.3g} |",
             ]
+        lines += export_rows(result.get("export"), unit)
+        lines += reality_rows(result.get("reality"), unit)
         if phys and phys.get("control"):
             lines += [""] + control_lines(phys["control"])
         if result.get("motion"):

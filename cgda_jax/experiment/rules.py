@@ -116,6 +116,7 @@ def validate_config(cfg: ExperimentConfig) -> None:
         raise ConfigError(f"key 'strategy.tolerance' must be a finite number > 0, got "
                           f"{cfg.strategy.tolerance}")
     _validate_feasibility(cfg)
+    _validate_reality(cfg)
     check_strategy_options(cfg.strategy)
     if not cfg.robot.joints:
         raise ConfigError("key 'robot.joints' is empty: name the joints to evolve")
@@ -141,6 +142,20 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
         if kind not in LIMIT_KINDS:
             raise ConfigError(f"key 'robot.limits.{kind}': unknown; the limits are "
                               f"{list(LIMIT_KINDS)}")
+
+
+def _validate_reality(cfg: ExperimentConfig) -> None:
+    """``[reality]``: each perturbation a number or a range of its kind; a mismatched
+    world needs dynamic mode."""
+    from cgda_jax.reality.mismatch import Mismatch
+
+    try:
+        Mismatch.from_dict(cfg.reality.mismatch_table())
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    if cfg.reality.enabled and cfg.robot.mode != "dynamic":
+        raise ConfigError("key 'reality.enabled': a mismatched world is physics; it "
+                          "needs robot.mode = \"dynamic\"")
 
 
 def _validate_objects(cfg: ExperimentConfig) -> None:

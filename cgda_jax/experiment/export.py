@@ -1,0 +1,82 @@
+"""A run's result as a trajectory file a robot controller can take (``cgda export``).
+
+    >>> traj = cgda_jax.export_trajectory("results/paint_iet")  # doctest: +SKIP
+    >>> cgda_jax.save_trajectory(traj, "paint.json")   # a ROS JointTrajectory inside
+    >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
+
+The trajectory itself is `cgda_jax.reality.export`'s (ruckig, straight joint-space
+moves with the run's timing); its files are `cgda_jax.reality.files`'.
+"""
+
+from __future__ import annotations
+
+import os
+
+from cgda_jax.experiment.compute import EXPORT_RATE, point_errors
+from cgda_jax.experiment.load import Run, load_run
+
+__all__ = ["check_exported", "export_trajectory"]
+
+
+def _run(run: Run | str | os.PathLike) -> Run:
+    run = run if isinstance(run, Run) else load_run(run)
+    if run.kind != "execution":
+        raise ValueError(f"{run.folder}: a {run.kind} run has no trajectory to export "
+                         "(export needs an execution run)")
+    return run
+
+
+def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *,
+                      jerk=None, sim=None):
+    """The run's best joints as a time-parameterized trajectory at ``rate`` Hz.
+
+    Args:
+        run: a `Run` (`cgda_jax.load_run`) or its results folder.
+        rate: control rate [Hz] (default 100).
+        jerk: optional jerk limit(s) [rad/s^3], scalar or per joint; None: the
+            run's own minimum-jerk peaks.
+        sim: the run's simulator if already built (default `Run.simulator()`).
+
+    Returns:
+        `cgda_jax.reality.export.ExportedTrajectory` (positions, velocities and
+        accelerations of the evolved joints, from the start posture through every
+        waypoint, each held as long as the run held it).
+
+    Raises:
+        FolderError: not a results folder; ValueError: a recognition run, or joints
+            that are NaN (a point without a posture: named).
+    """
+    from cgda_jax.reality.export import trajectory_of
+
+    run = _run(run)
+    sim = sim if sim is not None else run.simulator()
+    return trajectory_of(sim, run.arrays["joints"], rate=rate, jerk=jerk,
+                         info={"run": str(run.folder), "name": run.name,
+                               "strategy": run.result.get("strategy")})
+
+
+def check_exported(run: Run | str | os.PathLike, traj, *, sim=None,
+                   factor: int = 4) -> dict:
+    """Replay ``traj`` (e.g. read back from its file) on MuJoCo C with the run's
+    model and scene (`cgda_jax.reality.replay.replay_trajectory`) and judge its
+    features as the run's strategy does.
+
+    Returns:
+        ``max_point_error``, ``max_feature_difference`` (against the run's own
+        features), ``tolerance``, ``success`` (every point error < tolerance),
+        ``features`` (N, F).
+    """
+    import numpy as np
+
+    from cgda_jax.reality.replay import replay_trajectory
+
+    run = _run(run)
+    sim = sim if sim is not None else run.simulator()
+    feats = replay_trajectory(sim, traj, factor)
+    tol = float(run.result["tolerance"])
+    errors = point_errors(run.result["strategy"], feats, run.arrays["goal"], tol)
+    return {"max_point_error": float(errors.max()),
+            "max_feature_difference": float(np.abs(
+                feats - run.arrays["features"]).max()),
+            "tolerance": tol, "success": bool(np.all(errors < tol)),
+            "features": feats}

@@ -1,0 +1,18 @@
+"""From simulation to a robot: a result as a trajectory a controller can take
+(`cgda_jax.reality.export`, its files `cgda_jax.reality.files`), the replay of
+that trajectory on MuJoCo C that checks it (`cgda_jax.reality.replay`), and the
+robot interface a result can be executed on (`cgda_jax.reality.protocol`, with a
+mismatched MuJoCo world as the shipped implementation).
+
+Modules, in their import order:
+
+1. :mod:`~cgda_jax.reality.export`: time parameterization with ruckig
+   (`time_parameterize`, `trajectory_of`, `ExportedTrajectory`).
+2. :mod:`~cgda_jax.reality.files`: CSV, JSON (a ROS ``JointTrajectory``) and NPZ.
+3. :mod:`~cgda_jax.reality.replay`: the exported samples on MuJoCo C -> features.
+4. :mod:`~cgda_jax.reality.protocol`: the `Reality` a result runs against (the
+   user's robot driver implements it), `measure` (a checked call).
+5. :mod:`~cgda_jax.reality.mismatch`: the shipped `Reality`, a `MismatchedWorld`
+   (the scene in MuJoCo C with perturbed masses, friction, joint offsets, damping,
+   gains, feature noise and delay: `Mismatch`).
+"""

@@ -1,0 +1,329 @@
+"""A result as a trajectory a robot controller can take: joint positions, velocities
+and accelerations at a control rate, within the robot's limits.
+
+The simulator moves from the start posture to each waypoint in turn along the
+STRAIGHT joint-space segment between them (the minimum-jerk move of
+`cgda_jax.sim.timing`, every joint on the same profile), then holds the waypoint
+until its time is up; a paint wall sees the swept path.  The export must follow
+that same path, so each move is time-parameterized as a 1-DoF motion of the path
+parameter ``s`` in [0, 1] (``q = q0 + s (q1 - q0)``) with **ruckig** (Berscheid &
+Kroeger, "Jerk-limited real-time trajectory generation with arbitrary target
+states", RSS 2021; `ruckig` on PyPI): a jerk-limited, time-optimal profile between
+rest states, stretched to a minimum duration (the run's move time).  Why ruckig and
+not toppra: the moves are rest-to-rest along straight lines, which is exactly the
+case ruckig solves in closed form (microseconds per move, no path discretisation,
+limits on jerk as well as velocity and acceleration, and a ``minimum_duration`` so
+a move takes the run's own time instead of the fastest one); toppra's strength,
+time-optimal speed along a curved geometric path, is not needed here, and it
+does not limit jerk.  ruckig's own multi-DoF phase synchronization does not keep
+the line when a minimum duration is set (it falls back to time synchronization),
+so the line is kept by construction: one path parameter, limits mapped onto it,
+``v_s = min_j v_j / |dq_j|`` (same for acceleration and jerk).
+
+Timing: move ``i`` lasts at least the run's move time (the approach from the start
+posture its ``approach_s``), rounded UP to a whole control period; then the waypoint
+is held for the run's hold time (``waypoint_s - move_s``, rounded up), so every
+waypoint is reached exactly on a sample and held (the run reads its features at
+the end of the hold: `ExportedTrajectory.feature_t`).  Limits: the robot's
+(`cgda_jax.sim.limits.JointLimits`); where a joint has none (inf), and for jerk
+unless given, the export uses the peak of the run's own minimum-jerk move of that
+segment (``1.875 |dq| / T``, ``5.7735 |dq| / T^2``, ``60 |dq| / T^3``), so it is
+never more abrupt than the motion the run was judged on.  A move the limits
+cannot fit into the run's time is made longer (said in ``info["stretched"]``).
+
+The file formats (CSV, JSON mapping onto ROS ``trajectory_msgs/JointTrajectory``,
+NPZ) are `cgda_jax.reality.files`'.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PEAK_JERK", "ExportedTrajectory", "simulator_timing", "time_parameterize",
+           "trajectory_of"]
+
+#: |s'''| of the minimum-jerk profile is largest at tau = 0 and 1: 60.
+PEAK_JERK = 60.0
+_PEAK_SPEED = 1.875
+_PEAK_ACC = 10.0 / math.sqrt(3.0)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ExportedTrajectory:
+    """A time-parameterized joint trajectory (host NumPy, float64).
+
+    Attributes:
+        joint_names: (DoF,) the joints, in column order.
+        units: (DoF,) each joint's position unit, ``"rad"`` (hinge) or ``"m"``
+            (slide); velocities are per s, accelerations per s^2.
+        rate: the control rate [Hz]; sample k is at ``k / rate`` seconds.
+        t: (T,) sample times [s], from 0.
+        q, qd, qdd: (T, DoF) positions, velocities, accelerations.
+        start: (DoF,) the start posture (``q[0]``).
+        waypoints: (N, DoF) the waypoints, clipped into the joint limits as the
+            simulator clips them.
+        reached_index: (N,) the sample at which each waypoint is reached (its move
+            ends; held from there).
+        feature_index: (N,) the sample at the end of each waypoint's hold, where the
+            run reads the waypoint's features.
+        limits: ``{"velocity", "acceleration", "jerk"}`` -> (DoF,) the limits the
+            export keeps (NaN: none given, the run's own peaks used per move).
+        info: how it was made (``method``, ``ruckig`` version, ``stretched`` moves,
+            the run's timing, where it came from).
+    """
+
+    joint_names: tuple[str, ...]
+    units: tuple[str, ...]
+    rate: float
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    start: np.ndarray
+    waypoints: np.ndarray
+    reached_index: np.ndarray
+    feature_index: np.ndarray
+    limits: dict[str, np.ndarray]
+    info: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def n_dof(self) -> int:
+        return len(self.joint_names)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first sample to the last."""
+        return float(self.t[-1])
+
+    @property
+    def reached_t(self) -> np.ndarray:
+        """(N,) when each waypoint is reached [s]."""
+        return self.t[self.reached_index]
+
+    @property
+    def feature_t(self) -> np.ndarray:
+        """(N,) when each waypoint's features are read (the end of its hold) [s]."""
+        return self.t[self.feature_index]
+
+    def position_at(self, times) -> np.ndarray:
+        """(K, DoF) positions at ``times`` (K,) [s], linear between samples (what a
+        controller interpolating its setpoints commands); held after the end."""
+        times = np.asarray(times, np.float64)
+        return np.stack([np.interp(times, self.t, self.q[:, j])
+                         for j in range(self.n_dof)], axis=-1)
+
+
+def _ruckig_segment(v: float, a: float, j: float, duration: float):
+    """A ruckig trajectory of the path parameter 0 -> 1 (rest to rest) within
+    ``v``, ``a``, ``j`` lasting at least ``duration`` s."""
+    from ruckig import InputParameter, Result, Ruckig, Trajectory
+
+    otg, inp, traj = Ruckig(1), InputParameter(1), Trajectory(1)
+    inp.current_position, inp.target_position = [0.0], [1.0]
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
+    inp.minimum_duration = float(duration)
+    res = otg.calculate(inp, traj)
+    if res not in (Result.Working, Result.Finished):
+        raise ValueError(f"ruckig could not time a move (result {res}; limits on the "
+                         f"path v={v:g}, a={a:g}, j={j:g}, duration {duration:g} s)")
+    return traj
+
+
+def _path_limit(limit: np.ndarray, dq: np.ndarray, moving: np.ndarray,
+                own: float) -> float:
+    """The path parameter's limit: ``min_j limit_j / |dq_j|`` over the moving joints
+    with a finite limit; ``own`` (the run's own peak) where none has one."""
+    finite = moving & np.isfinite(limit)
+    if not finite.any():
+        return own
+    return float(np.min(limit[finite] / np.abs(dq[finite])))
+
+
+def _periods(seconds: float, rate: float) -> int:
+    """Whole control periods covering ``seconds`` (rounded up, tolerant of float
+    noise)."""
+    return max(0, math.ceil(seconds * rate - 1e-6))
+
+
+def time_parameterize(
+    start, waypoints, move_s: Sequence[float], hold_s: Sequence[float], *,
+    rate: float = 100.0, velocity=None, acceleration=None, jerk=None,
+    joint_names: Sequence[str] | None = None, units: Sequence[str] | None = None,
+    lower=None, upper=None,
+) -> ExportedTrajectory:
+    """Time-parameterize straight joint-space moves ``start -> waypoints[0] -> ...``.
+
+    Args:
+        start: (DoF,) the start posture.
+        waypoints: (N, DoF) the waypoints (finite).
+        move_s: (N,) each move's least duration [s] (> 0), e.g. the run's
+            ``[approach_s, move_s, ...]``.
+        hold_s: (N,) how long each waypoint is held after its move [s] (>= 0).
+        rate: control rate [Hz] (> 0).
+        velocity, acceleration, jerk: (DoF,) or scalar limits (> 0; inf / None:
+            none, the run's own peak of each move is used).
+        joint_names, units: per joint (default ``j0, j1, ...`` and ``"rad"``).
+        lower, upper: (DoF,) joint position limits: the start and the waypoints are
+            clipped into them (None: not clipped).
+
+    Returns:
+        The `ExportedTrajectory`.
+
+    Raises:
+        ValueError: shapes, non-finite waypoints, bad timing or rate, a limit <= 0.
+    """
+    import ruckig
+
+    wps = np.asarray(waypoints, np.float64)
+    q0 = np.asarray(start, np.float64).reshape(-1)
+    n_dof = q0.shape[0]
+    if wps.ndim != 2 or wps.shape[1] != n_dof or not len(wps):
+        raise ValueError(f"waypoints has shape {wps.shape}, expected (N, {n_dof})")
+    if not (np.all(np.isfinite(wps)) and np.all(np.isfinite(q0))):
+        bad = sorted(set(np.flatnonzero(~np.all(np.isfinite(wps), axis=1)).tolist()))
+        raise ValueError(f"waypoints {[b + 1 for b in bad]} are NaN or inf (a point "
+                         "without a posture): no trajectory to export")
+    n = len(wps)
+    move_s = np.asarray(move_s, np.float64).reshape(-1)
+    hold_s = np.asarray(hold_s, np.float64).reshape(-1)
+    if move_s.shape != (n,) or hold_s.shape != (n,):
+        raise ValueError(f"move_s {move_s.shape} and hold_s {hold_s.shape} must be "
+                         f"({n},), one per waypoint")
+    if not (np.all(np.isfinite(move_s)) and np.all(move_s > 0)
+            and np.all(np.isfinite(hold_s)) and np.all(hold_s >= 0)):
+        raise ValueError(f"move times must be > 0 and hold times >= 0 s, got "
+                         f"{move_s.tolist()} and {hold_s.tolist()}")
+    rate = float(rate)
+    if not (math.isfinite(rate) and rate > 0):
+        raise ValueError(f"rate must be > 0 Hz, got {rate}")
+    lims = {}
+    for kind, value in (("velocity", velocity), ("acceleration", acceleration),
+                        ("jerk", jerk)):
+        arr = np.full(n_dof, np.inf) if value is None else np.broadcast_to(
+            np.asarray(value, np.float64), (n_dof,)).copy()
+        if np.any(np.isnan(arr)) or np.any(arr <= 0):
+            raise ValueError(f"{kind} limits must be > 0 (inf: none), got "
+                             f"{arr.tolist()}")
+        lims[kind] = arr
+    if lower is not None or upper is not None:
+        lo = -np.inf if lower is None else np.asarray(lower, np.float64)
+        hi = np.inf if upper is None else np.asarray(upper, np.float64)
+        q0, wps = np.clip(q0, lo, hi), np.clip(wps, lo, hi)
+    dt = 1.0 / rate
+    qs, qds, qdds = [q0[None]], [np.zeros((1, n_dof))], [np.zeros((1, n_dof))]
+    reached, features, stretched = [], [], []
+    k = 0
+    prev = q0
+    for i in range(n):
+        dq = wps[i] - prev
+        moving = dq != 0
+        t_run = float(move_s[i])
+        move_k = max(1, _periods(t_run, rate))
+        if moving.any():
+            v = _path_limit(lims["velocity"], dq, moving, _PEAK_SPEED / t_run)
+            a = _path_limit(lims["acceleration"], dq, moving, _PEAK_ACC / t_run**2)
+            j = _path_limit(lims["jerk"], dq, moving, PEAK_JERK / t_run**3)
+            traj = _ruckig_segment(v, a, j, move_k * dt)
+            if traj.duration > move_k * dt + 1e-9:  # the limits need longer
+                move_k = _periods(traj.duration, rate)
+                traj = _ruckig_segment(v, a, j, move_k * dt)
+                stretched.append({"move": i + 1, "run_s": t_run,
+                                  "export_s": move_k * dt})
+            s = np.array([traj.at_time(m * dt) for m in range(1, move_k + 1)],
+                         np.float64)[..., 0]  # (move_k, 3): s, s', s''
+            qs.append(prev + s[:, 0:1] * dq)
+            qds.append(s[:, 1:2] * dq)
+            qdds.append(s[:, 2:3] * dq)
+            # ruckig ends at rest on 1 to rounding: the waypoint itself, at rest
+            qs[-1][-1], qds[-1][-1], qdds[-1][-1] = wps[i], 0.0, 0.0
+        else:
+            qs.append(np.repeat(wps[i][None], move_k, axis=0))
+            qds.append(np.zeros((move_k, n_dof)))
+            qdds.append(np.zeros((move_k, n_dof)))
+        k += move_k
+        reached.append(k)
+        hold_k = _periods(t_run + float(hold_s[i]), rate) - _periods(t_run, rate)
+        if hold_k > 0:
+            qs.append(np.repeat(wps[i][None], hold_k, axis=0))
+            qds.append(np.zeros((hold_k, n_dof)))
+            qdds.append(np.zeros((hold_k, n_dof)))
+            k += hold_k
+        features.append(k)
+        prev = wps[i]
+    q = np.concatenate(qs)
+    names = tuple(joint_names) if joint_names is not None else tuple(
+        f"j{i}" for i in range(n_dof))
+    unit = tuple(units) if units is not None else ("rad",) * n_dof
+    if len(names) != n_dof or len(unit) != n_dof:
+        raise ValueError(f"joint_names {names} and units {unit} must have {n_dof} "
+                         "entries")
+    return ExportedTrajectory(
+        joint_names=names, units=unit, rate=rate, t=np.arange(len(q)) * dt, q=q,
+        qd=np.concatenate(qds), qdd=np.concatenate(qdds), start=q0, waypoints=wps,
+        reached_index=np.asarray(reached, np.int64),
+        feature_index=np.asarray(features, np.int64),
+        limits={kk: np.where(np.isinf(vv), np.nan, vv) for kk, vv in lims.items()},
+        info={"method": "ruckig: jerk-limited rest-to-rest moves of the path "
+              "parameter along straight joint-space segments",
+              "ruckig": getattr(ruckig, "__version__", "?"),
+              "move_s": move_s.tolist(), "hold_s": hold_s.tolist(),
+              "stretched": stretched})
+
+
+def simulator_timing(sim, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The run's timing of ``n`` waypoints on ``sim``: each move's duration (the
+    approach ``sim.approach_s`` first, then ``sim.move_s``) and each hold
+    (``sim.waypoint_s - sim.move_s``), seconds, (n,) each."""
+    move = float(sim.move_s)
+    moves = np.array([float(getattr(sim, "approach_s", move))] + [move] * (n - 1))
+    return moves, np.full(n, max(0.0, float(sim.waypoint_s) - move))
+
+
+def _units(robot) -> tuple[str, ...]:
+    import mujoco
+
+    slide = int(mujoco.mjtJoint.mjJNT_SLIDE)
+    return tuple("m" if int(robot.mj_model.jnt_type[j]) == slide else "rad"
+                 for j in robot.joint_ids)
+
+
+def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
+                  info: dict | None = None) -> ExportedTrajectory:
+    """The exported trajectory of ``joints`` (N, DoF) as ``sim`` executes them: from
+    the robot's start posture, with the run's timing (`simulator_timing`) and the
+    limits its motion was judged against (the feasibility's, else the model's).
+
+    Args:
+        sim: the `cgda_jax.sim.execute.Simulator` of the run.
+        joints: (N, DoF) waypoints.
+        rate: control rate [Hz].
+        jerk: optional jerk limits (DoF,) or scalar [rad/s^3]; None: the run's own.
+        info: extra entries for ``info`` (where it came from).
+    """
+    from cgda_jax.sim.limits import read_limits
+
+    robot = sim.robot
+    joints = np.asarray(joints, np.float64)
+    feas = getattr(sim, "feasibility", None)
+    limits = feas.limits if feas is not None else read_limits(
+        robot.mj_model, robot.joint_names)
+    moves, holds = simulator_timing(sim, len(joints) if joints.ndim == 2 else 0)
+    traj = time_parameterize(
+        np.asarray(robot.start_genes, np.float64), joints, moves, holds, rate=rate,
+        velocity=np.asarray(limits.velocity, np.float64),
+        acceleration=np.asarray(limits.acceleration, np.float64), jerk=jerk,
+        joint_names=robot.joint_names, units=_units(robot),
+        lower=np.asarray(robot.lower, np.float64),
+        upper=np.asarray(robot.upper, np.float64))
+    traj.info.update({"mode": sim.mode, "waypoint_s": float(sim.waypoint_s),
+                      **(info or {})})
+    return traj
