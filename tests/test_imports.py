@@ -257,7 +257,7 @@ def test_no_import_loop():
 
 #: The modules of two packages in their import order (their package docstrings).
 ORDER = {
-    "experiment": ("config", "demo", "rules", "build", "validate", "compute",
+    "experiment": ("sections", "config", "demo", "rules", "build", "validate", "compute",
                    "results", "report", "load", "export", "figures", "run", "trials"),
     "cli": ("output", "list", "plot", "export", "trials", "run", "demo", "app", "__main__"),
 }

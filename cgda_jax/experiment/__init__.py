@@ -18,29 +18,31 @@ Modules, one job each, in their import order: each imports only modules above it
 (function-level imports too; tests/test_imports.py checks it), and no module takes
 another's ``_private`` name:
 
-1. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
+1. :mod:`~cgda_jax.experiment.sections`: the config's sections (``[data]``,
+   ``[robot]``, ...), one typed dataclass each, with their defaults.
+2. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
    overrides (`merge_table`).
-2. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
-3. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
+3. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
+4. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
    files named, the world and object-scene tables, the strategy's options
    (`strategy_function`), the interval count.
-4. :mod:`~cgda_jax.experiment.build`: the objects: demonstrations and goal, robot,
+5. :mod:`~cgda_jax.experiment.build`: the objects: demonstrations and goal, robot,
    world, scene and simulator, feature labels.
-5. :mod:`~cgda_jax.experiment.validate`: the checks that need built objects and no
+6. :mod:`~cgda_jax.experiment.validate`: the checks that need built objects and no
    compiled program (``--dry-run`` and the start of every run: `check_experiment`).
-6. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
+7. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
    execution run (and the replay on a finer simulator).
-7. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
+8. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
    into place when complete, locked, never mixing two runs).
-8. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
-9. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-10. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+9. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
+10. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
+11. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
     (`export_trajectory`, `check_exported`; ``cgda export``).
-11. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
-12. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
+13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-13. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+14. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
     trials``).
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
