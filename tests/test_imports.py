@@ -259,7 +259,8 @@ def test_no_import_loop():
 ORDER = {
     "experiment": ("config", "demo", "rules", "build", "validate", "compute",
                    "results", "report", "load", "figures", "run", "trials"),
-    "cli": ("output", "list", "plot", "trials", "run", "demo", "app", "__main__"),
+    "cli": ("output", "list", "plot", "track", "trials", "run", "demo", "app",
+            "__main__"),
 }
 
 

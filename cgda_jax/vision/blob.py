@@ -171,7 +171,8 @@ def measure(
     if x == 0 or y == 0 or x + w == width or y + h == height:
         return None  # touches the border: partly out of view
     region = labels[y:y + h, x:x + w] == k
-    inner = c.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    inner = c.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8),
+                    borderType=c.BORDER_CONSTANT, borderValue=0).astype(bool)
     if not inner.any():
         inner = region
     vs, us = np.nonzero(region)

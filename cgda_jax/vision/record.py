@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from cgda_jax.data import Demonstration, save_csv
-from cgda_jax.sim._mujoco_env import make_renderer
+from cgda_jax.sim import make_renderer
 from cgda_jax.vision.camera import Intrinsics, save_intrinsics
 from cgda_jax.vision.cv import cv2
 from cgda_jax.vision.scene import MARKER_HALF, SCENE_XML, Path, scripted_path
@@ -46,6 +46,7 @@ TRUTH_FEATURES = (
     "saturation_0_255", "value_0_255", "angle_deg", "visible",
 )
 _CAMERA = "rgbd"
+_PNG = (16, 9)  # cv2.IMWRITE_PNG_COMPRESSION, 9: the smallest files
 
 
 def camera_intrinsics(model: mujoco.MjModel, width: int, height: int) -> Intrinsics:
@@ -184,9 +185,10 @@ def render_recording(
                     (seg[..., 0] == marker_geom) & (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM)
                 )))
             name = f"frame_{k:04d}.png"
-            cv2().imwrite(str(folder / "rgb" / name), rgb[..., ::-1])
+            cv2().imwrite(str(folder / "rgb" / name), rgb[..., ::-1], _PNG)
             mm = np.round(np.nan_to_num(depth, nan=0.0) * 1000.0)
-            cv2().imwrite(str(folder / "depth" / name), np.clip(mm, 0, 65535).astype(np.uint16))
+            cv2().imwrite(str(folder / "depth" / name),
+                          np.clip(mm, 0, 65535).astype(np.uint16), _PNG)
             rows.append(_truth(model, data, cam, bool(np.isnan(path.cover_xy[k]).any())))
     finally:
         for r in renderers:

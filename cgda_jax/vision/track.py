@@ -106,10 +106,11 @@ def _depth_files(depth_dir) -> list[pathlib.Path]:
     return list_frames(folder, DEPTH_SUFFIXES)
 
 
-def _count_error(depth_dir, n_depth: int, n_video: str, video) -> ValueError:
+def _count_error(depth_dir, n_depth: int, n_video: int | None, video) -> ValueError:
+    video_frames = f"the {n_video} frames" if n_video else "more frames"
     return ValueError(
-        f"{pathlib.Path(depth_dir).expanduser()}: {n_depth} depth frames for the "
-        f"{n_video} frames of {video}"
+        f"{pathlib.Path(depth_dir).expanduser()}: {n_depth} depth frames for "
+        f"{video_frames} of {video}; give one depth frame per video frame"
     )
 
 
@@ -208,12 +209,15 @@ def track_video(
                     f"intrinsics are for {intrinsics.width}x{intrinsics.height}"
                 )
             if picked:
-                color, _ = auto_color(bgr, min_area=min_area)
+                try:
+                    color, _ = auto_color(bgr, min_area=min_area)
+                except ValueError as err:
+                    raise ValueError(f"{video}: {err}") from None
             first_color = color
         z = None
         if depth_files is not None:
             if k >= len(depth_files):
-                raise _count_error(depth, len(depth_files), "more", video)
+                raise _count_error(depth, len(depth_files), None, video)
             z = read_depth(depth_files[k], intrinsics.depth_scale)
             if z.shape != bgr.shape[:2]:
                 raise ValueError(
@@ -237,7 +241,7 @@ def track_video(
     names = features_for(depth is not None)
     found = np.asarray(found, bool)
     if depth_files is not None and len(depth_files) != len(found):
-        raise _count_error(depth, len(depth_files), str(len(found)), video)
+        raise _count_error(depth, len(depth_files), len(found), video)
     if not found.any():
         raise ValueError(f"{video}: the object ({first_color}) is not found in any frame")
     if found.sum() < 2:
