@@ -27,7 +27,8 @@ import numpy as np
 from cgda_jax.vision.camera import Intrinsics
 from cgda_jax.vision.cv import cv2
 
-__all__ = ["Blob", "ColorRange", "auto_color", "hsv_image", "in_range", "measure"]
+__all__ = ["Blob", "ColorRange", "auto_color", "find", "hsv_image", "in_range",
+           "measure", "measure_near"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,6 +199,54 @@ def measure(
     xyz = tuple(float(q) for q in intrinsics.deproject(u, v, z))
     a_m2 = _area_m2(us, vs, z_region[region], intrinsics)
     return dataclasses.replace(blob, xyz=xyz, area_m2=a_m2)
+
+
+def measure_near(
+    bgr: np.ndarray,
+    rng: ColorRange,
+    bbox: tuple[int, int, int, int],
+    *,
+    depth: np.ndarray | None = None,
+    intrinsics: Intrinsics | None = None,
+    min_area: int = 30,
+    margin: int = 40,
+) -> Blob | None:
+    """`measure` inside a window around ``bbox`` (x, y, w, h; the object's box in
+    the previous frame) grown by ``margin`` pixels and the box's own size on each
+    side: the same measurements, about 10x less work. None where the window holds
+    no region of ``min_area`` pixels or the region reaches the window's edge (the
+    caller then measures the whole frame)."""
+    x, y, w, h = bbox
+    grow = margin + max(w, h)
+    height, width = bgr.shape[:2]
+    x0, y0 = max(0, x - grow), max(0, y - grow)
+    x1, y1 = min(width, x + w + grow), min(height, y + h + grow)
+    cam = intrinsics
+    if cam is not None:
+        cam = dataclasses.replace(cam, width=x1 - x0, height=y1 - y0,
+                                  cx=cam.cx - x0, cy=cam.cy - y0)
+    blob = measure(bgr[y0:y1, x0:x1], rng, min_area=min_area, intrinsics=cam,
+                   depth=None if depth is None else depth[y0:y1, x0:x1])
+    if blob is None:
+        return None
+    bx, by, bw, bh = blob.bbox
+    return dataclasses.replace(blob, u=blob.u + x0, v=blob.v + y0,
+                               bbox=(bx + x0, by + y0, bw, bh))
+
+
+def find(
+    bgr: np.ndarray,
+    rng: ColorRange,
+    last_bbox: tuple[int, int, int, int] | None = None,
+    **kw,
+) -> Blob | None:
+    """The tracker's step: `measure_near` the last box when there is one, else (or
+    where that finds nothing whole) `measure` the whole frame. ``kw``: as `measure`."""
+    if last_bbox is not None and last_bbox[0] >= 0:
+        blob = measure_near(bgr, rng, last_bbox, **kw)
+        if blob is not None:
+            return blob
+    return measure(bgr, rng, **kw)
 
 
 def auto_color(

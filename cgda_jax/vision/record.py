@@ -46,7 +46,6 @@ TRUTH_FEATURES = (
     "saturation_0_255", "value_0_255", "angle_deg", "visible",
 )
 _CAMERA = "rgbd"
-_PNG = (16, 9)  # cv2.IMWRITE_PNG_COMPRESSION, 9: the smallest files
 
 
 def camera_intrinsics(model: mujoco.MjModel, width: int, height: int) -> Intrinsics:
@@ -132,6 +131,7 @@ def render_recording(
     occlude: bool = False,
     max_frames: int | None = None,
     segmentation: bool = False,
+    png_compression: int = 9,
 ) -> Demonstration:
     """Render one scripted repetition of ``action`` into a recording folder.
 
@@ -145,6 +145,7 @@ def render_recording(
         max_frames: keep only the first ``max_frames`` frames.
         segmentation: also write ``segment.npy``, (T,) the count of pixels MuJoCo's
             segmentation image gives the marker in each frame.
+        png_compression: zlib level of the PNG files, 0-9 (9: smallest, slowest).
 
     Returns:
         The ground truth as a `Demonstration` (also written to ``truth.csv``).
@@ -165,6 +166,7 @@ def render_recording(
         (folder / sub).mkdir(parents=True, exist_ok=True)
         for old in (folder / sub).glob("frame_*.png"):
             old.unlink()
+    png = (cv2().IMWRITE_PNG_COMPRESSION, int(png_compression))
     renderers = [make_renderer(model, height, width) for _ in range(2 + segmentation)]
     renderers[1].enable_depth_rendering()
     if segmentation:
@@ -185,10 +187,10 @@ def render_recording(
                     (seg[..., 0] == marker_geom) & (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM)
                 )))
             name = f"frame_{k:04d}.png"
-            cv2().imwrite(str(folder / "rgb" / name), rgb[..., ::-1], _PNG)
+            cv2().imwrite(str(folder / "rgb" / name), rgb[..., ::-1], png)
             mm = np.round(np.nan_to_num(depth, nan=0.0) * 1000.0)
             cv2().imwrite(str(folder / "depth" / name),
-                          np.clip(mm, 0, 65535).astype(np.uint16), _PNG)
+                          np.clip(mm, 0, 65535).astype(np.uint16), png)
             rows.append(_truth(model, data, cam, bool(np.isnan(path.cover_xy[k]).any())))
     finally:
         for r in renderers:

@@ -1,6 +1,8 @@
 """Track one coloured object through a recording and emit a `Demonstration`.
 
-Per frame `cgda_jax.vision.blob.measure` finds the object (or says it is lost).
+Per frame `cgda_jax.vision.blob.measure` finds the object (or says it is lost):
+first in a window around its box in the previous frame (`measure_near`), then, where
+it is not found whole there, in the whole frame.
 The colour range is given, or picked automatically from the first frame's most
 saturated region (`auto_color`; `Track.color` says which range was used). With
 ``follow_color`` (the default for an automatic pick) the hue window re-centres on
@@ -34,7 +36,7 @@ import pathlib
 import numpy as np
 
 from cgda_jax.data import Demonstration
-from cgda_jax.vision.blob import Blob, ColorRange, auto_color, hsv_image, measure
+from cgda_jax.vision.blob import Blob, ColorRange, auto_color, find
 from cgda_jax.vision.camera import Intrinsics, load_intrinsics
 from cgda_jax.vision.frames import DEPTH_SUFFIXES, iter_frames, list_frames, read_depth
 
@@ -224,8 +226,8 @@ def track_video(
                     f"{depth_files[k]}: depth frame is {z.shape[1]}x{z.shape[0]}, the "
                     f"video {video} is {bgr.shape[1]}x{bgr.shape[0]}"
                 )
-        blob = measure(bgr, color, depth=z, intrinsics=intrinsics, min_area=min_area,
-                       hsv=hsv_image(bgr))
+        blob = find(bgr, color, boxes[-1] if boxes else None, depth=z,
+                    intrinsics=intrinsics, min_area=min_area)
         if blob is not None and areas and blob.area_px < min_area_ratio * np.median(
             areas[-15:]
         ):
