@@ -262,3 +262,19 @@ def test_import_without_opencv_names_the_extra():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=120).stdout
     assert "ERR" in out and "cgda_jax[vision]" in out
+
+
+def test_a_colour_jump_is_followed(tmp_path):
+    """From frame 10 on the marker's hue is 25 higher (a jump the +/- 10 window
+    cannot follow): the automatic pick takes it up again near its last box."""
+    rec = _copy(tmp_path, "move")
+    for f in sorted((rec / "rgb").glob("*.png"))[10:]:
+        hsv = cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2HSV)
+        marker = (hsv[..., 0] >= 50) & (hsv[..., 0] <= 70) & (hsv[..., 1] >= 100)
+        hsv[..., 0][marker] += 25
+        cv2.imwrite(str(f), cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR))
+    track = track_video(rec / "rgb")
+    assert track.found.all()
+    hue = _column(track.demo, "hue_0_180")
+    assert np.abs(hue[:10] - 60).max() < 2 and np.abs(hue[10:] - 85).max() < 2
+    assert not track_video(rec / "rgb", follow_color=False, color="50-70").found[10:].any()

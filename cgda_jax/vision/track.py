@@ -7,7 +7,9 @@ The colour range is given, or picked automatically from the first frame's most
 saturated region (`auto_color`; `Track.color` says which range was used). With
 ``follow_color`` (the default for an automatic pick) the hue window re-centres on
 the object's measured colour after every frame, so an object whose colour changes
-gradually (PAINT) stays tracked.
+(PAINT) stays tracked; where the colour jumps out of the window between two frames,
+the most saturated region near the last box is picked again, if its area is close to
+the object's recent one (within ``min_area_ratio``).
 
 Lost frames, the stated rule:
 
@@ -116,6 +118,26 @@ def _count_error(depth_dir, n_depth: int, n_video: int | None, video) -> ValueEr
     )
 
 
+def _reacquire(bgr, box, recent, ratio, color, kw):
+    """Following a colour that jumped out of its window: the most saturated region
+    in the window around the last box (`auto_color` there), taken when its area is
+    within ``ratio`` .. 1 / ``ratio`` of the recent median. (new range, blob) or None."""
+    x, y, w, h = box
+    grow = 40 + max(w, h) // 2
+    height, width = bgr.shape[:2]
+    x0, y0 = max(0, x - grow), max(0, y - grow)
+    x1, y1 = min(width, x + w + grow), min(height, y + h + grow)
+    try:
+        rng, _ = auto_color(bgr[y0:y1, x0:x1], min_area=kw["min_area"],
+                            hue_tol=0.5 * ((color.hue_hi - color.hue_lo) % 180))
+    except ValueError:
+        return None
+    blob = find(bgr, rng, box, **kw)
+    if blob is None or (recent and not ratio * recent <= blob.area_px <= recent / ratio):
+        return None
+    return rng, blob
+
+
 def _fill_gaps(rows: np.ndarray, found: np.ndarray, names, max_gap: int, where: str):
     """Cut lost ends, interpolate short inner gaps; (first, last, filled rows, mask)."""
     idx = np.flatnonzero(found)
@@ -200,6 +222,7 @@ def track_video(
         raise ValueError(f"{video}: fps must be positive, got {fps}")
     depth_files = _depth_files(depth) if depth is not None else None
     rows, found, boxes, areas = [], [], [], []
+    last_box = None
     first_color = None
     for k, bgr in enumerate(iter_frames(video)):
         if k == 0:
@@ -226,16 +249,20 @@ def track_video(
                     f"{depth_files[k]}: depth frame is {z.shape[1]}x{z.shape[0]}, the "
                     f"video {video} is {bgr.shape[1]}x{bgr.shape[0]}"
                 )
-        blob = find(bgr, color, boxes[-1] if boxes else None, depth=z,
-                    intrinsics=intrinsics, min_area=min_area)
-        if blob is not None and areas and blob.area_px < min_area_ratio * np.median(
-            areas[-15:]
-        ):
+        kw = {"depth": z, "intrinsics": intrinsics, "min_area": min_area}
+        blob = find(bgr, color, last_box, **kw)
+        recent = float(np.median(areas[-15:])) if areas else None
+        if blob is None and follow and last_box is not None:
+            again = _reacquire(bgr, last_box, recent, min_area_ratio, color, kw)
+            if again is not None:
+                color, blob = again
+        if blob is not None and recent and blob.area_px < min_area_ratio * recent:
             blob = None  # partly occluded
         found.append(blob is not None)
         boxes.append(blob.bbox if blob is not None else (-1, -1, -1, -1))
         rows.append(_row(blob, depth is not None) if blob is not None else None)
         if blob is not None:
+            last_box = blob.bbox
             areas.append(blob.area_px)
             if follow:
                 color = color.around(blob.hue, blob.saturation, blob.value,
