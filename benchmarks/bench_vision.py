@@ -25,6 +25,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import pathlib
 import statistics
@@ -163,11 +164,64 @@ def recognition(demos_dir: pathlib.Path, reps: int) -> dict:
     return out
 
 
+#: camera axes in TEO's waist frame: x right -> -y, y down -> -z, z ahead -> +x
+_CAM_TO_WAIST = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def clean_on_teo(folders, demos_dir: pathlib.Path) -> dict:
+    import math
+
+    from cgda_jax.datasets.synthetic import CLEAN_CENTRE_M, clean_circle_demos
+    from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
+    from cgda_jax.strategies.ie import run_ie
+    from cgda_jax.vision.camera import load_intrinsics, save_intrinsics
+
+    clean = [f for f in folders if f.name.startswith("CLEAN-")][:6]
+    cam_pts = np.concatenate([load_csv(demos_dir / f"{f.name}.csv",
+                                       columns=("X_m", "Y_m", "Z_m")).features
+                              for f in clean])
+    centre_cam = 0.5 * (cam_pts.min(0) + cam_pts.max(0))
+    pose = np.eye(4)
+    pose[:3, :3] = _CAM_TO_WAIST
+    pose[:3, 3] = np.asarray(CLEAN_CENTRE_M) - _CAM_TO_WAIST @ centre_cam
+    cam = load_intrinsics(clean[0] / "intrinsics.json")
+    intr = OUT / "vision_clean_camera.json"
+    save_intrinsics(dataclasses.replace(cam, camera_to_world=pose.tolist()), intr)
+    out_dir = OUT / "vision_clean_teo"
+    assert cgda(["track", *map(str, clean), "--intrinsics", str(intr), "--out",
+                 str(out_dir), "--quiet"]) == 0
+    tracked = [load_csv(out_dir / f"{f.name}.csv", columns=("X_m", "Y_m", "Z_m"))
+               for f in clean]
+    robot = Robot.from_mjcf(model_path("teo.xml"),
+                            ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"],
+                            "marker", fixed={"r_forearm_rotation": math.radians(45)})
+    sim = Simulator(robot, MarkerScene())
+    out = {}
+    for label, demos in (("tracked video", tracked),
+                         ("synthetic clean_circle_demos", clean_circle_demos())):
+        goal = np.asarray(generalize(demos, 1.0).knots, np.float32)
+        t0 = time.perf_counter()
+        res = run_ie(sim, goal, population_size=32, tolerance=0.02,
+                     max_generations=200, seed=0)
+        wall = time.perf_counter() - t0
+        err = np.asarray(res.point_errors)
+        out[label] = {"points": len(goal), "success": bool(res.success),
+                      "max_point_error_mm": float(1e3 * err.max()),
+                      "mean_point_error_mm": float(1e3 * err.mean()),
+                      "wall_s_incl_compile": wall,
+                      "diameter_m": float(np.ptp(goal[:, 1:], axis=0).max())}
+        print(f"CLEAN on TEO (IE), goal from {label}: {len(goal)} points, success "
+              f"{res.success}, max point error {1e3 * err.max():.1f} mm (mean "
+              f"{1e3 * err.mean():.1f}), {wall:.1f} s incl. compile")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fps", type=float, default=8.0)
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--rerender", action="store_true")
+    ap.add_argument("--no-teo", action="store_true", help="skip CLEAN on TEO")
     args = ap.parse_args()
     t0 = time.perf_counter()
     folders = render_all(args.reps, args.fps, args.rerender)
@@ -210,9 +264,11 @@ def main() -> None:
     print(f"PNG decoding apart: rgb {1e3 * speed['decode_png_rgb_s']:.2f} ms, depth "
           f"{1e3 * speed['decode_png_depth_s']:.2f} ms per frame")
     rec = recognition(demos_dir, args.reps)
+    teo = None if args.no_teo else clean_on_teo(folders, demos_dir)
     write_json("vision", {"fps": args.fps, "reps": args.reps, "frames": n_frames,
                           "render_s": render_s, "track_s": track_s,
-                          "errors": rows, "throughput": speed, "recognition": rec})
+                          "errors": rows, "throughput": speed, "recognition": rec,
+                          "clean_on_teo": teo})
 
 
 if __name__ == "__main__":

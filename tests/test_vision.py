@@ -238,6 +238,24 @@ def test_cgda_track_csv_equals_python(tmp_path):
         assert sheet is not None and sheet.shape[1] > 1000
 
 
+def test_cgda_track_intrinsics_replace_a_recording_s_own(tmp_path):
+    """--intrinsics with a camera_to_world pose (camera 0.878 m above the face,
+    looking down) gives X, Y, Z in that frame: the marker's face at z = 0."""
+    import json
+
+    from cgda_jax.cli import main
+
+    raw = json.loads((DATA / "move" / "intrinsics.json").read_text())
+    raw["camera_to_world"] = [[1, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 0.878],
+                              [0, 0, 0, 1]]
+    (tmp_path / "cam.json").write_text(json.dumps(raw))
+    assert main(["track", str(DATA / "move"), "--intrinsics", str(tmp_path / "cam.json"),
+                 "--out", str(tmp_path / "o"), "--quiet", "--no-sheet"]) == 0
+    z = _column(load_csv(tmp_path / "o" / "move.csv"), "Z_m")
+    np.testing.assert_allclose(z, 0.0, atol=0.002)
+    assert not (tmp_path / "o" / "move_sheet.png").exists()
+
+
 def test_cgda_track_bad_input_is_one_line(tmp_path, capsys):
     from cgda_jax.cli import main
 

@@ -46,7 +46,8 @@ def add_track_parser(sub, fmt) -> None:
                    help="folder of depth frames aligned with the video (16-bit PNG "
                    "or .npy); once per VIDEO, in order")
     p.add_argument("--intrinsics", metavar="FILE",
-                   help="camera intrinsics JSON (needed with --depth)")
+                   help="camera intrinsics JSON (needed with --depth; replaces a "
+                   "recording folder's own, e.g. to add a camera_to_world pose)")
     p.add_argument("--color", default="auto", metavar="RANGE",
                    help="HLO-HHI[,SMIN,VMIN] in OpenCV HSV, or auto (default)")
     p.add_argument("--fps", type=float,
@@ -70,7 +71,7 @@ def _recording(path: pathlib.Path, args) -> dict:
         intr = path / "intrinsics.json"
         return {"video": path / "rgb", "name": path.name,
                 "depth": depth if depth.is_dir() and not args.no_depth else None,
-                "intrinsics": intr if intr.is_file() else args.intrinsics,
+                "intrinsics": args.intrinsics or (intr if intr.is_file() else None),
                 "fps": args.fps or fps}
     name = path.stem if path.is_file() else path.name
     return {"video": path, "name": name, "depth": None, "intrinsics": args.intrinsics,
