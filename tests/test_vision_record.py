@@ -27,8 +27,9 @@ from cgda_jax.vision.record import render_recording
 from cgda_jax.vision.frames import read_depth
 import pathlib
 out = pathlib.Path(sys.argv[1])
-occ = render_recording(out / "occ", "MOVE", 7, fps=4, occlude=True, segmentation=True)
-mov = render_recording(out / "move", "MOVE", 1, fps=4, max_frames=3)
+occ = render_recording(out / "occ", "MOVE", 7, fps=3, occlude=True, segmentation=True,
+                       png_compression=1)
+mov = render_recording(out / "move", "MOVE", 1, fps=4, max_frames=3, png_compression=1)
 f = occ.feature_names
 u, v = occ.features[:, f.index("u_px")], occ.features[:, f.index("v_px")]
 z = [read_depth(out / "occ/depth" / f"frame_{k:04d}.png", 1e-3)[int(round(v[k])),
