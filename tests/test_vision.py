@@ -125,6 +125,8 @@ def test_lost_frames_interpolated_cut_or_refused(tmp_path):
     assert track.first == 2 and track.last == truth.n_samples - 1
     np.testing.assert_array_equal(np.flatnonzero(~track.found), [0, 1, 10, 11, 12])
     np.testing.assert_array_equal(np.flatnonzero(track.interpolated), [10, 11, 12])
+    assert track.summary().endswith("kept frames 2-22, interpolated 3 lost frame(s), "
+                                    "cut 2 lost frame(s) at the ends")
     got = track.demo
     assert got.n_samples == truth.n_samples - 2 and np.isfinite(got.features).all()
     u = _column(truth, "u_px")

@@ -85,13 +85,14 @@ class Track:
     bboxes: np.ndarray
 
     def summary(self) -> str:
-        lost = np.flatnonzero(~self.found)
+        """One line: frames, colour range, frames kept, interpolated and cut."""
         text = (f"{self.n_frames} frames, object {'picked' if self.picked else 'range'} "
                 f"{self.color}; kept frames {self.first}-{self.last}")
         if self.interpolated.any():
             text += f", interpolated {int(self.interpolated.sum())} lost frame(s)"
-        if len(lost) and not self.interpolated.any():
-            text += f", cut {len(lost)} lost frame(s) at the ends"
+        cut = self.first + (self.n_frames - 1 - self.last)
+        if cut:
+            text += f", cut {cut} lost frame(s) at the ends"
         return text
 
 
