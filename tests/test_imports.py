@@ -259,7 +259,8 @@ def test_no_import_loop():
 ORDER = {
     "experiment": ("sections", "config", "demo", "rules", "build", "validate", "compute",
                    "results", "report", "load", "export", "figures", "run", "trials"),
-    "cli": ("output", "list", "plot", "export", "trials", "run", "demo", "app", "__main__"),
+    "cli": ("output", "list", "plot", "export", "track", "trials", "run", "demo", "app",
+            "__main__"),
 }
 
 

@@ -21,6 +21,7 @@ from cgda_jax.cli.output import (
 )
 from cgda_jax.cli.plot import add_plot_parser, cmd_plot
 from cgda_jax.cli.run import RUN_EXAMPLES, cmd_run
+from cgda_jax.cli.track import add_track_parser, cmd_track
 from cgda_jax.cli.trials import add_trials_arguments, job_member, join_job
 
 
@@ -39,7 +40,8 @@ def _parser() -> argparse.ArgumentParser:
         "`cgda run --help` lists the options.",
     )
     p.add_argument("--version", action="version", version=f"cgda {_version()}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="{run,demo,list,plot,export}")
+    sub = p.add_subparsers(dest="command", required=True,
+                           metavar="{run,demo,list,plot,export,track}")
     fmt = argparse.RawDescriptionHelpFormatter
     run = sub.add_parser("run", help="run one experiment: a built-in one by name "
                          "(`cgda list`) or a config file (TOML)",
@@ -79,6 +81,7 @@ def _parser() -> argparse.ArgumentParser:
                    "`cgda run NAME --dry-run` prints its config.")
     add_plot_parser(sub, fmt)
     add_export_parser(sub, fmt)
+    add_track_parser(sub, fmt)
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -95,6 +98,8 @@ def _dispatch(args, signals: Signals) -> int:
     try:
         if args.command == "list":
             return cmd_list(args)
+        if args.command == "track":  # no JAX: no job, no compilation cache
+            return cmd_track(args)
         join_job(args)  # a multi-process --trials job: before any JAX work
         if not args.no_cache:
             enable_compilation_cache()

@@ -19,6 +19,7 @@ from cgda_jax.experiment.rules import (
     resolve_data_dir,
     resolve_model,
     validate_world,
+    video_folders,
 )
 
 
@@ -59,6 +60,45 @@ def synthetic_demos(cfg: ExperimentConfig) -> dict:
     if d.features == "spatial":
         demos = {a: select_features(v, SPATIAL_FEATURES) for a, v in demos.items()}
     return demos
+
+
+def video_demos(cfg: ExperimentConfig) -> dict:
+    """The tracked demonstrations of a ``data.source = "video"`` recognition run:
+    action -> repetitions (`cgda_jax.experiment.rules.video_folders`), each tracked
+    as ``cgda track`` tracks it (a recording folder's depth and intrinsics used)."""
+    import json
+    import pathlib
+
+    from cgda_jax.vision.track import track_video
+
+    d = cfg.data
+    columns = {"marker": ("X_m", "Y_m", "Z_m", "area_px", "hue_0_180",
+                          "saturation_0_255", "value_0_255", "angle_deg"),
+               "spatial": ("X_m", "Y_m", "Z_m")}.get(d.features)
+    out = {}
+    for action, videos in video_folders(cfg).items():
+        out[action] = []
+        for v in videos:
+            kw: dict[str, Any] = {"color": d.color, "name": f"{action}/{v.name}"}
+            if (v / "rgb").is_dir():
+                meta = v / "recording.json"
+                if meta.is_file():
+                    kw["fps"] = json.loads(meta.read_text()).get("fps")
+                if d.features != "image" and (v / "depth").is_dir():
+                    kw["depth"], kw["intrinsics"] = v / "depth", v / "intrinsics.json"
+                v = pathlib.Path(v) / "rgb"
+            try:
+                demo = track_video(v, **kw).demo
+                out[action].append(demo.select(columns) if columns else demo)
+            except (ValueError, KeyError) as err:
+                raise ConfigError(f"key 'data.data_dir': {err}") from None
+    return out
+
+
+def recognition_demos(cfg: ExperimentConfig) -> dict:
+    """A recognition run's demonstrations, action -> repetitions: synthetic or
+    tracked from video."""
+    return video_demos(cfg) if cfg.data.source == "video" else synthetic_demos(cfg)
 
 
 def scene_feature_names(cfg: ExperimentConfig) -> list[str]:

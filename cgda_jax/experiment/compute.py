@@ -20,7 +20,7 @@ from cgda_jax.experiment.build import (
     default_waypoint_s,
     error_unit,
     feature_labels,
-    synthetic_demos,
+    recognition_demos,
 )
 from cgda_jax.experiment.config import ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import strategy_function
@@ -38,7 +38,7 @@ def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
 
     d, r = cfg.data, cfg.recognition
     t0 = time.perf_counter()
-    demos = synthetic_demos(cfg)
+    demos = recognition_demos(cfg)
     library = ActionLibrary.from_demonstrations(
         {a: v[: d.n_train] for a, v in demos.items()}, d.interval_s, d.method
     )

@@ -68,6 +68,39 @@ def resolve_data_dir(cfg: ExperimentConfig) -> pathlib.Path:
     return p
 
 
+def video_folders(cfg: ExperimentConfig) -> dict[str, list[pathlib.Path]]:
+    """``data.source = "video"``: action name -> its recordings (the entries of
+    ``data.data_dir/<action>/``, in name order); each action needs more than
+    ``data.n_train`` of them (the first ``n_train`` generalize, the rest are tests)."""
+    d = cfg.data
+    if not d.data_dir:
+        raise ConfigError("key 'data.data_dir' is empty: point it at a folder with one "
+                          "folder of recordings (videos) per action")
+    root = pathlib.Path(d.data_dir).expanduser()
+    if not root.is_dir():
+        raise FileNotFoundError(f"video folder not found: {root} (key 'data.data_dir')")
+    actions = sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+    if len(actions) < 2:
+        raise ConfigError(f"key 'data.data_dir': {root} holds {len(actions)} action "
+                          "folder(s); recognition needs at least 2")
+    out = {}
+    for a in actions:
+        videos = sorted(p for p in a.iterdir() if not p.name.startswith("."))
+        if not 1 <= d.n_train < len(videos):
+            raise ConfigError(
+                f"key 'data.n_train' = {d.n_train}: {a} holds {len(videos)} "
+                "recording(s); need 1 <= n_train < that (the rest are the tests)")
+        out[a.name] = videos
+    if d.color != "auto":
+        from cgda_jax.vision.blob import ColorRange
+
+        try:
+            ColorRange.parse(d.color)
+        except ValueError as err:
+            raise ConfigError(f"key 'data.color': {err}") from None
+    return out
+
+
 def validate_config(cfg: ExperimentConfig) -> None:
     """Check values and that the files and folders named by ``cfg`` exist.
 
@@ -80,13 +113,20 @@ def validate_config(cfg: ExperimentConfig) -> None:
     if not cfg.data.interval_s > 0:
         raise ConfigError(f"key 'data.interval_s' must be > 0, got {cfg.data.interval_s}")
     if cfg.kind == "recognition":
-        if cfg.data.source != "synthetic":
-            raise ConfigError("key 'data.source': recognition runs on 'synthetic' data")
-        _choice(cfg.data.features, ("marker", "spatial", "arm"), "data.features")
+        if cfg.data.source not in ("synthetic", "video"):
+            raise ConfigError("key 'data.source': recognition runs on 'synthetic' or "
+                              "'video' data")
+        if cfg.data.source == "video":
+            _choice(cfg.data.features, ("marker", "spatial", "image"), "data.features")
+            video_folders(cfg)
+        else:
+            _choice(cfg.data.features, ("marker", "spatial", "arm"), "data.features")
         _choice(cfg.recognition.metric, ("dtw", "dtw_multi", "euclidean"),
                 "recognition.metric")
         _choice(cfg.recognition.query, ("reduced", "raw"), "recognition.query")
-        if not 1 <= cfg.data.n_train < cfg.data.n_repetitions:
+        if cfg.data.source == "synthetic" and not (
+            1 <= cfg.data.n_train < cfg.data.n_repetitions
+        ):
             raise ConfigError(
                 f"keys 'data.n_train'={cfg.data.n_train} and 'data.n_repetitions'="
                 f"{cfg.data.n_repetitions}: need 1 <= n_train < n_repetitions"

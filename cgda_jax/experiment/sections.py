@@ -20,9 +20,15 @@ class DataConfig:
             ``goal_points`` steps), "xgnitive" (real TEO demonstrations),
             "move_box" (a box pushed along a table: x, y, yaw) or "rotate_valve"
             (a valve's angle); for the last two the goal keeps the demonstration
-            columns the ``objects`` scene reads (`cgda_jax.datasets.objects`).
+            columns the ``objects`` scene reads (`cgda_jax.datasets.objects`);
+            "video" (recognition from a camera: ``data_dir`` holds one folder per
+            action, each with that action's recordings in name order, tracked
+            with `cgda_jax.vision` as ``cgda track`` does).
         features: synthetic: "marker" (8 object features), "spatial" (X, Y, Z) or
-            "arm" (12 arm-point coordinates).
+            "arm" (12 arm-point coordinates); video: "marker" (X_m, Y_m, Z_m,
+            area_px, hue, saturation, value, angle_deg; needs depth), "spatial"
+            (X_m, Y_m, Z_m) or "image" (the features without depth).
+        color: video: the object's colour range (``"HLO-HHI,SMIN,VMIN"``) or "auto".
         n_repetitions, n_train: synthetic: repetitions per action; the first
             ``n_train`` generalize, the rest are test queries.
         seed: seed of the synthetic demonstrations.
@@ -30,7 +36,8 @@ class DataConfig:
             "xgnitive").
         centre, diameter, n_demos: clean circle (metres, waist frame).
         goal_points: paint ramp length.
-        data_dir: xgnitive data folder (default: $CGDA_XGNITIVE_DIR).
+        data_dir: xgnitive data folder (default: $CGDA_XGNITIVE_DIR); video: the
+            folder of action folders.
         action, stream, columns: xgnitive action ("paint" | "iron"), stream and
             feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``).
         scale: factor applied to the goal's features (e.g. unit changes).
@@ -66,6 +73,7 @@ class DataConfig:
     curve: float = 0.0
     object: str = ""
     duration_s: float = 0.0
+    color: str = "auto"
 
 
 @dataclasses.dataclass

@@ -149,6 +149,10 @@ def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
     from cgda_jax.experiment.build import synthetic_demos
 
     d = cfg.data
+    if d.source == "video":  # the folders were checked; tracking is the run's
+        from cgda_jax.experiment.rules import video_folders
+
+        return {"actions": len(video_folders(cfg))}
     demos = synthetic_demos(cfg)
     for reps in demos.values():
         check_interval_count(reps[: d.n_train], d.interval_s, d.method)

@@ -4,7 +4,8 @@
 # needs it, and the public names below are imported on first access.  The offscreen
 # OpenGL back-end is chosen when rendering (`cgda_jax.sim._mujoco_env.make_renderer`);
 # `headless_backends` (those a headless machine can use) and `last_backend` (the one
-# a render used) are public here for the experiment layer and the CLI.
+# a render used) are public here for the experiment layer and the CLI, and
+# `make_renderer` for renders of other scenes (`cgda_jax.vision.record`).
 import importlib as _importlib
 
 _LAZY = {
@@ -26,6 +27,7 @@ _LAZY = {
     "ObjectScene": "cgda_jax.sim.scenes",
     "headless_backends": "cgda_jax.sim._mujoco_env",
     "last_backend": "cgda_jax.sim._mujoco_env",
+    "make_renderer": "cgda_jax.sim._mujoco_env",
 }
 
 __all__ = [
@@ -45,6 +47,7 @@ __all__ = [
     "headless_backends",
     "last_backend",
     "list_pieces",
+    "make_renderer",
     "model_path",
     "render_trajectory",
 ]
