@@ -9,9 +9,13 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
   paper's strategies, without the restarts, stagnation stops, backtracks and sampled
   FTE start the defaults add); the speed ratio is the peer's time over this one's;
 - peer: that search written with pycma's ask/tell and MuJoCo's C
-  ``mj_kinematics``, one candidate at a time (benchmarks/peers.py: same gene space,
-  start, step size, population size, fitness, stopping rule and success test;
-  pycma's own termination criteria off);
+  ``mj_kinematics``, one candidate at a time (benchmarks/peer_strategies.py: same
+  gene space, start, step size, population size, fitness, stopping rule and success
+  test; pycma's own termination criteria off); with the experiment's feasibility on
+  (the default) the peer judges every move as ours does, with MuJoCo C
+  (``mj_geomDistance`` on the same pairs and samples, the same limits, penalty,
+  least-motion rule and, for IE, the same sequential evolution;
+  benchmarks/peer_feasibility.py); the table's ``feasibility`` column says which;
 - IET time per point: ours measured with one generation per chunk (a host sync per
   generation, so a little slower than the real run), the peer's per point;
   "flat" = mean of the last 3 points within 1.5x of the first 3;
@@ -38,6 +42,7 @@ import time
 
 import jax
 import numpy as np
+import peer_strategies
 import peers
 from _common import print_table, report_target, write_json
 
@@ -107,16 +112,26 @@ def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
 
 
 def run_peer(cfg, goal, sim) -> dict:
-    c_sim = peers.MujocoMarker.from_simulator(sim)
+    """The peer's search (`peer_strategies`), with the same feasibility checks as
+    ours (`peer_feasibility`, MuJoCo C) when the simulator has them."""
+    from peer_feasibility import FeasibleMarker
+
+    from cgda_jax.strategies.ie import STAGNATION
+
+    if sim.feasibility is not None:
+        c_sim = FeasibleMarker.from_simulator(sim)
+    else:
+        c_sim = peers.MujocoMarker.from_simulator(sim)
     s = cfg.strategy
     args = (c_sim, goal, s.population_size, s.tolerance, s.max_generations)
     t0 = time.perf_counter()
-    if s.name == "ie":
-        out = peers.pycma_ie(*args, seed=s.seed)
-    elif s.name == "iet":
-        out = peers.pycma_iet(*args, seed=s.seed)
+    if s.name == "ie":  # SAME_SEARCH: no stagnation stop
+        out = peer_strategies.pycma_ie(*args, seed=s.seed)
+    elif s.name == "iet":  # ours keeps its stagnation stop under SAME_SEARCH
+        stagnation = {**s.options, **SAME_SEARCH["iet"]}.get("stagnation", STAGNATION)
+        out = peer_strategies.pycma_iet(*args, seed=s.seed, stagnation=stagnation)
     else:
-        out = peers.pycma_fte(
+        out = peer_strategies.pycma_fte(
             *args, stagnation=s.options.get("stagnation", 10), seed=s.seed
         )
     out["time_s"] = time.perf_counter() - t0
@@ -209,6 +224,8 @@ def main() -> None:
             {
                 "experiment": name,
                 "points": goal.shape[0],
+                # the peer judges the same moves with MuJoCo C when ours does
+                "feasibility": "on (both)" if sim.feasibility is not None else "off",
                 "ours_cold_s": ours["cold_s"],
                 "ours_compile_s": ours["compile_s"],
                 "ours_steady_s": ours["steady_s"],
