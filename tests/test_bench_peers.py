@@ -12,8 +12,8 @@ import pytest
 from cgda_jax.distance import dtw
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
-import peer_strategies  # noqa: E402
-import peers  # noqa: E402
+import peer_strategies
+import peers
 
 
 def _numpy_dtw(x, y):
