@@ -89,6 +89,11 @@ SAME_SEARCH = {
 }
 
 
+#: The "as `cgda run`" columns when they are not run (``--ratio-only``).
+EMPTY = dict.fromkeys(("cold_s", "compile_s", "steady_s", "evaluations", "success",
+                       "max_point_error"), float("nan"))
+
+
 def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
     fn = ex.strategy_function(cfg.strategy.name)
     kw = {**strategy_kwargs(cfg), **settings}
@@ -203,6 +208,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--trials", type=int, default=30)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--ratio-only", action="store_true",
+                        help="only the same-search runs and the peer (no 'as cgda "
+                        "run' runs, no IET per-point timing)")
     parser.add_argument(
         "--only", nargs="*", default=["clean_ie", "clean_fte", "paint_iet", "trials"]
     )
@@ -214,7 +222,8 @@ def main() -> None:
     for name in [n for n in args.only if n != "trials"]:
         print(f"{name} ...", flush=True)
         cfg, goal, sim = setup(name, overrides)
-        ours = run_ours(cfg, goal, sim, args.repeats)  # as `cgda run` runs it
+        ours = (EMPTY if args.ratio_only  # as `cgda run` runs it
+                else run_ours(cfg, goal, sim, args.repeats))
         same = run_ours(cfg, goal, sim, args.repeats,
                         **SAME_SEARCH[cfg.strategy.name])
         peer = run_peer(cfg, goal, sim)
@@ -232,29 +241,31 @@ def main() -> None:
                 "ours_evals": ours["evaluations"],
                 "ours_ok": ours["success"],
                 "same_steady_s": same["steady_s"],
+                "same_compile_s": same["compile_s"],
                 "same_evals": same["evaluations"],
                 "same_ok": same["success"],
                 "peer_s": peer["time_s"],
                 "peer_evals": peer["evaluations"],
                 "peer_ok": peer["success"],
+                "peer_violation": peer.get("violation", ""),
                 "ratio": ratio,
                 "target": "" if target is None else f">= {target:g}x",
                 "met": "" if target is None else ratio >= target,
             }
         )
         payload[name] = {"ours": ours, "same_search": same, "peer": _plain(peer)}
-        if cfg.strategy.name == "iet":
+        if cfg.strategy.name == "iet" and not args.ratio_only:
             ours_pt = iet_point_times(cfg, goal, sim)
             payload[name]["ours_point_times_s"] = ours_pt
             payload[name]["ours_flatness"] = flatness(ours_pt)
             payload[name]["peer_flatness"] = flatness(peer["point_times_s"])
-        if cfg.strategy.name == "ie":
+        if cfg.strategy.name == "ie" and not args.ratio_only:
             payload["cold_start_s"] = ours["cold_s"]
     cols = list(rows[0]) if rows else []
     if rows:
         print_table(rows, cols)
     for name in ("paint_iet",):
-        if name in payload:
+        if name in payload and "ours_flatness" in payload[name]:
             print(
                 f"{name} time per point: ours {payload[name]['ours_flatness']}, "
                 f"peer {payload[name]['peer_flatness']}"

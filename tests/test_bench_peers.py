@@ -142,17 +142,21 @@ def _compare_moves(sim, twin, moves):
     """Our and the C twin's violation of each (q0, dq, duration, approach) and the
     pairs' distances at the moves' sample postures (asserted equal)."""
     feas = sim.feasibility
-    move = jax.jit(jax.vmap(feas.move))
     q0 = np.array([m[0] for m in moves], np.float32)
     dq = np.array([m[1] for m in moves], np.float32)
     dur = np.array([m[2] for m in moves], np.float32)
     first = np.array([m[3] if len(m) > 3 else False for m in moves])
-    ours = np.asarray(move(q0, dq, dur, first))
+    post = np.concatenate([_sample_postures(feas, a, b) for a, b in zip(q0, dq)])
+
+    @jax.jit  # one program: the moves' violations and the samples' distances
+    def ours_fn(q0, dq, dur, first, post):
+        return (jax.vmap(feas.move)(q0, dq, dur, first),
+                jax.vmap(feas.collider.distances)(post))
+
+    ours, d_ours = (np.asarray(x) for x in ours_fn(q0, dq, dur, first, post))
     theirs = np.array([twin.move(a, b, float(t), bool(f)) for a, b, t, f
                        in zip(q0.astype(float), dq.astype(float), dur, first)])
     np.testing.assert_allclose(theirs, ours, atol=VIOLATION_ATOL, rtol=1e-4)
-    post = np.concatenate([_sample_postures(feas, a, b) for a, b in zip(q0, dq)])
-    d_ours = np.asarray(jax.jit(jax.vmap(feas.collider.distances))(post))
     d_c = np.stack([twin.distances(q) for q in post.astype(float)])
     assert twin.pair_names == list(feas.collider.pair_names)
     sep = (d_ours > 0) & (d_c < 0.99)  # below mj_geomDistance's distmax (1 m)
@@ -251,10 +255,10 @@ def test_c_fitness_equals_ours_with_feasibility(teo_paint_sim):
     u = np.asarray(from_joints(jnp.asarray(postures, jnp.float32), plan.lower,
                                plan.upper))
     peer = peer_strategies.Stepper(c_sim, 3.0)
+    ours_fn = jax.jit(lambda pop, prefix: plan.point_fitness(  # IET's; IE's at 0
+        state, jnp.asarray(goal, jnp.float32), prefix)(pop))
     for prefix in (None, 4.0):
-        ours = np.asarray(jax.jit(plan.point_fitness(
-            state, jnp.asarray(goal, jnp.float32),
-            None if prefix is None else jnp.float32(prefix)))(jnp.asarray(u)))
+        ours = np.asarray(ours_fn(jnp.asarray(u), jnp.float32(prefix or 0.0)))
         theirs = np.array([peer.point_fitness(c_state, goal, prefix)(x) for x in u])
         np.testing.assert_allclose(theirs, ours, rtol=1e-4, atol=1e-4)
     assert ours[0] < 3.0 and ours[1] < 3.0 and ours[4] > 1e3 and ours[5] > 1e3
