@@ -231,6 +231,7 @@ def test_c_feasibility_equals_ours_on_teo_with_the_paint_board(teo_paint_sim):
     assert ours[0] == 0 and all(v > 0 for v in ours[1:])
 
 
+@pytest.mark.slow  # 36 s on the loaded 2-core machine: the paint step's compile
 def test_c_fitness_equals_ours_with_feasibility(teo_paint_sim):
     """IE's / IET's point fitness (least motion, penalty) from a mid-run state."""
     from peer_feasibility import FeasibleMarker
