@@ -9,9 +9,13 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
   paper's strategies, without the restarts, stagnation stops, backtracks and sampled
   FTE start the defaults add); the speed ratio is the peer's time over this one's;
 - peer: that search written with pycma's ask/tell and MuJoCo's C
-  ``mj_kinematics``, one candidate at a time (benchmarks/peers.py: same gene space,
-  start, step size, population size, fitness, stopping rule and success test;
-  pycma's own termination criteria off);
+  ``mj_kinematics``, one candidate at a time (benchmarks/peer_strategies.py: same
+  gene space, start, step size, population size, fitness, stopping rule and success
+  test; pycma's own termination criteria off); with the experiment's feasibility on
+  (the default) the peer judges every move as ours does, with MuJoCo C
+  (``mj_geomDistance`` on the same pairs and samples, the same limits, penalty,
+  least-motion rule and, for IE, the same sequential evolution;
+  benchmarks/peer_feasibility.py); the table's ``feasibility`` column says which;
 - IET time per point: ours measured with one generation per chunk (a host sync per
   generation, so a little slower than the real run), the peer's per point;
   "flat" = mean of the last 3 points within 1.5x of the first 3;
@@ -38,6 +42,7 @@ import time
 
 import jax
 import numpy as np
+import peer_strategies
 import peers
 from _common import print_table, report_target, write_json
 
@@ -84,6 +89,11 @@ SAME_SEARCH = {
 }
 
 
+#: The "as `cgda run`" columns when they are not run (``--ratio-only``).
+EMPTY = dict.fromkeys(("cold_s", "compile_s", "steady_s", "evaluations", "success",
+                       "max_point_error"), float("nan"))
+
+
 def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
     fn = ex.strategy_function(cfg.strategy.name)
     kw = {**strategy_kwargs(cfg), **settings}
@@ -107,16 +117,26 @@ def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
 
 
 def run_peer(cfg, goal, sim) -> dict:
-    c_sim = peers.MujocoMarker.from_simulator(sim)
+    """The peer's search (`peer_strategies`), with the same feasibility checks as
+    ours (`peer_feasibility`, MuJoCo C) when the simulator has them."""
+    from peer_feasibility import FeasibleMarker
+
+    from cgda_jax.strategies.ie import STAGNATION
+
+    if sim.feasibility is not None:
+        c_sim = FeasibleMarker.from_simulator(sim)
+    else:
+        c_sim = peers.MujocoMarker.from_simulator(sim)
     s = cfg.strategy
     args = (c_sim, goal, s.population_size, s.tolerance, s.max_generations)
     t0 = time.perf_counter()
-    if s.name == "ie":
-        out = peers.pycma_ie(*args, seed=s.seed)
-    elif s.name == "iet":
-        out = peers.pycma_iet(*args, seed=s.seed)
+    if s.name == "ie":  # SAME_SEARCH: no stagnation stop
+        out = peer_strategies.pycma_ie(*args, seed=s.seed)
+    elif s.name == "iet":  # ours keeps its stagnation stop under SAME_SEARCH
+        stagnation = {**s.options, **SAME_SEARCH["iet"]}.get("stagnation", STAGNATION)
+        out = peer_strategies.pycma_iet(*args, seed=s.seed, stagnation=stagnation)
     else:
-        out = peers.pycma_fte(
+        out = peer_strategies.pycma_fte(
             *args, stagnation=s.options.get("stagnation", 10), seed=s.seed
         )
     out["time_s"] = time.perf_counter() - t0
@@ -188,6 +208,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--trials", type=int, default=30)
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--ratio-only", action="store_true",
+                        help="only the same-search runs and the peer (no 'as cgda "
+                        "run' runs, no IET per-point timing)")
     parser.add_argument(
         "--only", nargs="*", default=["clean_ie", "clean_fte", "paint_iet", "trials"]
     )
@@ -199,7 +222,8 @@ def main() -> None:
     for name in [n for n in args.only if n != "trials"]:
         print(f"{name} ...", flush=True)
         cfg, goal, sim = setup(name, overrides)
-        ours = run_ours(cfg, goal, sim, args.repeats)  # as `cgda run` runs it
+        ours = (EMPTY if args.ratio_only  # as `cgda run` runs it
+                else run_ours(cfg, goal, sim, args.repeats))
         same = run_ours(cfg, goal, sim, args.repeats,
                         **SAME_SEARCH[cfg.strategy.name])
         peer = run_peer(cfg, goal, sim)
@@ -209,35 +233,39 @@ def main() -> None:
             {
                 "experiment": name,
                 "points": goal.shape[0],
+                # the peer judges the same moves with MuJoCo C when ours does
+                "feasibility": "on (both)" if sim.feasibility is not None else "off",
                 "ours_cold_s": ours["cold_s"],
                 "ours_compile_s": ours["compile_s"],
                 "ours_steady_s": ours["steady_s"],
                 "ours_evals": ours["evaluations"],
                 "ours_ok": ours["success"],
                 "same_steady_s": same["steady_s"],
+                "same_compile_s": same["compile_s"],
                 "same_evals": same["evaluations"],
                 "same_ok": same["success"],
                 "peer_s": peer["time_s"],
                 "peer_evals": peer["evaluations"],
                 "peer_ok": peer["success"],
+                "peer_violation": peer.get("violation", ""),
                 "ratio": ratio,
                 "target": "" if target is None else f">= {target:g}x",
                 "met": "" if target is None else ratio >= target,
             }
         )
         payload[name] = {"ours": ours, "same_search": same, "peer": _plain(peer)}
-        if cfg.strategy.name == "iet":
+        if cfg.strategy.name == "iet" and not args.ratio_only:
             ours_pt = iet_point_times(cfg, goal, sim)
             payload[name]["ours_point_times_s"] = ours_pt
             payload[name]["ours_flatness"] = flatness(ours_pt)
             payload[name]["peer_flatness"] = flatness(peer["point_times_s"])
-        if cfg.strategy.name == "ie":
+        if cfg.strategy.name == "ie" and not args.ratio_only:
             payload["cold_start_s"] = ours["cold_s"]
     cols = list(rows[0]) if rows else []
     if rows:
         print_table(rows, cols)
     for name in ("paint_iet",):
-        if name in payload:
+        if name in payload and "ours_flatness" in payload[name]:
             print(
                 f"{name} time per point: ours {payload[name]['ours_flatness']}, "
                 f"peer {payload[name]['peer_flatness']}"
