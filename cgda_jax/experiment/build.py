@@ -16,6 +16,7 @@ from cgda_jax.experiment.config import (
 )
 from cgda_jax.experiment.rules import (
     check_interval_count,
+    demonstration_files,
     resolve_data_dir,
     resolve_model,
     validate_world,
@@ -40,6 +41,10 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
         from cgda_jax.datasets import clean_circle_demos
 
         demos = clean_circle_demos(d.centre, d.diameter, d.n_demos, d.seed)
+    elif d.source == "csv":
+        demos = csv_demos(cfg)
+    elif d.source == "video":
+        demos = [track_recording(cfg, v, v.name) for v in demonstration_files(cfg)]
     else:
         from cgda_jax.data import load_xgnitive
 
@@ -66,6 +71,14 @@ def video_demos(cfg: ExperimentConfig) -> dict:
     """The tracked demonstrations of a ``data.source = "video"`` recognition run:
     action -> repetitions (`cgda_jax.experiment.rules.video_folders`), each tracked
     as ``cgda track`` tracks it (a recording folder's depth and intrinsics used)."""
+    return {action: [track_recording(cfg, v, f"{action}/{v.name}") for v in videos]
+            for action, videos in video_folders(cfg).items()}
+
+
+def track_recording(cfg: ExperimentConfig, v, name: str):
+    """One recording of ``data.data_dir`` tracked as ``cgda track`` tracks it (a
+    recording folder's depth, intrinsics and frame rate used), with the columns
+    ``data.features`` names ("image": every column the tracker gives)."""
     import json
     import pathlib
 
@@ -75,23 +88,34 @@ def video_demos(cfg: ExperimentConfig) -> dict:
     columns = {"marker": ("X_m", "Y_m", "Z_m", "area_px", "hue_0_180",
                           "saturation_0_255", "value_0_255", "angle_deg"),
                "spatial": ("X_m", "Y_m", "Z_m")}.get(d.features)
-    out = {}
-    for action, videos in video_folders(cfg).items():
-        out[action] = []
-        for v in videos:
-            kw: dict[str, Any] = {"color": d.color, "name": f"{action}/{v.name}"}
-            if (v / "rgb").is_dir():
-                meta = v / "recording.json"
-                if meta.is_file():
-                    kw["fps"] = json.loads(meta.read_text()).get("fps")
-                if d.features != "image" and (v / "depth").is_dir():
-                    kw["depth"], kw["intrinsics"] = v / "depth", v / "intrinsics.json"
-                v = pathlib.Path(v) / "rgb"
-            try:
-                demo = track_video(v, **kw).demo
-                out[action].append(demo.select(columns) if columns else demo)
-            except (ValueError, KeyError) as err:
-                raise ConfigError(f"key 'data.data_dir': {err}") from None
+    kw: dict[str, Any] = {"color": d.color, "name": name}
+    v = pathlib.Path(v)
+    if (v / "rgb").is_dir():
+        meta = v / "recording.json"
+        if meta.is_file():
+            kw["fps"] = json.loads(meta.read_text()).get("fps")
+        if d.features != "image" and (v / "depth").is_dir():
+            kw["depth"], kw["intrinsics"] = v / "depth", v / "intrinsics.json"
+        v = v / "rgb"
+    try:
+        demo = track_video(v, **kw).demo
+        return demo.select(columns) if columns else demo
+    except (ValueError, KeyError) as err:
+        raise ConfigError(f"key 'data.data_dir': {err}") from None
+
+
+def csv_demos(cfg: ExperimentConfig) -> list:
+    """``data.source = "csv"``: every CSV file of ``data.data_dir`` read with
+    `cgda_jax.data.load_csv`, keeping ``data.columns`` in that order."""
+    from cgda_jax.data import load_csv
+
+    out = []
+    for f in demonstration_files(cfg):
+        try:
+            out.append(load_csv(f, cfg.data.columns))
+        except KeyError as err:
+            raise ConfigError(f"key 'data.columns': {err.args[0] if err.args else err}"
+                              ) from None
     return out
 
 

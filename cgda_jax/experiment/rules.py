@@ -68,6 +68,26 @@ def resolve_data_dir(cfg: ExperimentConfig) -> pathlib.Path:
     return p
 
 
+def demonstration_files(cfg: ExperimentConfig) -> list[pathlib.Path]:
+    """An execution run's own demonstrations: ``data.source = "csv"``: the ``.csv``
+    files of ``data.data_dir`` (as ``cgda track --out`` writes them); ``"video"``:
+    its recordings (videos, frame folders, recording folders); in name order."""
+    d = cfg.data
+    what = "demonstration CSV files" if d.source == "csv" else "recordings (videos)"
+    if not d.data_dir:
+        raise ConfigError(f"key 'data.data_dir' is empty: point it at a folder of {what}")
+    root = pathlib.Path(d.data_dir).expanduser()
+    if not root.is_dir():
+        raise FileNotFoundError(f"folder not found: {root} (key 'data.data_dir')")
+    if d.source == "csv":
+        files = sorted(root.glob("*.csv"))
+    else:
+        files = sorted(p for p in root.iterdir() if not p.name.startswith("."))
+    if not files:
+        raise ConfigError(f"key 'data.data_dir': {root} holds no {what}")
+    return files
+
+
 def video_folders(cfg: ExperimentConfig) -> dict[str, list[pathlib.Path]]:
     """``data.source = "video"``: action name -> its recordings (the entries of
     ``data.data_dir/<action>/``, in name order); each action needs more than
@@ -135,10 +155,12 @@ def validate_config(cfg: ExperimentConfig) -> None:
     if cfg.data.source == "synthetic":
         raise ConfigError(
             "key 'data.source': execution needs a goal: 'clean_circle', 'paint_ramp', "
-            "'xgnitive', 'move_box' or 'rotate_valve'"
+            "'xgnitive', 'move_box', 'rotate_valve', 'csv' or 'video'"
         )
     if cfg.data.source == "xgnitive":
         resolve_data_dir(cfg)
+    if cfg.data.source in ("csv", "video"):
+        demonstration_files(cfg)
     _choice(cfg.scene.kind, SCENES, "scene.kind")
     _validate_objects(cfg)
     _choice(cfg.strategy.name, STRATEGIES, "strategy.name")

@@ -23,7 +23,10 @@ class DataConfig:
             columns the ``objects`` scene reads (`cgda_jax.datasets.objects`);
             "video" (recognition from a camera: ``data_dir`` holds one folder per
             action, each with that action's recordings in name order, tracked
-            with `cgda_jax.vision` as ``cgda track`` does).
+            with `cgda_jax.vision` as ``cgda track`` does; execution: ``data_dir``
+            holds the recordings of the one action to execute); "csv"
+            (execution: every ``.csv`` file of ``data_dir``, as `load_csv` and
+            ``cgda track --out`` write them, keeping ``columns``).
         features: synthetic: "marker" (8 object features), "spatial" (X, Y, Z) or
             "arm" (12 arm-point coordinates); video: "marker" (X_m, Y_m, Z_m,
             area_px, hue, saturation, value, angle_deg; needs depth), "spatial"
@@ -37,9 +40,11 @@ class DataConfig:
         centre, diameter, n_demos: clean circle (metres, waist frame).
         goal_points: paint ramp length.
         data_dir: xgnitive data folder (default: $CGDA_XGNITIVE_DIR); video: the
-            folder of action folders.
+            folder of action folders (recognition) or of recordings (execution);
+            csv: the folder of CSV files.
         action, stream, columns: xgnitive action ("paint" | "iron"), stream and
-            feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``).
+            feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``); csv: the
+            feature columns to keep, in order (e.g. ``["X_m", "Y_m", "Z_m"]``).
         scale: factor applied to the goal's features (e.g. unit changes).
         start, end: move_box: the box's (x, y) before and after the push [m];
             rotate_valve: the valve angle before and after [rad] (one value);
