@@ -147,10 +147,12 @@ def test_mjx_kinematics_equals_mujoco_c_on_every_shipped_model(name):
 @pytest.mark.parametrize("name", [
     "tiny_arm.xml", "teo.xml", "iiwa14.xml",
     # measured 2026-12-02: MJX's features differ from MuJoCo C's by up to 33 mm on the
-    # Panda (motors through the PD with gravity compensation, implicitfast); not
-    # resolved yet, so it is marked as a known failure, not loosened
+    # Panda (motors through the PD with gravity compensation) under its implicitfast
+    # integrator at 0.01 s; the same model with integrator="Euler" at 0.002 s agrees
+    # within 4e-7 m.  Not resolved yet: a known failure, not a loosened tolerance
     pytest.param("panda.xml", marks=pytest.mark.xfail(
-        strict=True, reason="MJX vs MuJoCo C differ by up to 33 mm on the motor PD")),
+        strict=True, reason="MJX vs MuJoCo C differ by up to 33 mm on the Panda's "
+                            "PD under implicitfast (Euler agrees)")),
 ])
 def test_mjx_physics_equals_mujoco_c_on_every_shipped_model(name):
     joints, site, key = SHIPPED[name]
