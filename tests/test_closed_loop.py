@@ -133,3 +133,18 @@ def test_the_report_gives_the_closed_loop_a_row_beside_the_open_loop():
     assert "per point: 0.02, 0.004; 2 steps, planning 0.75 s, execution 0.2 s" in rows[1]
     del reality["closed_loop"]  # other strategies: the open loop only
     assert len(reality_rows(reality, "m")) == 1
+
+
+def test_the_replay_check_judges_oet_steps_in_order(sim, goal):
+    """OET executes S steps for N goal points (S != N): the finer replay judges them
+    as OET does (`ordered_point_errors`), not step i against point i."""
+    import types
+
+    from cgda_jax.experiment.compute import replay_check
+
+    steps = np.concatenate([WAYPOINTS[:1], WAYPOINTS])  # 4 steps, 3 points
+    feats = np.asarray(sim.execute(steps), np.float64)
+    res = types.SimpleNamespace(strategy="oet", joints=steps, goal=goal,
+                                features=feats, tolerance=0.01)
+    out = replay_check(sim, res)
+    assert out["success"] and out["max_point_error"] < 0.01

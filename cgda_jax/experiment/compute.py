@@ -98,7 +98,7 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
     the optimiser exploited the resolution it was evaluated at."""
     fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
     feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
-    errors = np.linalg.norm(feats - np.asarray(res.goal), axis=-1)
+    errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
     out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
            else {"substeps": fine.substeps})
     return out | {
