@@ -14,7 +14,11 @@ strategy seed:
 
 Both judged per goal point on the world's measured features (OET in order).
 
-    python benchmarks/bench_closed_loop.py [--seeds 5]
+``--tiny``: the tiny arm instead (tests/test_closed_loop.py's goal and settings,
+offsets drawn in [-3, 3] degrees, mismatch seeds 5 and 6, OET seeds 0 and 1): OET's
+plan replayed open loop against OET closed loop.
+
+    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny]
 """
 
 from __future__ import annotations
@@ -35,10 +39,49 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 NAME = "move_push_box_mismatch"
 
 
+def tiny() -> None:
+    from cgda_jax import MarkerScene, Robot, Simulator, model_path
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.protocol import measure
+    from cgda_jax.strategies.oet import ordered_point_errors, run_oet
+
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                            "marker")
+    sim = Simulator(robot, MarkerScene(), mode="dynamic", waypoint_s=0.5,
+                    physics="mujoco")
+    wps = np.array([[0.1, 0.2, 0.1], [0.3, 0.4, 0.2], [0.5, 0.5, 0.3]], np.float32)
+    goal = np.asarray(sim.execute(wps), np.float64)
+    kw = {"population_size": 16, "tolerance": 0.01, "max_generations": 80}
+    rows = []
+    for world_seed in (5, 6):
+        mm = Mismatch(joint_offset_deg=[-3.0, 3.0], seed=world_seed)
+        for seed in (0, 1):
+            plan = run_oet(sim, goal, seed=seed, **kw)
+            world = MismatchedWorld(sim, mm)
+            measure(world)
+            got = measure(world, trajectory_of(sim, plan.joints)).features
+            dist = np.linalg.norm(goal[:, None] - got[None], axis=-1)
+            open_loop = ordered_point_errors(dist, kw["tolerance"])
+            closed = run_oet_closed_loop(sim, goal, MismatchedWorld(sim, mm),
+                                         seed=seed, **kw)
+            steps = closed.info["closed_loop"]
+            rows.append({"world_seed": world_seed, "seed": seed,
+                         "open_mm": np.round(1e3 * open_loop, 1).tolist(),
+                         "closed_mm": np.round(1e3 * closed.point_errors, 1).tolist(),
+                         "planning_s": float(np.sum(steps["planning_s"])),
+                         "execution_s": float(np.sum(steps["execution_s"]))})
+            print(rows[-1], flush=True)
+    write_json("bench_closed_loop_tiny", {"rows": rows})
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--tiny", action="store_true")
     args = parser.parse_args()
+    if args.tiny:
+        tiny()
+        return
     cfg = ex.load_config(REPO / "experiments" / f"{NAME}.toml")
     goal, demos, _ = ex.build_goal(cfg)
     sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
