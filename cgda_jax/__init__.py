@@ -106,6 +106,7 @@ _LAZY.update({
     "MismatchedWorld": "cgda_jax.reality.mismatch",
     "export_trajectory": "cgda_jax.experiment.export",
     "check_exported": "cgda_jax.experiment.export",
+    "run_oet_closed_loop": "cgda_jax.strategies.closed_loop",
 })
 
 
@@ -175,6 +176,7 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld  # noqa: F401
     from cgda_jax.reality.protocol import Measurement, Reality, RealityError  # noqa: F401
     from cgda_jax.reality.replay import replay_trajectory  # noqa: F401
+    from cgda_jax.strategies.closed_loop import run_oet_closed_loop  # noqa: F401
     from cgda_jax.recognize import (  # noqa: F401
         ActionLibrary, Recognition, cost_matrix, recognize,
     )

@@ -172,3 +172,12 @@ def test_open_loop_on_the_mismatched_world_is_judged_per_point(sim):
     row = reality_rows(off, "m")[0]
     assert row.startswith("| open loop on the mismatched world (seed 0")
     assert "success False" in row
+
+
+def test_joint_offsets_by_name(sim):
+    w = MismatchedWorld(sim, Mismatch.from_dict({"joint_offset_deg": {"elbow": 3.0}}))
+    np.testing.assert_allclose(w.drawn["joint_offset"], np.deg2rad([0.0, 0.0, 3.0]))
+    with pytest.raises(ValueError, match=r"joint\(s\) \['wrist'\] are not the evolved"):
+        MismatchedWorld(sim, Mismatch(joint_offset_deg={"wrist": 1.0}))
+    with pytest.raises(ValueError, match=r"\['elbow'\] given a range"):
+        Mismatch(joint_offset_deg={"elbow": [0.0, 1.0]})

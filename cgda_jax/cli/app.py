@@ -63,7 +63,9 @@ def _parser() -> argparse.ArgumentParser:
                      "robot, scene, algorithm, sizes, results folder) and print the "
                      "resolved config; compiles no simulation, runs nothing")
     run.add_argument("--reality", action="store_true", help="also execute the result "
-                     "open loop on the config's mismatched world ([reality] table)")
+                     "open loop on the config's mismatched world ([reality] table); strategy oet "
+                     "also runs closed loop there, each step planned from what the "
+                     "world measured")
     add_trials_arguments(run)
     demo = sub.add_parser(
         "demo", help="the main job: recognition tables, clean (IE) and paint (IET) on TEO",

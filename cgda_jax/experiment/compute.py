@@ -98,7 +98,7 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
     the optimiser exploited the resolution it was evaluated at."""
     fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
     feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
-    errors = np.linalg.norm(feats - np.asarray(res.goal), axis=-1)
+    errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
     out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
            else {"substeps": fine.substeps})
     return out | {
@@ -192,6 +192,32 @@ def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
     }
 
 
+def closed_loop_check(sim, goal, strategy, table: dict) -> dict:
+    """OET closed on the mismatched world (`cgda_jax.strategies.closed_loop`, a
+    fresh `MismatchedWorld` of the ``[reality]`` values ``table``, the run's
+    strategy settings ``strategy``): each step planned from what the world
+    measured; its measured features judged per goal point, and its planning and
+    execution times per step."""
+    from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
+    from cgda_jax.strategies.closed_loop import run_oet_closed_loop
+
+    s = strategy
+    res = run_oet_closed_loop(
+        sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
+        algorithm=s.algorithm, population_size=s.population_size,
+        tolerance=s.tolerance, max_generations=s.max_generations, seed=s.seed,
+        **s.options)
+    steps = res.info["closed_loop"]
+    errors = np.asarray(res.point_errors, np.float64)
+    return {
+        "loop": "closed", "steps": len(res.joints),
+        "point_errors": errors.tolist(), "max_point_error": float(errors.max()),
+        "success": bool(res.success), "step_errors": steps["error"],
+        "planning_s": steps["planning_s"], "execution_s": steps["execution_s"],
+        "compile_time_s": res.compile_time_s,
+    }
+
+
 def compute_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
@@ -239,6 +265,9 @@ def compute_execution(
     summary["export"] = export_check(sim, res)
     if cfg.reality.enabled:
         summary["reality"] = reality_check(sim, res, cfg.reality.mismatch_table())
+        if s.name == "oet":  # online: also closed on the world, step by step
+            summary["reality"]["closed_loop"] = closed_loop_check(
+                sim, goal, s, cfg.reality.mismatch_table())
     motion = motion_check(sim, res)
     if motion is not None:
         summary["motion"], profile = motion

@@ -153,7 +153,8 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
 
 def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     """The report's row of the result executed open loop on the mismatched world
-    (`cgda_jax.experiment.compute.reality_check`)."""
+    (`cgda_jax.experiment.compute.reality_check`) and, for OET, the row of the
+    closed loop there (`cgda_jax.experiment.compute.closed_loop_check`)."""
     if not reality:
         return []
     drawn = ", ".join(
@@ -163,9 +164,19 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
         return [f"| open loop on the mismatched world | not executed: "
                 f"{reality.get('reason')} |"]
     per = ", ".join(f"{e:.3g}" for e in reality["point_errors"])
-    return [(f"| open loop on the mismatched world (seed {reality['seed']}: {drawn}) "
+    rows = [(f"| open loop on the mismatched world (seed {reality['seed']}: {drawn}) "
              f"| success {reality['success']}, max point error "
              f"{_with_unit(reality['max_point_error'], unit)}; per point: {per} |")]
+    closed = reality.get("closed_loop")
+    if closed:
+        per = ", ".join(f"{e:.3g}" for e in closed["point_errors"])
+        rows.append(
+            f"| closed loop (OET) on the same world | success {closed['success']}, "
+            f"max point error {_with_unit(closed['max_point_error'], unit)}; per "
+            f"point: {per}; {closed['steps']} steps, planning "
+            f"{sum(closed['planning_s']):.3g} s, execution "
+            f"{sum(closed['execution_s']):.3g} s |")
+    return rows
 
 
 def report_markdown(cfg: ExperimentConfig, result: dict,

@@ -212,9 +212,14 @@ def _validate_reality(cfg: ExperimentConfig) -> None:
     from cgda_jax.reality.mismatch import Mismatch
 
     try:
-        Mismatch.from_dict(cfg.reality.mismatch_table())
+        mm = Mismatch.from_dict(cfg.reality.mismatch_table())
     except ValueError as e:
         raise ConfigError(str(e)) from None
+    if isinstance(mm.joint_offset_deg, dict):
+        unknown = sorted(set(mm.joint_offset_deg) - set(cfg.robot.joints))
+        if unknown:
+            raise ConfigError(f"key 'reality.joint_offset_deg': joint(s) {unknown} "
+                              f"are not robot.joints {list(cfg.robot.joints)}")
     if cfg.reality.enabled and cfg.robot.mode != "dynamic":
         raise ConfigError("key 'reality.enabled': a mismatched world is physics; it "
                           "needs robot.mode = \"dynamic\"")

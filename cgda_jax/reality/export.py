@@ -297,7 +297,7 @@ def _units(robot) -> tuple[str, ...]:
 
 
 def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
-                  info: dict | None = None) -> ExportedTrajectory:
+                  info: dict | None = None, start=None) -> ExportedTrajectory:
     """The exported trajectory of ``joints`` (N, DoF) as ``sim`` executes them: from
     the robot's start posture, with the run's timing (`simulator_timing`) and the
     limits its motion was judged against (the feasibility's, else the model's).
@@ -308,6 +308,9 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
         rate: control rate [Hz].
         jerk: optional jerk limits (DoF,) or scalar [rad/s^3]; None: the run's own.
         info: extra entries for ``info`` (where it came from).
+        start: (DoF,) where the robot is (default its start posture, the first
+            move the approach); given, every move is a ``sim.move_s`` move (a
+            segment of a run already under way, as a closed loop sends it).
     """
     from cgda_jax.sim.limits import read_limits
 
@@ -317,8 +320,11 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
     limits = feas.limits if feas is not None else read_limits(
         robot.mj_model, robot.joint_names)
     moves, holds = simulator_timing(sim, len(joints) if joints.ndim == 2 else 0)
+    if start is not None:
+        moves = np.full_like(moves, float(sim.move_s))
+    q0 = robot.start_genes if start is None else start
     traj = time_parameterize(
-        np.asarray(robot.start_genes, np.float64), joints, moves, holds, rate=rate,
+        np.asarray(q0, np.float64), joints, moves, holds, rate=rate,
         velocity=np.asarray(limits.velocity, np.float64),
         acceleration=np.asarray(limits.acceleration, np.float64), jerk=jerk,
         joint_names=robot.joint_names, units=_units(robot),

@@ -10,7 +10,8 @@ uniformly with its ``seed`` (`Mismatch.draw`):
 - ``friction_scale``: every geom's sliding friction times this;
 - ``joint_offset_deg``: per evolved joint, the physical joint sits this far from
   what it is commanded (a calibration offset; its encoder still reads the
-  commanded frame, so only the features show it); a range is drawn per joint;
+  commanded frame, so only the features show it); a range is drawn per joint; a
+  table ``{joint = degrees}`` gives named joints their own (the others 0);
 - ``damping_scale``: the evolved joints' damping times this;
 - ``gain_scale``: the actuators' position gain (kp) times this;
 - ``noise``: the features measured with Gaussian noise of this standard deviation
@@ -44,7 +45,14 @@ _POSITIVE = ("mass_scale", "friction_scale", "gain_scale")
 _NONNEGATIVE = ("damping_scale", "noise", "delay_s")
 
 
-def _value(name: str, v) -> float | tuple[float, float]:
+def _value(name: str, v) -> float | tuple[float, float] | dict[str, float]:
+    if name == "joint_offset_deg" and isinstance(v, dict):
+        out = {str(k): _value(f"{name}.{k}", x) for k, x in v.items()}
+        ranged = sorted(k for k, x in out.items() if isinstance(x, tuple))
+        if ranged:
+            raise ValueError(f"reality.{name}: joint(s) {ranged} given a range; a "
+                             "table gives each named joint a number of degrees")
+        return out
     if isinstance(v, (list, tuple)):
         if len(v) != 2:
             raise ValueError(f"reality.{name} = {list(v)}: a range is [low, high]")
@@ -95,14 +103,28 @@ class Mismatch:
                              f"{sorted([*FIELDS, 'seed'])}")
         return cls(**table)
 
-    def draw(self, n_dof: int) -> dict[str, Any]:
+    def draw(self, n_dof: int, joint_names=None) -> dict[str, Any]:
         """The concrete values: ranges drawn uniformly (``joint_offset_deg`` per
-        joint, (n_dof,) radians as ``joint_offset``), with ``seed``."""
+        joint, (n_dof,) radians as ``joint_offset``; a table by ``joint_names``),
+        with ``seed``.
+
+        Raises:
+            ValueError: a ``joint_offset_deg`` table names a joint not in
+                ``joint_names``.
+        """
         rng = np.random.default_rng(self.seed)
         out: dict[str, Any] = {}
         for name in FIELDS:
             v = getattr(self, name)
-            if name == "joint_offset_deg":
+            if name == "joint_offset_deg" and isinstance(v, dict):
+                names = list(joint_names or [])
+                unknown = sorted(set(v) - set(names))
+                if unknown or len(names) != n_dof:
+                    raise ValueError(f"reality.joint_offset_deg: joint(s) {unknown} "
+                                     f"are not the evolved joints {names}")
+                out["joint_offset"] = np.deg2rad(
+                    np.array([v.get(j, 0.0) for j in names], np.float64))
+            elif name == "joint_offset_deg":
                 off = (rng.uniform(v[0], v[1], n_dof) if isinstance(v, tuple)
                        else np.full(n_dof, v))
                 out["joint_offset"] = np.deg2rad(off)
@@ -135,7 +157,7 @@ class MismatchedWorld:
         self.feature_names = tuple(sim.feature_names)
         self.joint_names = tuple(sim.robot.joint_names)
         self.phys = phys = sim.physics
-        self.drawn = self.mismatch.draw(len(self.joint_names))
+        self.drawn = self.mismatch.draw(len(self.joint_names), self.joint_names)
         m = self.model = copy.deepcopy(phys.model)
         objects = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b)
                    for b in phys.object_bodies]

@@ -41,7 +41,9 @@ class OETState:
     found no valid candidate; the run stopped). Restarts of the current step's
     evolution: `tries` started, the best over the finished ones (`try_best_u`,
     `try_best_fitness`) and what they spent (`try_generations`, `try_evaluations`,
-    `try_invalid`); `step_tries` (S,) the tries each executed step took."""
+    `try_invalid`); `step_tries` (S,) the tries each executed step took. `bias`
+    (F,): what the features measured off the model's prediction at the last step
+    (0 in OET; a closed loop's correction of the next target, `relocalize`)."""
 
     evo: Evolution
     key: jax.Array
@@ -63,6 +65,7 @@ class OETState:
     try_evaluations: jax.Array
     try_invalid: jax.Array
     step_tries: jax.Array
+    bias: jax.Array
 
 
 def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
@@ -131,12 +134,12 @@ class OETPlan(PlanBase):
     def _target(self, k):
         return jnp.minimum(k + 1, self.n_points - 1)
 
-    def _fitness(self, sim_state, k):
-        return self.point_fitness(sim_state, self.goal[self._target(k)])
+    def _fitness(self, sim_state, k, bias):
+        return self.point_fitness(sim_state, self.goal[self._target(k)] - bias)
 
-    def _start(self, key, sim_state, k, steps, mean):
-        return self.start(jax.random.fold_in(key, steps), self._fitness(sim_state, k),
-                          mean=mean)
+    def _start(self, key, sim_state, k, steps, mean, bias):
+        return self.start(jax.random.fold_in(key, steps),
+                          self._fitness(sim_state, k, bias), mean=mean)
 
     def init(self, key):
         sim_state = self.sim.init_state()
@@ -144,7 +147,8 @@ class OETPlan(PlanBase):
         steps = jnp.zeros((), jnp.int32)
         s, f = self.max_steps, self.goal.shape[1]
         return OETState(
-            evo=self._start(key, sim_state, k, steps, None),
+            evo=self._start(key, sim_state, k, steps, None,
+                            jnp.zeros((f,), jnp.float32)),
             key=key, k=k, steps=steps, sim_state=sim_state,
             joints=jnp.zeros((s, self.n_dof), jnp.float32),
             features=jnp.zeros((s, f), jnp.float32),
@@ -155,6 +159,7 @@ class OETPlan(PlanBase):
             step_invalid=jnp.zeros((s,), jnp.int32),
             stuck=jnp.asarray(False),
             step_tries=jnp.zeros((s,), jnp.int32),
+            bias=jnp.zeros((f,), jnp.float32),
             **self._fresh_tries(),
         )
 
@@ -193,24 +198,47 @@ class OETPlan(PlanBase):
         key = jax.random.fold_in(jax.random.fold_in(s.key, s.steps), s.tries)
         k_mean, k_evo = jax.random.split(key)
         mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
-        evo = self.start(k_evo, self._fitness(s.sim_state, s.k), mean=mean)
+        evo = self.start(k_evo, self._fitness(s.sim_state, s.k, s.bias), mean=mean)
         return s.replace(
             evo=evo, tries=s.tries + 1, try_best_u=m.evo.best_u,
             try_best_fitness=m.evo.best_fitness, try_generations=m.evo.generation,
             try_evaluations=m.evo.evaluations, try_invalid=m.evo.invalid)
 
+    def localize(self, k: jax.Array, feats: jax.Array) -> jax.Array:
+        """The goal step nearest ``feats`` (F,) in the window [k, k + lookahead] of
+        the previous localized step ``k``."""
+        window = jnp.arange(self.n_points)
+        inside = (window >= jnp.maximum(k, 0)) & (window <= k + self.lookahead)
+        dist = jnp.linalg.norm(self.goal - feats, axis=-1)
+        return jnp.argmin(jnp.where(inside, dist, jnp.inf)).astype(jnp.int32)
+
+    def relocalize(self, s: OETState, prev_k: jax.Array, sim_state: Any,
+                   feats: jax.Array, correct: Any = True) -> OETState:
+        """``s`` just after a step was executed (in the model), re-localized on what
+        was measured instead: the executed step's features ``feats`` (F,), the
+        localized step from ``prev_k`` (the one before the step) and the next
+        step's evolution started from ``sim_state`` (as `_execute` starts it from
+        the model's own state; `cgda_jax.strategies.closed_loop`). With
+        ``correct`` the next target is moved against the measured features'
+        offset from the model's prediction (``bias``; a model error the joints do
+        not show, e.g. a calibration offset, is then corrected at the next step)."""
+        k = self.localize(prev_k, feats)
+        q = s.joints[s.steps - 1]
+        bias = jnp.where(correct, feats - s.features[s.steps - 1], s.bias)
+        return s.replace(
+            evo=self._start(s.key, sim_state, k, s.steps,
+                            from_joints(q, self.lower, self.upper), bias),
+            k=k, sim_state=sim_state, bias=bias,
+            features=s.features.at[s.steps - 1].set(feats))
+
     def _execute(self, s: OETState) -> OETState:
         q = self.joints(s.evo.best_u)
         sim_state, feats = self.sim.step(s.sim_state, q)
-        window = jnp.arange(self.n_points)
-        lo = jnp.maximum(s.k, 0)
-        inside = (window >= lo) & (window <= s.k + self.lookahead)
-        dist = jnp.linalg.norm(self.goal - feats, axis=-1)
-        k = jnp.argmin(jnp.where(inside, dist, jnp.inf)).astype(jnp.int32)
+        k = self.localize(s.k, feats)
         steps = s.steps + 1
         return s.replace(
             evo=self._start(s.key, sim_state, k, steps,
-                            from_joints(q, self.lower, self.upper)),
+                            from_joints(q, self.lower, self.upper), s.bias),
             k=k, steps=steps, sim_state=sim_state,
             joints=s.joints.at[s.steps].set(q),
             features=s.features.at[s.steps].set(feats),
@@ -247,7 +275,7 @@ class OETPlan(PlanBase):
 
     def step(self, s: OETState):
         finished = self.done(s)
-        evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k),
+        evo, metrics = self.evolve(s.evo, self._fitness(s.sim_state, s.k, s.bias),
                                    self._try_stop(s))
         new = jax.lax.cond(evo.done, self._end, lambda x: x, s.replace(evo=evo))
         new = freeze(finished, s, new)

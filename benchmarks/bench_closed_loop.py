@@ -1,0 +1,129 @@
+"""Open-loop IET against closed-loop OET on a mismatched world, over seeds (issue 22).
+
+experiments/move_push_box_mismatch.toml: the box twice as heavy, half the friction,
+3 degree offsets on the shoulder flexion and the elbow, 2 mm feature noise.  The goal
+and the (exact) internal model are built as ``cgda run`` builds them.  For each
+strategy seed:
+
+- open loop: IET (the config's settings) found on the model, its exported
+  trajectory sent as it is to the mismatched world
+  (`cgda_jax.experiment.compute.reality_check`);
+- closed loop: OET on the same world (`cgda_jax.strategies.closed_loop`), each push
+  planned from what the world measured; the same population, tolerance, generations
+  per step and step size (``std_init``) as the IET run.
+
+Both judged per goal point on the world's measured features (OET in order).
+
+``--tiny``: the tiny arm instead (tests/test_closed_loop.py's goal and settings,
+offsets drawn in [-3, 3] degrees, mismatch seeds 5 and 6, OET seeds 0 and 1): OET's
+plan replayed open loop against OET closed loop.
+
+    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import time
+
+import numpy as np
+from _common import print_table, write_json
+
+from cgda_jax import experiment as ex, run_trials
+from cgda_jax.experiment.compute import reality_check
+from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
+from cgda_jax.strategies.closed_loop import run_oet_closed_loop
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+NAME = "move_push_box_mismatch"
+
+
+def tiny() -> None:
+    from cgda_jax import MarkerScene, Robot, Simulator, model_path
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.protocol import measure
+    from cgda_jax.strategies.oet import ordered_point_errors, run_oet
+
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                            "marker")
+    sim = Simulator(robot, MarkerScene(), mode="dynamic", waypoint_s=0.5,
+                    physics="mujoco")
+    wps = np.array([[0.1, 0.2, 0.1], [0.3, 0.4, 0.2], [0.5, 0.5, 0.3]], np.float32)
+    goal = np.asarray(sim.execute(wps), np.float64)
+    kw = {"population_size": 16, "tolerance": 0.01, "max_generations": 80}
+    rows = []
+    for world_seed in (5, 6):
+        mm = Mismatch(joint_offset_deg=[-3.0, 3.0], seed=world_seed)
+        for seed in (0, 1):
+            plan = run_oet(sim, goal, seed=seed, **kw)
+            world = MismatchedWorld(sim, mm)
+            measure(world)
+            got = measure(world, trajectory_of(sim, plan.joints)).features
+            dist = np.linalg.norm(goal[:, None] - got[None], axis=-1)
+            open_loop = ordered_point_errors(dist, kw["tolerance"])
+            closed = run_oet_closed_loop(sim, goal, MismatchedWorld(sim, mm),
+                                         seed=seed, **kw)
+            steps = closed.info["closed_loop"]
+            rows.append({"world_seed": world_seed, "seed": seed,
+                         "open_mm": np.round(1e3 * open_loop, 1).tolist(),
+                         "closed_mm": np.round(1e3 * closed.point_errors, 1).tolist(),
+                         "planning_s": float(np.sum(steps["planning_s"])),
+                         "execution_s": float(np.sum(steps["execution_s"]))})
+            print(rows[-1], flush=True)
+    write_json("bench_closed_loop_tiny", {"rows": rows})
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--tiny", action="store_true")
+    args = parser.parse_args()
+    if args.tiny:
+        tiny()
+        return
+    cfg = ex.load_config(REPO / "experiments" / f"{NAME}.toml")
+    goal, demos, _ = ex.build_goal(cfg)
+    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
+    s, table = cfg.strategy, cfg.reality.mismatch_table()
+    t0 = time.perf_counter()
+    iet = run_trials(s.name, sim, goal, args.seeds, seed=0, algorithm=s.algorithm,
+                     population_size=s.population_size, tolerance=s.tolerance,
+                     max_generations=s.max_generations, chunk_size=s.chunk_size,
+                     **s.options)
+    iet_s = time.perf_counter() - t0
+    rows = []
+    for res in iet:
+        seed = res.info["seed"]
+        open_loop = reality_check(sim, res, table)
+        t1 = time.perf_counter()
+        closed = run_oet_closed_loop(
+            sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
+            algorithm=s.algorithm, population_size=s.population_size,
+            tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
+            algorithm_params=s.options.get("algorithm_params"))
+        steps = closed.info["closed_loop"]
+        rows.append({
+            "seed": seed, "iet_model_success": res.success,
+            "open_loop_success": open_loop["success"],
+            "open_loop_max_err_mm": 1e3 * open_loop["max_point_error"],
+            "closed_loop_success": closed.success,
+            "closed_loop_max_err_mm": 1e3 * float(closed.max_point_error),
+            "closed_steps": len(closed.joints),
+            "planning_s": float(np.sum(steps["planning_s"])),
+            "execution_s": float(np.sum(steps["execution_s"])),
+            "closed_compile_s": closed.compile_time_s,
+            "closed_total_s": time.perf_counter() - t1,
+        })
+        print(rows[-1], flush=True)
+    print_table(rows, list(rows[0]))
+    summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
+               "open_loop_successes": sum(r["open_loop_success"] for r in rows),
+               "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
+               "mismatch": open_loop["mismatch"]}
+    print(summary)
+    write_json("bench_closed_loop", {"rows": rows, "summary": summary})
+
+
+if __name__ == "__main__":
+    main()

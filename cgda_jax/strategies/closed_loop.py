@@ -1,0 +1,247 @@
+"""Closed-loop OET: each step planned in the internal model from the state MEASURED
+on a `cgda_jax.reality.protocol.Reality`, executed there, measured, re-localized.
+
+One step:
+
+1. plan: OET's own step (`OETPlan.step`, compiled once, run until one posture is
+   executed in the model; its restarts and stagnation as OET's) from the current
+   internal state;
+2. execute: that posture as a short exported trajectory segment
+   (`cgda_jax.reality.export.trajectory_of` from where the robot was last sent,
+   the run's move and hold times; the first segment is the approach from the start
+   posture) sent through `cgda_jax.reality.protocol.measure` (a reality that raises
+   or measures NaN stops the run with `RealityError`);
+3. re-localize (`OETPlan.relocalize`): the goal step nearest the MEASURED features
+   in OET's window, and the next step's evolution started from an internal state
+   rebuilt on the measurement (`measured_state`: the evolved joints at the
+   MEASURED joints, the marker there), its target moved against the measured
+   features' offset from the model's prediction (``correct``: a model error the
+   encoders cannot see, a calibration offset, a heavier object, is corrected at the
+   next step).  What the protocol does not measure (features and joints only) stays
+   the model's prediction: velocities, object poses and a scene's carried state
+   (painted cells); the objects are re-localized only through the features (the
+   goal step and the correction), not in the model's state.
+
+It stops when the localized step is the goal's last point, after ``max_steps``
+executed steps, or when a step's evolution found no valid posture.  With a reality
+that measures exactly what the model predicts it is OET (`run_oet`).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from cgda_jax.reality.export import trajectory_of
+from cgda_jax.reality.protocol import Reality, RealityError, measure
+from cgda_jax.strategies.base import check_config
+from cgda_jax.strategies.oet import OETPlan
+from cgda_jax.strategies.result import ExecutionResult
+from cgda_jax.strategies.runner import seed_keys
+
+__all__ = ["compiled_loop", "measured_state", "run_oet_closed_loop"]
+
+
+def measured_state(sim, predicted: Any, joints: jax.Array) -> Any:
+    """The internal `SimState` rebuilt on measured ``joints`` (DoF,), the rest the
+    model's ``predicted`` state after the step. Kinematic mode: the posture
+    (``genes``, clipped) and the marker at the measured joints. Dynamic mode: the
+    physics posture's evolved joints at the measured ones (velocities, objects and
+    the other joints as predicted: the protocol measures none of them), the marker
+    there; ``genes``, the commanded target the next move's ramp starts from, stays
+    what was commanded (the exported segment starts there too)."""
+    q = sim.robot.clip(jnp.asarray(joints, jnp.float32))
+    new = predicted.replace(marker=sim.robot.marker_position(q))
+    if sim.mode == "dynamic":
+        qadr = jnp.asarray(sim.physics.gene_qadr)
+        return new.replace(data=predicted.data.at[qadr].set(q))
+    return new.replace(genes=q)
+
+
+_COMPILED: dict = {}  # (sim, goal, settings) -> the compiled loop; a few kept
+_KEEP = 4
+
+
+def compiled_loop(sim, goal: jax.Array, settings: dict):
+    """The loop's compiled functions ``(plan, init, advance, relocate)``: OET's plan
+    of ``settings`` (`OETPlan`'s keyword arguments) on ``sim`` and ``goal``, its
+    ``init(key)``, ``advance(state)`` (OET's steps until one posture is executed
+    in the model, with that step's best fitness) and ``relocate(state, prev_k,
+    joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`;
+    ``correct`` a traced bool). Compiled once
+    per simulator, goal and settings (the seed is an argument): the last few are
+    kept, so a loop over seeds or realities compiles once."""
+    goal_np = np.asarray(goal)
+    cache_key = (id(sim), goal_np.shape, goal_np.tobytes(),
+                 repr(sorted(settings.items())))
+    hit = _COMPILED.get(cache_key)
+    if hit is not None and hit[0] is sim:
+        return hit[1]
+    plan = OETPlan(sim, goal, **settings)
+
+    def advance(s):
+        n0 = s.steps
+
+        def cond(c):
+            return (c[0].steps == n0) & ~plan.done(c[0])
+
+        def body(c):
+            new, m = plan.step(c[0])
+            return new, jnp.where(m["step"] == n0, m["best_fitness"], c[1])
+
+        return jax.lax.while_loop(cond, body, (s, jnp.asarray(jnp.inf, jnp.float32)))
+
+    def relocate(s, prev_k, joints, feats, correct):
+        state = measured_state(sim, s.sim_state, joints)
+        return plan.relocalize(s, prev_k, state, feats, correct)
+
+    key = seed_keys([0])[0]
+    init_c = jax.jit(plan.init).lower(key).compile()
+    s = jax.eval_shape(plan.init, key)
+    advance_c = jax.jit(advance).lower(s).compile()
+    spec = jax.ShapeDtypeStruct
+    relocate_c = jax.jit(relocate).lower(
+        s, s.k, spec((plan.n_dof,), jnp.float32),
+        spec((goal_np.shape[1],), jnp.float32), spec((), jnp.bool_)).compile()
+    while len(_COMPILED) >= _KEEP:
+        _COMPILED.pop(next(iter(_COMPILED)))
+    out = (plan, init_c, advance_c, relocate_c)
+    _COMPILED[cache_key] = (sim, out)
+    return out
+
+
+def _check_names(sim, reality: Reality) -> None:
+    for what, ours in (("feature_names", tuple(sim.feature_names)),
+                       ("joint_names", tuple(sim.robot.joint_names))):
+        theirs = tuple(getattr(reality, what, ()))
+        if theirs != ours:
+            raise RealityError(f"{type(reality).__name__}.{what} {list(theirs)} are "
+                               f"not the simulator's {list(ours)}")
+
+
+def run_oet_closed_loop(
+    sim: Any,
+    goal: Any,
+    reality: Reality,
+    *,
+    algorithm: Any = "CMA_ES",
+    population_size: int = 16,
+    tolerance: float = 0.02,
+    max_generations: int = 100,
+    max_steps: int | None = None,
+    lookahead: int = 1,
+    restarts: int = 0,
+    stagnation: int | None = None,
+    seed: int = 0,
+    rate: float = 100.0,
+    correct: bool = True,
+    algorithm_kwargs: dict | None = None,
+    algorithm_params: dict | None = None,
+    progress_fn: Any = None,
+    chunk_size: int | None = None,
+    devices: Any = None,
+) -> ExecutionResult:
+    """OET closed on ``reality`` (see the module doc).
+
+    Args:
+        sim: the internal model (a `cgda_jax.sim.execute.Simulator`).
+        goal: goal feature trajectory (N, F).
+        reality: the `Reality` executed on; its feature and joint names must be
+            the simulator's. It is `reset` first.
+        rate: the exported segments' control rate [Hz].
+        correct: the next step's target moved against the last step's measured
+            offset from the model's prediction (`OETPlan.relocalize`); False:
+            re-localized and re-planned from the measured joints only.
+        algorithm, population_size, tolerance, max_generations, max_steps,
+            lookahead, restarts, stagnation, seed, algorithm_kwargs,
+            algorithm_params: as in `cgda_jax.strategies.oet.run_oet`.
+        progress_fn: called after each step with a dict (step, k, planning_s,
+            execution_s, error).
+        chunk_size: unused (the loop steps per executed posture); accepted so the
+            call matches the other strategies'.
+        devices: None or 1: the loop runs on one device.
+
+    Returns:
+        An `ExecutionResult` (strategy "oet") whose joints are the commanded
+        postures (S, DoF) and features the MEASURED ones (S, F), judged per goal
+        point as OET (`ordered_point_errors`); ``fitness_history`` holds each
+        step's final best fitness only. ``info["closed_loop"]`` per step:
+        ``planning_s``, ``execution_s``, ``error`` (measured features to the step's
+        target point), ``predicted_features`` (the model's, before re-localizing),
+        ``measured_joints``; and ``compile_time_s``.
+
+    Raises:
+        RealityError: the reality raised, measured NaN / inf or wrong shapes, or
+            its names are not the simulator's.
+        ValueError: bad settings (as `run_oet`), or ``devices`` other than 1.
+    """
+    del chunk_size
+    if devices not in (None, 1):
+        raise ValueError(f"devices={devices!r}: the closed loop runs on one device "
+                         "(None or 1)")
+    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    _check_names(sim, reality)
+    settings = {"algorithm": algorithm, "population_size": population_size,
+                "tolerance": tolerance, "max_generations": max_generations,
+                "algorithm_kwargs": algorithm_kwargs,
+                "algorithm_params": algorithm_params, "max_steps": max_steps,
+                "lookahead": lookahead, "restarts": restarts,
+                "stagnation": stagnation}
+    measure(reality)  # the start posture (a failing reality stops before compiling)
+    t0 = time.perf_counter()
+    plan, init_c, advance_c, relocate_c = compiled_loop(sim, goal, settings)
+    compile_time = time.perf_counter() - t0
+    key = seed_keys([seed])[0]
+    s = init_c(key)
+
+    t1 = time.perf_counter()
+    steps: dict[str, list] = {"planning_s": [], "execution_s": [], "error": [],
+                              "predicted_features": [], "measured_joints": []}
+    best: list[float] = []
+    commanded = None
+    goal_np = np.asarray(goal, np.float64)
+    while not bool(plan.done(s)):
+        prev_k = s.k
+        tp = time.perf_counter()
+        new, fit = jax.block_until_ready(advance_c(s))
+        planning = time.perf_counter() - tp
+        n = int(new.steps)
+        if n == int(s.steps):  # stuck: no valid posture, nothing executed
+            s = new
+            break
+        q = np.asarray(new.joints[n - 1], np.float64)
+        traj = trajectory_of(sim, q[None], rate=rate, start=commanded)
+        te = time.perf_counter()
+        got = measure(reality, traj)
+        execution = time.perf_counter() - te
+        feats = got.features[-1]
+        target = int(new.targets[n - 1])
+        steps["planning_s"].append(planning)
+        steps["execution_s"].append(execution)
+        steps["error"].append(float(np.linalg.norm(feats - goal_np[target])))
+        steps["predicted_features"].append(np.asarray(new.features[n - 1]).tolist())
+        steps["measured_joints"].append(got.joints[-1].tolist())
+        best.append(float(fit))
+        s = relocate_c(new, prev_k, jnp.asarray(got.joints[-1], jnp.float32),
+                       jnp.asarray(feats, jnp.float32), jnp.asarray(bool(correct)))
+        commanded = np.asarray(traj.q[-1], np.float64)
+        if progress_fn is not None:
+            progress_fn({"strategy": "oet", "loop": "closed", "step": n,
+                         "k": int(s.k), "planning_s": planning,
+                         "execution_s": execution, "error": steps["error"][-1]})
+    final = jax.tree.map(np.asarray, jax.block_until_ready(plan.finish(s)))
+    wall = time.perf_counter() - t1
+    n = int(final["steps"])
+    history = {"best_fitness": np.asarray(best, np.float32),
+               "step": np.arange(n, dtype=np.int32)}
+    timing = {"wall_time_s": wall, "compile_time_s": compile_time,
+              "trials_in_batch": 1}
+    res = plan.to_result(final, history, timing)
+    res.info.update({"seed": int(seed), "devices": 1, "loop": "closed",
+                     "closed_loop": steps, "corrected": bool(correct),
+                     "reality": type(reality).__name__})
+    return res
