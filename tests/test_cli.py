@@ -15,6 +15,7 @@ def _cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path_factory.getbasetemp() / "jaxcache"))
 
 
+@pytest.mark.slow  # 134 s in CI: the whole demo; test_results_folder checks the demo's folder rules
 def test_demo_small_succeeds_and_writes_results(tmp_path, capsys):
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--small", "--quiet"]) == 0

@@ -88,6 +88,7 @@ def test_processes_needs_trials_and_a_positive_count(capsys, tmp_path):
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
 
 
+@pytest.mark.slow  # 53 s in CI; test_distributed checks two processes against one
 def test_trials_over_two_processes_equal_one_process(tmp_path):
     """``--processes 2`` starts two local processes as one jax.distributed job (the
     README's command): process 0 alone writes the folder, whose records equal the

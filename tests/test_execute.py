@@ -146,6 +146,7 @@ def test_population_equals_each_alone_and_does_not_recompile(teo):
     assert sim._execute_population._cache_size() == before == 1
 
 
+@pytest.mark.slow  # 40 s in CI (three MJX compiles); test_strategies checks the slicing path
 def test_dynamic_population_in_slices_equals_each_candidate(tiny):
     # 5 candidates in slices of 2 (lax.map over vmapped slices, a ragged last one)
     sim = Simulator(tiny, MarkerScene(), mode="dynamic", physics_steps=5, batch_size=2,

@@ -131,6 +131,7 @@ def test_render_switch_writes_gif_and_frame_strip_or_nothing(tmp_path):
     assert "render" not in off and not (tmp_path / "off/plots").exists()
 
 
+@pytest.mark.slow  # 33 s in CI; the render switch test stays
 def test_missing_gl_gives_one_warning_not_a_crash(tmp_path):
     # EGL requested while PyOpenGL is pinned to another platform: no GL context
     env = dict(os.environ, MUJOCO_GL="egl", PYOPENGL_PLATFORM="osmesa", JAX_PLATFORMS="cpu",

@@ -11,7 +11,14 @@ nbclient = pytest.importorskip("nbclient")
 NOTEBOOKS = pathlib.Path(__file__).resolve().parents[1] / "notebooks"
 
 
-@pytest.mark.parametrize("path", sorted(NOTEBOOKS.glob("*.ipynb")), ids=lambda p: p.stem)
+# The longest notebooks (35-74 s each in CI) run with -m slow; the others every time.
+SLOW = {"05_objects", "06_your_own_robot", "07_reading_runs"}
+
+
+@pytest.mark.parametrize(
+    "path", [pytest.param(p, marks=pytest.mark.slow) if p.stem in SLOW else p
+             for p in sorted(NOTEBOOKS.glob("*.ipynb"))],
+    ids=lambda p: p.stem)
 def test_notebook_runs(path, monkeypatch, request, tmp_path_factory):
     # never the user's compilation cache (~/.cache/cgda_jax), should a notebook enable it
     monkeypatch.setenv("CGDA_JAX_CACHE", str(tmp_path_factory.getbasetemp() / "jaxcache"))

@@ -136,6 +136,7 @@ def test_random_moves_paint_the_same_at_16x_substeps(paint_sim):
     assert np.any(_painted_after_moves(coarse, q0, q1) != fine)
 
 
+@pytest.mark.slow  # 97 s in CI: a replay check of a full IET paint run
 def test_iet_paint_results_replay_with_16x_substeps(paint_sim):
     """IET paint results (small budget, 3 seeds): the 16 x sub-step replay paints
     the same percentages after every waypoint."""

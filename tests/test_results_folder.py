@@ -485,6 +485,7 @@ def test_demo_drawing_error_in_the_second_thread_is_one_error_line(
     no_leftovers(out)
 
 
+@pytest.mark.slow  # 25 s in CI; the CLI runs of the same rules stay
 def test_run_experiment_api_follows_the_same_rules(tmp_path):
     from cgda_jax.experiment import run_experiment
 

@@ -138,6 +138,7 @@ def test_sharded_execute_matches_unsharded_on_4_devices():
     assert "SHARDING-OK" in _run(SCRIPT)
 
 
+@pytest.mark.slow  # 45 s in CI; test_sharded_execute_matches_unsharded_on_4_devices stays
 def test_strategies_devices_option_matches_unsharded_on_4_devices():
     assert "STRATEGIES-OK" in _run(STRATEGIES_SCRIPT)
 

@@ -101,6 +101,7 @@ FTE_KW = {"population_size": 8, "tolerance": 0.05, "max_generations": 30, "chunk
           "stagnation": 3, "init": "middle", "restarts": 0}
 
 
+@pytest.mark.slow  # 44 s in CI; the IE pooling test stays
 def test_fte_trials_repacked_equal_single_runs(sim, goal):
     trials = run_trials("fte", sim, goal[:3], 3, seed=1, **FTE_KW)
     sizes = trials[0].info["batch_sizes"]
