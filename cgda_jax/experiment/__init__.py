@@ -23,26 +23,28 @@ another's ``_private`` name:
 2. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
    overrides (`merge_table`).
 3. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
-4. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
-   files named, the world and object-scene tables, the strategy's options
+4. :mod:`~cgda_jax.experiment.locate`: the files and folders a config names (model,
+   data folder, demonstration files, recordings per action).
+5. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
+   the world and object-scene tables, the strategy's options
    (`strategy_function`), the interval count.
-5. :mod:`~cgda_jax.experiment.build`: the objects: demonstrations and goal, robot,
+6. :mod:`~cgda_jax.experiment.build`: the objects: demonstrations and goal, robot,
    world, scene and simulator, feature labels.
-6. :mod:`~cgda_jax.experiment.validate`: the checks that need built objects and no
+7. :mod:`~cgda_jax.experiment.validate`: the checks that need built objects and no
    compiled program (``--dry-run`` and the start of every run: `check_experiment`).
-7. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
+8. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
    execution run (and the replay on a finer simulator).
-8. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
+9. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
    into place when complete, locked, never mixing two runs).
-9. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
-10. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-11. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+10. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
+11. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
+12. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
     (`export_trajectory`, `check_exported`; ``cgda export``).
-12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+13. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
-13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
+14. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-14. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+15. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
     trials``).
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
@@ -104,11 +106,13 @@ from cgda_jax.experiment.results import (
     RunFolder as RunFolder,
     plan_folder as plan_folder,
 )
+from cgda_jax.experiment.locate import (
+    resolve_data_dir as resolve_data_dir,
+    resolve_model as resolve_model,
+)
 from cgda_jax.experiment.rules import (
     SET_BY_CONFIG as SET_BY_CONFIG,
     check_strategy_options as check_strategy_options,
-    resolve_data_dir as resolve_data_dir,
-    resolve_model as resolve_model,
     strategy_function as strategy_function,
     validate_config as validate_config,
 )

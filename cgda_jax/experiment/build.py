@@ -14,14 +14,13 @@ from cgda_jax.experiment.config import (
     ConfigError,
     ExperimentConfig,
 )
-from cgda_jax.experiment.rules import (
-    check_interval_count,
+from cgda_jax.experiment.locate import (
     demonstration_files,
     resolve_data_dir,
     resolve_model,
-    validate_world,
     video_folders,
 )
+from cgda_jax.experiment.rules import check_interval_count, validate_world
 
 
 def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
@@ -69,7 +68,7 @@ def synthetic_demos(cfg: ExperimentConfig) -> dict:
 
 def video_demos(cfg: ExperimentConfig) -> dict:
     """The tracked demonstrations of a ``data.source = "video"`` recognition run:
-    action -> repetitions (`cgda_jax.experiment.rules.video_folders`), each tracked
+    action -> repetitions (`cgda_jax.experiment.locate.video_folders`), each tracked
     as ``cgda track`` tracks it (a recording folder's depth and intrinsics used)."""
     return {action: [track_recording(cfg, v, f"{action}/{v.name}") for v in videos]
             for action, videos in video_folders(cfg).items()}

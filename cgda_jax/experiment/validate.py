@@ -150,7 +150,7 @@ def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
 
     d = cfg.data
     if d.source == "video":  # the folders were checked; tracking is the run's
-        from cgda_jax.experiment.rules import video_folders
+        from cgda_jax.experiment.locate import video_folders
 
         return {"actions": len(video_folders(cfg))}
     demos = synthetic_demos(cfg)
@@ -193,7 +193,7 @@ def _check_physics_steps(cfg: ExperimentConfig, waypoint_s: float) -> None:
     before the simulator allocates its per-step profile)."""
     import mujoco
 
-    from cgda_jax.experiment.rules import resolve_model
+    from cgda_jax.experiment.locate import resolve_model
 
     rc = cfg.robot
     timestep = rc.timestep
