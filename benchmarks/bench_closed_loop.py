@@ -78,6 +78,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tiny", action="store_true")
+    parser.add_argument("--no-relocate", action="store_true",
+                        help="closed loop without the objects' re-localization")
+    parser.add_argument("--no-correct", action="store_true",
+                        help="closed loop without the target's correction")
     args = parser.parse_args()
     if args.tiny:
         tiny()
@@ -101,8 +105,14 @@ def main() -> None:
             sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
             algorithm=s.algorithm, population_size=s.population_size,
             tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
-            algorithm_params=s.options.get("algorithm_params"))
+            algorithm_params=s.options.get("algorithm_params"),
+            relocate_objects=not args.no_relocate, correct=not args.no_correct)
         steps = closed.info["closed_loop"]
+        print({"seed": seed, "relocalized": closed.info["relocalized"],
+               "step_error_mm": np.round(1e3 * np.asarray(steps["error"]), 1).tolist(),
+               "targets": closed.info["targets"],
+               "box_end": np.round(closed.features[-1], 4).tolist(),
+               "goal_end": np.round(goal[-1], 4).tolist()}, flush=True)
         rows.append({
             "seed": seed, "iet_model_success": res.success,
             "open_loop_success": open_loop["success"],
@@ -113,11 +123,15 @@ def main() -> None:
             "planning_s": float(np.sum(steps["planning_s"])),
             "execution_s": float(np.sum(steps["execution_s"])),
             "closed_compile_s": closed.compile_time_s,
+            "closed_step_error_mm": np.round(1e3 * np.asarray(steps["error"]),
+                                             1).tolist(),
             "closed_total_s": time.perf_counter() - t1,
         })
         print(rows[-1], flush=True)
-    print_table(rows, list(rows[0]))
+    print_table(rows, [k for k in rows[0] if k != "closed_step_error_mm"])
     summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
+               "relocate_objects": not args.no_relocate,
+               "correct": not args.no_correct,
                "open_loop_successes": sum(r["open_loop_success"] for r in rows),
                "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
                "mismatch": open_loop["mismatch"]}
