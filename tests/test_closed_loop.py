@@ -126,11 +126,16 @@ def test_the_report_gives_the_closed_loop_a_row_beside_the_open_loop():
                "max_point_error": 0.03, "success": False,
                "closed_loop": {"point_errors": [0.02, 0.004], "max_point_error": 0.02,
                                "success": False, "steps": 2,
-                               "planning_s": [0.5, 0.25], "execution_s": [0.1, 0.1]}}
+                               "planning_s": [0.5, 0.25], "execution_s": [0.1, 0.1],
+                               "relocalized": ["box.x", "box.y"],
+                               "not_relocalized": {"marker.x": "on the robot",
+                                                   "marker.y": "on the robot"}}}
     rows = reality_rows(reality, "m")
     assert len(rows) == 2 and rows[0].startswith("| open loop")
     assert rows[1].startswith("| closed loop (OET) on the same world | success False")
     assert "per point: 0.02, 0.004; 2 steps, planning 0.75 s, execution 0.2 s" in rows[1]
+    assert ("objects re-localized from box.x, box.y (not marker.x, marker.y: on the "
+            "robot) |") in rows[1]
     del reality["closed_loop"]  # other strategies: the open loop only
     assert len(reality_rows(reality, "m")) == 1
 
