@@ -18,7 +18,12 @@ Both judged per goal point on the world's measured features (OET in order).
 offsets drawn in [-3, 3] degrees, mismatch seeds 5 and 6, OET seeds 0 and 1): OET's
 plan replayed open loop against OET closed loop.
 
-    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny]
+``--config rotate_valve_mismatch``: the valve variant (the lever twice as heavy,
+3 degree offsets on the abduction and the elbow, 0.01 rad of angle noise).
+``--no-relocate`` / ``--no-correct``: the closed loop without the objects'
+re-localization / the target's correction.
+
+    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny] [--config NAME]
 """
 
 from __future__ import annotations
@@ -78,6 +83,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tiny", action="store_true")
+    parser.add_argument("--config", default=NAME,
+                        help=f"an experiment with a [reality] table (default {NAME})")
     parser.add_argument("--no-relocate", action="store_true",
                         help="closed loop without the objects' re-localization")
     parser.add_argument("--no-correct", action="store_true",
@@ -86,7 +93,7 @@ def main() -> None:
     if args.tiny:
         tiny()
         return
-    cfg = ex.load_config(REPO / "experiments" / f"{NAME}.toml")
+    cfg = ex.load_config(REPO / "experiments" / f"{args.config}.toml")
     goal, demos, _ = ex.build_goal(cfg)
     sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
     s, table = cfg.strategy, cfg.reality.mismatch_table()
@@ -136,7 +143,8 @@ def main() -> None:
                "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
                "mismatch": open_loop["mismatch"]}
     print(summary)
-    write_json("bench_closed_loop", {"rows": rows, "summary": summary})
+    write_json("bench_closed_loop" + ("" if args.config == NAME else f"_{args.config}"),
+               {"rows": rows, "summary": summary})
 
 
 if __name__ == "__main__":
