@@ -10,6 +10,7 @@ import pytest
 
 from cgda_jax import ObjectScene, Robot, Simulator, model_path
 from cgda_jax.reality.mismatch import MismatchedWorld
+from cgda_jax.reality.protocol import Measurement
 from cgda_jax.sim.features import FeatureSet
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop
@@ -92,22 +93,34 @@ def test_the_located_state_has_the_measured_features():
 
 
 class _MovedBox(MismatchedWorld):
-    """The world with its box 3 cm / -2 cm off where the model has it."""
+    """The world with its box 3 cm / -2 cm off where the model has it, moved
+    again by 2 cm / 1 cm before the first step (someone nudges it)."""
 
-    def reset(self):
-        out = super().reset()
+    def _shift(self, dxy):
         j = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, "box")
         a = self.model.jnt_qposadr[j]
-        self._data.qpos[a:a + 2] += [0.03, -0.02]
+        self._data.qpos[a:a + 2] += dxy
         mujoco.mj_forward(self.model, self._data)
-        return out
+
+    def reset(self):
+        super().reset()
+        self._shift([0.03, -0.02])
+        self.at_start = self.box_xy()
+        feats = self._features(self._data.sensordata.copy(), None)  # moved
+        return Measurement(feats[None], np.asarray(self.sim.robot.start_genes)[None])
+
+    def execute(self, trajectory):
+        if not hasattr(self, "nudged"):
+            self.nudged = True
+            self._shift([0.02, 0.01])
+        return super().execute(trajectory)
 
     def box_xy(self):
         b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, "box")
         return self._data.xpos[b][:2].copy()
 
 
-def test_the_next_step_is_planned_from_the_measured_box(sim, goal):
+def test_each_step_is_planned_from_the_measured_box(sim, goal):
     model_box = goal[0, :2]  # where the model has it (at rest, out of reach)
     world = _MovedBox(sim)
     res = run_oet_closed_loop(sim, goal, world, correct=False, **KW)
@@ -115,11 +128,13 @@ def test_the_next_step_is_planned_from_the_measured_box(sim, goal):
     assert set(res.info["not_relocalized"]) == {"marker.x", "marker.y", "marker.z"}
     predicted = np.asarray(res.info["closed_loop"]["predicted_features"])
     np.testing.assert_allclose(res.features[:, :2], [world.box_xy()] * 2, atol=1e-6)
-    assert np.linalg.norm(world.box_xy() - model_box) > 0.035
-    # the first step starts from the model's box (nothing measured yet), the
-    # second from the box measured after the first: the world's (MuJoCo C data),
-    # not where the model predicted it
-    np.testing.assert_allclose(predicted[0, :2], model_box, atol=1e-5)
+    np.testing.assert_allclose(world.at_start - model_box, [0.03, -0.02], atol=1e-5)
+    np.testing.assert_allclose(world.box_xy() - world.at_start, [0.02, 0.01],
+                               atol=1e-5)
+    # the first step starts from the box measured at the start (the world's
+    # MuJoCo C data there), the second from the box measured after the first: not
+    # where the model had or predicted it (the box out of reach stays put there)
+    np.testing.assert_allclose(predicted[0, :2], world.at_start, atol=1e-5)
     np.testing.assert_allclose(predicted[1, :2], world.box_xy(), atol=1e-5)
 
 

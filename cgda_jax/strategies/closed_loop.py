@@ -21,7 +21,8 @@ One step:
    where the measured features say (`cgda_jax.sim.relocate.ObjectLocator`: a box's
    free joint from its measured position and yaw, a valve's hinge from its
    measured angle, at rest), so that the next step is planned against the object
-   where the world has it.  What the features do not determine stays the model's
+   where the world has it (also before the first step, from the reality's start
+   measurement).  What the features do not determine stays the model's
    prediction: the other velocities, an object feature the locator cannot invert
    (``info["not_relocalized"]`` says which and why) and a scene's carried state
    (painted cells).
@@ -48,7 +49,7 @@ from cgda_jax.strategies.oet import OETPlan
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import seed_keys
 
-__all__ = ["compiled_loop", "measured_state", "run_oet_closed_loop"]
+__all__ = ["compiled_loop", "measured_state", "run_oet_closed_loop", "start_features"]
 
 
 def measured_state(sim, predicted: Any, joints: jax.Array, locator: Any = None,
@@ -74,17 +75,32 @@ def measured_state(sim, predicted: Any, joints: jax.Array, locator: Any = None,
     return new.replace(genes=q)
 
 
+def start_features(sim, state: Any) -> np.ndarray:
+    """(F,) the world features of a dynamic-mode ``state`` (MuJoCo C's forward
+    kinematics of its physics state): what the model has at the loop's start."""
+    import mujoco
+
+    phys = sim.physics
+    data = np.asarray(state.data, np.float64)
+    d = mujoco.MjData(phys.model)
+    d.qpos[:], d.qvel[:] = data[:phys.nq], data[phys.nq:]
+    mujoco.mj_forward(phys.model, d)
+    return np.asarray(phys.features.from_data(d), np.float64)
+
+
 _COMPILED: dict = {}  # (sim, goal, settings) -> the compiled loop; a few kept
 _KEEP = 4
 
 
 def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
-    """The loop's compiled functions ``(plan, init, advance, relocate)``: OET's plan
+    """The loop's compiled functions ``(plan, init, advance, relocate, start)``: OET's plan
     of ``settings`` (`OETPlan`'s keyword arguments) on ``sim`` and ``goal``, its
     ``init(key)``, ``advance(state)`` (OET's steps until one posture is executed
     in the model, with that step's best fitness) and ``relocate(state, prev_k,
     joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`, the
-    objects re-localized by ``locator`` when given; ``correct`` a traced bool).
+    objects re-localized by ``locator`` when given; ``correct`` a traced bool),
+    and ``start(state, joints, features, predicted)`` (`OETPlan.start_at` on
+    `measured_state` of the reality's start measurement; None without a locator).
     Compiled once
     per simulator, goal and settings (the seed is an argument): the last few are
     kept, so a loop over seeds or realities compiles once."""
@@ -113,6 +129,10 @@ def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
                                s.features[s.steps - 1], feats)
         return plan.relocalize(s, prev_k, state, feats, correct)
 
+    def start(s, joints, feats, predicted):
+        state = measured_state(sim, s.sim_state, joints, locator, predicted, feats)
+        return plan.start_at(s, state)
+
     key = seed_keys([0])[0]
     init_c = jax.jit(plan.init).lower(key).compile()
     s = jax.eval_shape(plan.init, key)
@@ -121,9 +141,12 @@ def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
     relocate_c = jax.jit(relocate).lower(
         s, s.k, spec((plan.n_dof,), jnp.float32),
         spec((goal_np.shape[1],), jnp.float32), spec((), jnp.bool_)).compile()
+    feat = spec((goal_np.shape[1],), jnp.float32)
+    start_c = jax.jit(start).lower(s, spec((plan.n_dof,), jnp.float32), feat,
+                                   feat).compile() if locator is not None else None
     while len(_COMPILED) >= _KEEP:
         _COMPILED.pop(next(iter(_COMPILED)))
-    out = (plan, init_c, advance_c, relocate_c)
+    out = (plan, init_c, advance_c, relocate_c, start_c)
     _COMPILED[cache_key] = (sim, out)
     return out
 
@@ -211,14 +234,19 @@ def run_oet_closed_loop(
                 "algorithm_params": algorithm_params, "max_steps": max_steps,
                 "lookahead": lookahead, "restarts": restarts,
                 "stagnation": stagnation}
-    measure(reality)  # the start posture (a failing reality stops before compiling)
+    first = measure(reality)  # (a failing reality stops the run before compiling)
     t0 = time.perf_counter()
     found = ObjectLocator.of(sim) if relocate_objects else None
     locator = found if found is not None and found.any else None
-    plan, init_c, advance_c, relocate_c = compiled_loop(sim, goal, settings, locator)
+    plan, init_c, advance_c, relocate_c, start_c = compiled_loop(sim, goal, settings,
+                                                                 locator)
     compile_time = time.perf_counter() - t0
     key = seed_keys([seed])[0]
     s = init_c(key)
+    if start_c is not None:  # the objects where the reality measured them at its start
+        s = start_c(s, jnp.asarray(first.joints[0], jnp.float32),
+                    jnp.asarray(first.features[0], jnp.float32),
+                    jnp.asarray(start_features(sim, s.sim_state), jnp.float32))
 
     t1 = time.perf_counter()
     steps: dict[str, list] = {"planning_s": [], "execution_s": [], "error": [],
