@@ -21,7 +21,8 @@ plan replayed open loop against OET closed loop.
 ``--config rotate_valve_mismatch``: the valve variant (the lever twice as heavy,
 3 degree offsets on the abduction and the elbow, 0.01 rad of angle noise).
 ``--no-relocate`` / ``--no-correct``: the closed loop without the objects'
-re-localization / the target's correction.
+re-localization / the target's correction; ``--step-tolerance``, ``--restarts``,
+``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).
 
     python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny] [--config NAME]
 """
@@ -89,6 +90,14 @@ def main() -> None:
                         help="closed loop without the objects' re-localization")
     parser.add_argument("--no-correct", action="store_true",
                         help="closed loop without the target's correction")
+    parser.add_argument("--step-tolerance", type=float, default=None,
+                        help="closed loop: a step's evolution stops below this "
+                             "(default: the config's tolerance; judged at that)")
+    parser.add_argument("--restarts", type=int, default=0,
+                        help="closed loop: restarts of a stalled step's evolution")
+    parser.add_argument("--stagnation", type=int, default=None,
+                        help="closed loop: a try stops after this many "
+                             "generations without improvement")
     args = parser.parse_args()
     if args.tiny:
         tiny()
@@ -113,7 +122,9 @@ def main() -> None:
             algorithm=s.algorithm, population_size=s.population_size,
             tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
             algorithm_params=s.options.get("algorithm_params"),
-            relocate_objects=not args.no_relocate, correct=not args.no_correct)
+            relocate_objects=not args.no_relocate, correct=not args.no_correct,
+            step_tolerance=args.step_tolerance, restarts=args.restarts,
+            stagnation=args.stagnation)
         steps = closed.info["closed_loop"]
         print({"seed": seed, "relocalized": closed.info["relocalized"],
                "step_error_mm": np.round(1e3 * np.asarray(steps["error"]), 1).tolist(),
@@ -139,6 +150,8 @@ def main() -> None:
     summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
                "relocate_objects": not args.no_relocate,
                "correct": not args.no_correct,
+               "step_tolerance": args.step_tolerance, "restarts": args.restarts,
+               "stagnation": args.stagnation,
                "open_loop_successes": sum(r["open_loop_success"] for r in rows),
                "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
                "mismatch": open_loop["mismatch"]}

@@ -34,6 +34,7 @@ that measures exactly what the model predicts it is OET (`run_oet`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -45,7 +46,7 @@ from cgda_jax.reality.export import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.base import check_config
-from cgda_jax.strategies.oet import OETPlan
+from cgda_jax.strategies.oet import OETPlan, ordered_point_errors
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import seed_keys
 
@@ -177,6 +178,7 @@ def run_oet_closed_loop(
     rate: float = 100.0,
     correct: bool = True,
     relocate_objects: bool = True,
+    step_tolerance: float | None = None,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Any = None,
@@ -199,6 +201,11 @@ def run_oet_closed_loop(
             (`cgda_jax.sim.relocate.ObjectLocator`; ``info["relocalized"]`` and
             ``info["not_relocalized"]`` name the feature columns); False: they
             stay where the model predicts them.
+        step_tolerance: a step's evolution stops below this error in the model
+            (None: ``tolerance``); the measured result is still judged at
+            ``tolerance``.  A tighter one keeps the model from accepting a push
+            that lands anywhere within the tolerance, which a world that
+            slides further (a heavier box on less friction) overshoots.
         algorithm, population_size, tolerance, max_generations, max_steps,
             lookahead, restarts, stagnation, seed, algorithm_kwargs,
             algorithm_params: as in `cgda_jax.strategies.oet.run_oet`.
@@ -227,9 +234,13 @@ def run_oet_closed_loop(
         raise ValueError(f"devices={devices!r}: the closed loop runs on one device "
                          "(None or 1)")
     goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    if step_tolerance is not None and not (np.isfinite(step_tolerance)
+                                           and step_tolerance > 0):
+        raise ValueError(f"step_tolerance must be > 0; got {step_tolerance}")
     _check_names(sim, reality)
     settings = {"algorithm": algorithm, "population_size": population_size,
-                "tolerance": tolerance, "max_generations": max_generations,
+                "tolerance": tolerance if step_tolerance is None else
+                float(step_tolerance), "max_generations": max_generations,
                 "algorithm_kwargs": algorithm_kwargs,
                 "algorithm_params": algorithm_params, "max_steps": max_steps,
                 "lookahead": lookahead, "restarts": restarts,
@@ -291,9 +302,16 @@ def run_oet_closed_loop(
     timing = {"wall_time_s": wall, "compile_time_s": compile_time,
               "trials_in_batch": 1}
     res = plan.to_result(final, history, timing)
+    if step_tolerance is not None:  # judged at the run's tolerance, not the step's
+        dist = np.linalg.norm(goal_np[:, None] - res.features[None], axis=-1)
+        errors = ordered_point_errors(dist, tolerance)
+        res = dataclasses.replace(
+            res, point_errors=errors, tolerance=float(tolerance),
+            success=bool(np.all(errors < tolerance)) and res.info.get("feasible", True))
     res.info.update({"seed": int(seed), "devices": 1, "loop": "closed",
                      "closed_loop": steps, "corrected": bool(correct),
                      "relocalized": list(found.located) if found else [],
                      "not_relocalized": dict(found.not_located) if found else {},
-                     "reality": type(reality).__name__})
+                     "reality": type(reality).__name__,
+                     "step_tolerance": step_tolerance})
     return res
