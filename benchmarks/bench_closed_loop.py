@@ -18,7 +18,13 @@ Both judged per goal point on the world's measured features (OET in order).
 offsets drawn in [-3, 3] degrees, mismatch seeds 5 and 6, OET seeds 0 and 1): OET's
 plan replayed open loop against OET closed loop.
 
-    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny]
+``--config rotate_valve_mismatch``: the valve variant (the lever twice as heavy,
+3 degree offsets on the abduction and the elbow, 0.01 rad of angle noise).
+``--no-relocate`` / ``--no-correct``: the closed loop without the objects'
+re-localization / the target's correction; ``--step-tolerance``, ``--restarts``,
+``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).
+
+    python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny] [--config NAME]
 """
 
 from __future__ import annotations
@@ -78,11 +84,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=5)
     parser.add_argument("--tiny", action="store_true")
+    parser.add_argument("--config", default=NAME,
+                        help=f"an experiment with a [reality] table (default {NAME})")
+    parser.add_argument("--no-relocate", action="store_true",
+                        help="closed loop without the objects' re-localization")
+    parser.add_argument("--no-correct", action="store_true",
+                        help="closed loop without the target's correction")
+    parser.add_argument("--step-tolerance", type=float, default=None,
+                        help="closed loop: a step's evolution stops below this "
+                             "(default: the config's tolerance; judged at that)")
+    parser.add_argument("--restarts", type=int, default=0,
+                        help="closed loop: restarts of a stalled step's evolution")
+    parser.add_argument("--stagnation", type=int, default=None,
+                        help="closed loop: a try stops after this many "
+                             "generations without improvement")
     args = parser.parse_args()
     if args.tiny:
         tiny()
         return
-    cfg = ex.load_config(REPO / "experiments" / f"{NAME}.toml")
+    cfg = ex.load_config(REPO / "experiments" / f"{args.config}.toml")
     goal, demos, _ = ex.build_goal(cfg)
     sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
     s, table = cfg.strategy, cfg.reality.mismatch_table()
@@ -101,8 +121,16 @@ def main() -> None:
             sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
             algorithm=s.algorithm, population_size=s.population_size,
             tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
-            algorithm_params=s.options.get("algorithm_params"))
+            algorithm_params=s.options.get("algorithm_params"),
+            relocate_objects=not args.no_relocate, correct=not args.no_correct,
+            step_tolerance=args.step_tolerance, restarts=args.restarts,
+            stagnation=args.stagnation)
         steps = closed.info["closed_loop"]
+        print({"seed": seed, "relocalized": closed.info["relocalized"],
+               "step_error_mm": np.round(1e3 * np.asarray(steps["error"]), 1).tolist(),
+               "targets": closed.info["targets"],
+               "box_end": np.round(closed.features[-1], 4).tolist(),
+               "goal_end": np.round(goal[-1], 4).tolist()}, flush=True)
         rows.append({
             "seed": seed, "iet_model_success": res.success,
             "open_loop_success": open_loop["success"],
@@ -113,16 +141,23 @@ def main() -> None:
             "planning_s": float(np.sum(steps["planning_s"])),
             "execution_s": float(np.sum(steps["execution_s"])),
             "closed_compile_s": closed.compile_time_s,
+            "closed_step_error_mm": np.round(1e3 * np.asarray(steps["error"]),
+                                             1).tolist(),
             "closed_total_s": time.perf_counter() - t1,
         })
         print(rows[-1], flush=True)
-    print_table(rows, list(rows[0]))
+    print_table(rows, [k for k in rows[0] if k != "closed_step_error_mm"])
     summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
+               "relocate_objects": not args.no_relocate,
+               "correct": not args.no_correct,
+               "step_tolerance": args.step_tolerance, "restarts": args.restarts,
+               "stagnation": args.stagnation,
                "open_loop_successes": sum(r["open_loop_success"] for r in rows),
                "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
                "mismatch": open_loop["mismatch"]}
     print(summary)
-    write_json("bench_closed_loop", {"rows": rows, "summary": summary})
+    write_json("bench_closed_loop" + ("" if args.config == NAME else f"_{args.config}"),
+               {"rows": rows, "summary": summary})
 
 
 if __name__ == "__main__":

@@ -126,11 +126,16 @@ def test_the_report_gives_the_closed_loop_a_row_beside_the_open_loop():
                "max_point_error": 0.03, "success": False,
                "closed_loop": {"point_errors": [0.02, 0.004], "max_point_error": 0.02,
                                "success": False, "steps": 2,
-                               "planning_s": [0.5, 0.25], "execution_s": [0.1, 0.1]}}
+                               "planning_s": [0.5, 0.25], "execution_s": [0.1, 0.1],
+                               "relocalized": ["box.x", "box.y"],
+                               "not_relocalized": {"marker.x": "on the robot",
+                                                   "marker.y": "on the robot"}}}
     rows = reality_rows(reality, "m")
     assert len(rows) == 2 and rows[0].startswith("| open loop")
     assert rows[1].startswith("| closed loop (OET) on the same world | success False")
     assert "per point: 0.02, 0.004; 2 steps, planning 0.75 s, execution 0.2 s" in rows[1]
+    assert ("objects re-localized from box.x, box.y (not marker.x, marker.y: on the "
+            "robot) |") in rows[1]
     del reality["closed_loop"]  # other strategies: the open loop only
     assert len(reality_rows(reality, "m")) == 1
 
@@ -148,3 +153,18 @@ def test_the_replay_check_judges_oet_steps_in_order(sim, goal):
                                 features=feats, tolerance=0.01)
     out = replay_check(sim, res)
     assert out["success"] and out["max_point_error"] < 0.01
+
+
+def test_a_tighter_step_tolerance_is_judged_at_the_run_s_tolerance(sim, goal):
+    world = MismatchedWorld(sim)
+    res = run_oet_closed_loop(sim, goal, world, correct=False,
+                              **{**KW, "tolerance": 0.02}, step_tolerance=0.005)
+    assert res.tolerance == 0.02 and res.info["step_tolerance"] == 0.005
+    # the errors and the success are the measured features against the goal at
+    # 0.02, in order (independent of the steps' own 0.005)
+    dist = np.linalg.norm(goal[:, None] - res.features[None], axis=-1)
+    want = ordered_point_errors(dist, 0.02)
+    np.testing.assert_allclose(res.point_errors, want, atol=1e-6)
+    assert res.success == bool(np.all(want < 0.02))
+    with pytest.raises(ValueError, match="step_tolerance must be > 0"):
+        run_oet_closed_loop(sim, goal, world, **KW, step_tolerance=float("nan"))

@@ -215,6 +215,8 @@ def closed_loop_check(sim, goal, strategy, table: dict) -> dict:
         "success": bool(res.success), "step_errors": steps["error"],
         "planning_s": steps["planning_s"], "execution_s": steps["execution_s"],
         "compile_time_s": res.compile_time_s,
+        "relocalized": res.info["relocalized"],
+        "not_relocalized": res.info["not_relocalized"],
     }
 
 

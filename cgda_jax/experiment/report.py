@@ -151,6 +151,16 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
             f"{lim['velocity']}, acceleration {lim['acceleration']}) |")]
 
 
+def _not_relocalized(table: dict | None) -> str:
+    """The feature columns the closed loop could not re-localize, by reason."""
+    if not table:
+        return ""
+    by: dict[str, list[str]] = {}
+    for col, why in table.items():
+        by.setdefault(why, []).append(col)
+    return " (not " + "; ".join(f"{', '.join(c)}: {w}" for w, c in by.items()) + ")"
+
+
 def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     """The report's row of the result executed open loop on the mismatched world
     (`cgda_jax.experiment.compute.reality_check`) and, for OET, the row of the
@@ -175,7 +185,9 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
             f"max point error {_with_unit(closed['max_point_error'], unit)}; per "
             f"point: {per}; {closed['steps']} steps, planning "
             f"{sum(closed['planning_s']):.3g} s, execution "
-            f"{sum(closed['execution_s']):.3g} s |")
+            f"{sum(closed['execution_s']):.3g} s; objects re-localized from "
+            f"{', '.join(closed.get('relocalized') or []) or 'no feature'}"
+            f"{_not_relocalized(closed.get('not_relocalized'))} |")
     return rows
 
 

@@ -56,7 +56,7 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["FeatureSet", "FeatureSpec", "add_sensors"]
+__all__ = ["FRAME_COLUMNS", "FeatureSet", "FeatureSpec", "add_sensors"]
 
 KINDS = ("body", "site", "joint")
 #: quantity -> (columns, unit) for bodies and sites; column = axis index or "yaw".
@@ -73,6 +73,8 @@ _JOINT_QUANTITIES = {
     "angle": (mujoco.mjtJoint.mjJNT_HINGE, "rad"),
     "position": (mujoco.mjtJoint.mjJNT_SLIDE, "m"),
 }
+#: body/site quantity -> its columns: an axis index (0, 1, 2) or "yaw".
+FRAME_COLUMNS = {q: cols for q, (cols, _) in _FRAME_QUANTITIES.items()}
 QUANTITIES = {
     "body": tuple(_FRAME_QUANTITIES),
     "site": tuple(_FRAME_QUANTITIES),

@@ -17,10 +17,15 @@ One step:
    MEASURED joints, the marker there), its target moved against the measured
    features' offset from the model's prediction (``correct``: a model error the
    encoders cannot see, a calibration offset, a heavier object, is corrected at the
-   next step).  What the protocol does not measure (features and joints only) stays
-   the model's prediction: velocities, object poses and a scene's carried state
-   (painted cells); the objects are re-localized only through the features (the
-   goal step and the correction), not in the model's state.
+   next step), and (``relocate_objects``, dynamic mode) the model's objects put
+   where the measured features say (`cgda_jax.sim.relocate.ObjectLocator`: a box's
+   free joint from its measured position and yaw, a valve's hinge from its
+   measured angle, at rest), so that the next step is planned against the object
+   where the world has it (also before the first step, from the reality's start
+   measurement).  What the features do not determine stays the model's
+   prediction: the other velocities, an object feature the locator cannot invert
+   (``info["not_relocalized"]`` says which and why) and a scene's carried state
+   (painted cells).
 
 It stops when the localized step is the goal's last point, after ``max_steps``
 executed steps, or when a step's evolution found no valid posture.  With a reality
@@ -29,6 +34,7 @@ that measures exactly what the model predicts it is OET (`run_oet`).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from typing import Any
 
@@ -38,46 +44,70 @@ import numpy as np
 
 from cgda_jax.reality.export import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
+from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.base import check_config
-from cgda_jax.strategies.oet import OETPlan
+from cgda_jax.strategies.oet import OETPlan, ordered_point_errors
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import seed_keys
 
-__all__ = ["compiled_loop", "measured_state", "run_oet_closed_loop"]
+__all__ = ["compiled_loop", "measured_state", "run_oet_closed_loop", "start_features"]
 
 
-def measured_state(sim, predicted: Any, joints: jax.Array) -> Any:
+def measured_state(sim, predicted: Any, joints: jax.Array, locator: Any = None,
+                   predicted_features: Any = None, features: Any = None) -> Any:
     """The internal `SimState` rebuilt on measured ``joints`` (DoF,), the rest the
     model's ``predicted`` state after the step. Kinematic mode: the posture
     (``genes``, clipped) and the marker at the measured joints. Dynamic mode: the
-    physics posture's evolved joints at the measured ones (velocities, objects and
-    the other joints as predicted: the protocol measures none of them), the marker
-    there; ``genes``, the commanded target the next move's ramp starts from, stays
-    what was commanded (the exported segment starts there too)."""
+    physics posture's evolved joints at the measured ones (velocities and the other
+    joints as predicted: the protocol measures none of them), the marker there;
+    ``genes``, the commanded target the next move's ramp starts from, stays what
+    was commanded (the exported segment starts there too).  With an
+    `cgda_jax.sim.relocate.ObjectLocator` ``locator`` (dynamic mode), the objects
+    are put where the measured ``features`` (F,) say, ``predicted_features`` (F,)
+    the model's for ``predicted``."""
     q = sim.robot.clip(jnp.asarray(joints, jnp.float32))
     new = predicted.replace(marker=sim.robot.marker_position(q))
     if sim.mode == "dynamic":
         qadr = jnp.asarray(sim.physics.gene_qadr)
-        return new.replace(data=predicted.data.at[qadr].set(q))
+        data = predicted.data
+        if locator is not None:
+            data = locator.locate(data, predicted_features, features)
+        return new.replace(data=data.at[qadr].set(q))
     return new.replace(genes=q)
+
+
+def start_features(sim, state: Any) -> np.ndarray:
+    """(F,) the world features of a dynamic-mode ``state`` (MuJoCo C's forward
+    kinematics of its physics state): what the model has at the loop's start."""
+    import mujoco
+
+    phys = sim.physics
+    data = np.asarray(state.data, np.float64)
+    d = mujoco.MjData(phys.model)
+    d.qpos[:], d.qvel[:] = data[:phys.nq], data[phys.nq:]
+    mujoco.mj_forward(phys.model, d)
+    return np.asarray(phys.features.from_data(d), np.float64)
 
 
 _COMPILED: dict = {}  # (sim, goal, settings) -> the compiled loop; a few kept
 _KEEP = 4
 
 
-def compiled_loop(sim, goal: jax.Array, settings: dict):
-    """The loop's compiled functions ``(plan, init, advance, relocate)``: OET's plan
+def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
+    """The loop's compiled functions ``(plan, init, advance, relocate, start)``: OET's plan
     of ``settings`` (`OETPlan`'s keyword arguments) on ``sim`` and ``goal``, its
     ``init(key)``, ``advance(state)`` (OET's steps until one posture is executed
     in the model, with that step's best fitness) and ``relocate(state, prev_k,
-    joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`;
-    ``correct`` a traced bool). Compiled once
+    joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`, the
+    objects re-localized by ``locator`` when given; ``correct`` a traced bool),
+    and ``start(state, joints, features, predicted)`` (`OETPlan.start_at` on
+    `measured_state` of the reality's start measurement; None without a locator).
+    Compiled once
     per simulator, goal and settings (the seed is an argument): the last few are
     kept, so a loop over seeds or realities compiles once."""
     goal_np = np.asarray(goal)
     cache_key = (id(sim), goal_np.shape, goal_np.tobytes(),
-                 repr(sorted(settings.items())))
+                 repr(sorted(settings.items())), locator is not None)
     hit = _COMPILED.get(cache_key)
     if hit is not None and hit[0] is sim:
         return hit[1]
@@ -96,8 +126,13 @@ def compiled_loop(sim, goal: jax.Array, settings: dict):
         return jax.lax.while_loop(cond, body, (s, jnp.asarray(jnp.inf, jnp.float32)))
 
     def relocate(s, prev_k, joints, feats, correct):
-        state = measured_state(sim, s.sim_state, joints)
+        state = measured_state(sim, s.sim_state, joints, locator,
+                               s.features[s.steps - 1], feats)
         return plan.relocalize(s, prev_k, state, feats, correct)
+
+    def start(s, joints, feats, predicted):
+        state = measured_state(sim, s.sim_state, joints, locator, predicted, feats)
+        return plan.start_at(s, state)
 
     key = seed_keys([0])[0]
     init_c = jax.jit(plan.init).lower(key).compile()
@@ -107,9 +142,12 @@ def compiled_loop(sim, goal: jax.Array, settings: dict):
     relocate_c = jax.jit(relocate).lower(
         s, s.k, spec((plan.n_dof,), jnp.float32),
         spec((goal_np.shape[1],), jnp.float32), spec((), jnp.bool_)).compile()
+    feat = spec((goal_np.shape[1],), jnp.float32)
+    start_c = jax.jit(start).lower(s, spec((plan.n_dof,), jnp.float32), feat,
+                                   feat).compile() if locator is not None else None
     while len(_COMPILED) >= _KEEP:
         _COMPILED.pop(next(iter(_COMPILED)))
-    out = (plan, init_c, advance_c, relocate_c)
+    out = (plan, init_c, advance_c, relocate_c, start_c)
     _COMPILED[cache_key] = (sim, out)
     return out
 
@@ -139,6 +177,8 @@ def run_oet_closed_loop(
     seed: int = 0,
     rate: float = 100.0,
     correct: bool = True,
+    relocate_objects: bool = True,
+    step_tolerance: float | None = None,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Any = None,
@@ -156,6 +196,16 @@ def run_oet_closed_loop(
         correct: the next step's target moved against the last step's measured
             offset from the model's prediction (`OETPlan.relocalize`); False:
             re-localized and re-planned from the measured joints only.
+        relocate_objects: dynamic mode: after each step the model's objects are
+            put where the measured features say
+            (`cgda_jax.sim.relocate.ObjectLocator`; ``info["relocalized"]`` and
+            ``info["not_relocalized"]`` name the feature columns); False: they
+            stay where the model predicts them.
+        step_tolerance: a step's evolution stops below this error in the model
+            (None: ``tolerance``); the measured result is still judged at
+            ``tolerance``.  A tighter one keeps the model from accepting a push
+            that lands anywhere within the tolerance, which a world that
+            slides further (a heavier box on less friction) overshoots.
         algorithm, population_size, tolerance, max_generations, max_steps,
             lookahead, restarts, stagnation, seed, algorithm_kwargs,
             algorithm_params: as in `cgda_jax.strategies.oet.run_oet`.
@@ -184,19 +234,30 @@ def run_oet_closed_loop(
         raise ValueError(f"devices={devices!r}: the closed loop runs on one device "
                          "(None or 1)")
     goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    if step_tolerance is not None and not (np.isfinite(step_tolerance)
+                                           and step_tolerance > 0):
+        raise ValueError(f"step_tolerance must be > 0; got {step_tolerance}")
     _check_names(sim, reality)
     settings = {"algorithm": algorithm, "population_size": population_size,
-                "tolerance": tolerance, "max_generations": max_generations,
+                "tolerance": tolerance if step_tolerance is None else
+                float(step_tolerance), "max_generations": max_generations,
                 "algorithm_kwargs": algorithm_kwargs,
                 "algorithm_params": algorithm_params, "max_steps": max_steps,
                 "lookahead": lookahead, "restarts": restarts,
                 "stagnation": stagnation}
-    measure(reality)  # the start posture (a failing reality stops before compiling)
+    first = measure(reality)  # (a failing reality stops the run before compiling)
     t0 = time.perf_counter()
-    plan, init_c, advance_c, relocate_c = compiled_loop(sim, goal, settings)
+    found = ObjectLocator.of(sim) if relocate_objects else None
+    locator = found if found is not None and found.any else None
+    plan, init_c, advance_c, relocate_c, start_c = compiled_loop(sim, goal, settings,
+                                                                 locator)
     compile_time = time.perf_counter() - t0
     key = seed_keys([seed])[0]
     s = init_c(key)
+    if start_c is not None:  # the objects where the reality measured them at its start
+        s = start_c(s, jnp.asarray(first.joints[0], jnp.float32),
+                    jnp.asarray(first.features[0], jnp.float32),
+                    jnp.asarray(start_features(sim, s.sim_state), jnp.float32))
 
     t1 = time.perf_counter()
     steps: dict[str, list] = {"planning_s": [], "execution_s": [], "error": [],
@@ -241,7 +302,16 @@ def run_oet_closed_loop(
     timing = {"wall_time_s": wall, "compile_time_s": compile_time,
               "trials_in_batch": 1}
     res = plan.to_result(final, history, timing)
+    if step_tolerance is not None:  # judged at the run's tolerance, not the step's
+        dist = np.linalg.norm(goal_np[:, None] - res.features[None], axis=-1)
+        errors = ordered_point_errors(dist, tolerance)
+        res = dataclasses.replace(
+            res, point_errors=errors, tolerance=float(tolerance),
+            success=bool(np.all(errors < tolerance)) and res.info.get("feasible", True))
     res.info.update({"seed": int(seed), "devices": 1, "loop": "closed",
                      "closed_loop": steps, "corrected": bool(correct),
-                     "reality": type(reality).__name__})
+                     "relocalized": list(found.located) if found else [],
+                     "not_relocalized": dict(found.not_located) if found else {},
+                     "reality": type(reality).__name__,
+                     "step_tolerance": step_tolerance})
     return res

@@ -231,6 +231,13 @@ class OETPlan(PlanBase):
             k=k, sim_state=sim_state, bias=bias,
             features=s.features.at[s.steps - 1].set(feats))
 
+    def start_at(self, s: OETState, sim_state: Any) -> OETState:
+        """``s`` before its first step (`init`), its first evolution started from
+        ``sim_state`` instead (a closed loop's start state rebuilt on what the
+        reality measured at its start; the localized step as it was)."""
+        return s.replace(evo=self._start(s.key, sim_state, s.k, s.steps, None,
+                                         s.bias), sim_state=sim_state)
+
     def _execute(self, s: OETState) -> OETState:
         q = self.joints(s.evo.best_u)
         sim_state, feats = self.sim.step(s.sim_state, q)
