@@ -103,12 +103,14 @@ def _pump(pipe, out: TextIO, prefix: str, i: int, lines: _Lines) -> None:
 
 
 def _signal_all(procs: Iterable[subprocess.Popen], sig: int) -> None:
+    """`sig` to each worker's process group: the worker and what it started (a
+    worker that already ended may have left children behind in its group, which
+    would otherwise run on and write to its pipes)."""
     for p in procs:
-        if p.poll() is None:
-            try:
-                os.killpg(p.pid, sig)
-            except (ProcessLookupError, PermissionError):
-                pass
+        try:
+            os.killpg(p.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            pass
 
 
 def _wait(procs: list[subprocess.Popen], timeout_s: float) -> bool:
@@ -121,16 +123,18 @@ def _wait(procs: list[subprocess.Popen], timeout_s: float) -> bool:
 
 
 def _stop(procs: Sequence[subprocess.Popen], grace_s: float = 3.0) -> None:
-    """Stop every running worker's process group: SIGTERM, then SIGKILL what is
-    left after `grace_s`. Processes 1 .. N-1 first, process 0 (which hosts JAX's
-    coordination service) once they are gone: a worker whose coordinator vanished
-    first would abort with a C++ stack of its own."""
+    """Stop every worker's process group: SIGTERM, then SIGKILL what is left after
+    `grace_s`. Processes 1 .. N-1 first, process 0 (which hosts JAX's coordination
+    service) once they are gone: a worker whose coordinator vanished first would
+    abort with a C++ stack of its own. Last, SIGKILL to every group: what the
+    workers started and left behind (a helper of a killed worker)."""
     procs = list(procs)
     for group in (procs[1:], procs[:1]):
         _signal_all(group, signal.SIGTERM)
         if not _wait(group, grace_s):
             _signal_all(group, signal.SIGKILL)
             _wait(group, grace_s)
+    _signal_all(procs, signal.SIGKILL)  # what the workers left in their groups
 
 
 def _status(code: int) -> int:
@@ -247,6 +251,7 @@ def start_job(n_processes: int, argv: Sequence[str], *,
     pumps: list[threading.Thread] = []
 
     def end_all(keep: int | None = None) -> None:
+        """Stop the job; `keep`: the failed process, whose last lines still come."""
         if mute_on_end:
             lines.mute(keep, n)
         _stop(procs)
@@ -279,7 +284,10 @@ def start_job(n_processes: int, argv: Sequence[str], *,
                       if c is not None and c not in ok]
             if failed:
                 i, c = failed[0]
-                end_all(keep=i)
+                # killed by a signal, the process itself said nothing more: what
+                # comes on its pipes now is from what it started (a helper's
+                # complaint that its parent vanished), noise like the others'
+                end_all(keep=None if c < 0 else i)
                 return JobEnd(_status(c) or 1, "failed", i, c, message=(
                     f"process {i} exited with status {_status(c)}; stopped the "
                     "others"))

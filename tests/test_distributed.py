@@ -261,3 +261,50 @@ def test_gather_waits_for_a_process_40_s_late():
     code = dist.launch(2, [sys.executable, "-c", GATHER_LATE], timeout_s=TIMEOUT_S,
                        env={"JAX_PLATFORMS": "cpu"}, stdout=out, stderr=io.StringIO())
     assert code == 0 and out.getvalue().count("GATHER-OK") == 2, out.getvalue()
+
+
+# process 0 starts a helper that shares its stderr and reads from it, then is
+# killed: the helper notices its parent gone, complains and would stay 60 s
+ORPHANING = """
+import os, signal, subprocess, sys, time
+if os.environ['CGDA_PROCESS_ID'] == '0':
+    helper = subprocess.Popen([sys.executable, '-c', '''
+import os, sys, time
+print('helper', os.getpid(), flush=True)
+try:
+    input()
+except EOFError:
+    sys.stderr.write('Traceback (most recent call last):\\\\nEOFError: parent gone\\\\n')
+    sys.stderr.flush()
+time.sleep(60)
+'''], stdin=subprocess.PIPE, stdout=sys.stdout)
+    time.sleep(1.0)
+    os.kill(os.getpid(), signal.SIGKILL)
+time.sleep(60)
+"""
+
+
+def test_a_worker_killed_by_a_signal_leaves_no_helper_and_no_noise():
+    """What a killed worker started is stopped with the job, and what it prints
+    as it notices (on the worker's pipes) does not reach the user."""
+    from cgda_jax.launch import start_job
+
+    out, err = io.StringIO(), io.StringIO()
+    t0 = time.monotonic()
+    end = start_job(2, [sys.executable, "-c", ORPHANING], timeout_s=50, stdout=out,
+                    stderr=err, mute_on_end=True, hold_s=0.5)
+    assert end.reason == "failed" and end.process == 0 and end.code == -9
+    assert time.monotonic() - t0 < 20
+    assert "Traceback" not in err.getvalue() and "parent gone" not in err.getvalue()
+    helper = int(next(line for line in out.getvalue().splitlines()
+                      if "helper" in line).split()[-1])
+    assert not _running(helper)
+
+
+def _running(pid: int) -> bool:
+    """`pid` exists and is not a zombie (an orphan killed waits for init to reap it)."""
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
