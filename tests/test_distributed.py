@@ -4,6 +4,7 @@ per-seed results as one process; a failing worker stops the job fast."""
 
 import io
 import os
+import pathlib
 import pickle
 import sys
 import time
@@ -304,7 +305,7 @@ def test_a_worker_killed_by_a_signal_leaves_no_helper_and_no_noise():
 def _running(pid: int) -> bool:
     """`pid` exists and is not a zombie (an orphan killed waits for init to reap it)."""
     try:
-        stat = open(f"/proc/{pid}/stat").read()
+        stat = pathlib.Path(f"/proc/{pid}/stat").read_text()
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
