@@ -168,3 +168,48 @@ def test_a_tighter_step_tolerance_is_judged_at_the_run_s_tolerance(sim, goal):
     assert res.success == bool(np.all(want < 0.02))
     with pytest.raises(ValueError, match="step_tolerance must be > 0"):
         run_oet_closed_loop(sim, goal, world, **KW, step_tolerance=float("nan"))
+
+
+def test_the_reality_section_sets_the_closed_loop_of_cgda_run(sim, goal):
+    """``[reality]`` step_tolerance / relocate_objects / correct reach the closed
+    loop `cgda run --reality` runs (`closed_loop_check`): its result is that of
+    `run_oet_closed_loop` called with them; bad values are config errors."""
+    import types
+
+    from cgda_jax.experiment import ConfigError, load_config
+    from cgda_jax.experiment.compute import closed_loop_check
+    from cgda_jax.experiment.rules import validate_config
+
+    tiny = ["kind=execution", "data.source=clean_circle", "scene.kind=marker",
+            "strategy.feasibility=false", "robot.model=tiny_arm.xml",
+            'robot.joints=["yaw", "shoulder", "elbow"]', "robot.fixed={}",
+            "robot.mode=dynamic", "strategy.name=oet", "strategy.tolerance=0.01",
+            "reality.enabled=true"]
+    cfg = load_config(None, tiny + ["reality.step_tolerance=0.005",
+                                    "reality.correct=false",
+                                    "reality.joint_offset_deg=[-3, 3]",
+                                    "reality.seed=5"])
+    validate_config(cfg)
+    assert cfg.reality.loop_options() == {"step_tolerance": 0.005,
+                                          "relocate_objects": True, "correct": False}
+    assert "step_tolerance" not in cfg.reality.mismatch_table()
+    strategy = types.SimpleNamespace(
+        algorithm="CMA_ES", population_size=KW["population_size"],
+        tolerance=KW["tolerance"], max_generations=KW["max_generations"], seed=0,
+        options={})
+    got = closed_loop_check(sim, goal, strategy, cfg.reality)
+    want = run_oet_closed_loop(
+        sim, goal, MismatchedWorld(sim, Mismatch(joint_offset_deg=[-3, 3], seed=5)),
+        step_tolerance=0.005, correct=False, **KW)
+    np.testing.assert_allclose(got["point_errors"], want.point_errors, atol=1e-9)
+    assert got["steps"] == len(want.joints)
+    from cgda_jax.experiment.report import reality_rows
+
+    row = reality_rows({"mismatch": {}, "seed": 5, "executed": True,
+                        "point_errors": [0.1], "max_point_error": 0.1,
+                        "success": False, "closed_loop": got}, "m")[1]
+    assert "steps evolved to 0.005, targets not corrected |" in row
+    for bad, match in (("reality.step_tolerance=-1", "must be >= 0"),
+                       ("reality.step_tolerance=0.05", "above strategy.tolerance")):
+        with pytest.raises(ConfigError, match=match):
+            validate_config(load_config(None, tiny + [bad]))

@@ -192,21 +192,21 @@ def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
     }
 
 
-def closed_loop_check(sim, goal, strategy, table: dict) -> dict:
+def closed_loop_check(sim, goal, strategy, reality) -> dict:
     """OET closed on the mismatched world (`cgda_jax.strategies.closed_loop`, a
-    fresh `MismatchedWorld` of the ``[reality]`` values ``table``, the run's
-    strategy settings ``strategy``): each step planned from what the world
-    measured; its measured features judged per goal point, and its planning and
-    execution times per step."""
+    fresh `MismatchedWorld` of the ``[reality]`` section ``reality``, with its
+    loop options, and the run's strategy settings ``strategy``): each step
+    planned from what the world measured; its measured features judged per goal
+    point, and its planning and execution times per step."""
     from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
     from cgda_jax.strategies.closed_loop import run_oet_closed_loop
 
-    s = strategy
+    s, loop = strategy, reality.loop_options()
     res = run_oet_closed_loop(
-        sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
+        sim, goal, MismatchedWorld(sim, Mismatch.from_dict(reality.mismatch_table())),
         algorithm=s.algorithm, population_size=s.population_size,
         tolerance=s.tolerance, max_generations=s.max_generations, seed=s.seed,
-        **s.options)
+        **loop, **s.options)
     steps = res.info["closed_loop"]
     errors = np.asarray(res.point_errors, np.float64)
     return {
@@ -217,6 +217,7 @@ def closed_loop_check(sim, goal, strategy, table: dict) -> dict:
         "compile_time_s": res.compile_time_s,
         "relocalized": res.info["relocalized"],
         "not_relocalized": res.info["not_relocalized"],
+        "options": loop,
     }
 
 
@@ -269,7 +270,7 @@ def compute_execution(
         summary["reality"] = reality_check(sim, res, cfg.reality.mismatch_table())
         if s.name == "oet":  # online: also closed on the world, step by step
             summary["reality"]["closed_loop"] = closed_loop_check(
-                sim, goal, s, cfg.reality.mismatch_table())
+                sim, goal, s, cfg.reality)
     motion = motion_check(sim, res)
     if motion is not None:
         summary["motion"], profile = motion

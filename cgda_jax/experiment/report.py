@@ -161,6 +161,20 @@ def _not_relocalized(table: dict | None) -> str:
     return " (not " + "; ".join(f"{', '.join(c)}: {w}" for w, c in by.items()) + ")"
 
 
+def _loop_options(options: dict | None) -> str:
+    """The closed loop's settings that differ from the defaults, in words."""
+    if not options:
+        return ""
+    said = []
+    if options.get("step_tolerance"):
+        said.append(f"steps evolved to {options['step_tolerance']:g}")
+    if options.get("relocate_objects") is False:
+        said.append("objects not re-localized")
+    if options.get("correct") is False:
+        said.append("targets not corrected")
+    return "; " + ", ".join(said) if said else ""
+
+
 def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     """The report's row of the result executed open loop on the mismatched world
     (`cgda_jax.experiment.compute.reality_check`) and, for OET, the row of the
@@ -187,7 +201,8 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
             f"{sum(closed['planning_s']):.3g} s, execution "
             f"{sum(closed['execution_s']):.3g} s; objects re-localized from "
             f"{', '.join(closed.get('relocalized') or []) or 'no feature'}"
-            f"{_not_relocalized(closed.get('not_relocalized'))} |")
+            f"{_not_relocalized(closed.get('not_relocalized'))}"
+            f"{_loop_options(closed.get('options'))} |")
     return rows
 
 

@@ -140,6 +140,14 @@ def _validate_reality(cfg: ExperimentConfig) -> None:
         if unknown:
             raise ConfigError(f"key 'reality.joint_offset_deg': joint(s) {unknown} "
                               f"are not robot.joints {list(cfg.robot.joints)}")
+    st = cfg.reality.step_tolerance
+    if not (math.isfinite(st) and st >= 0):
+        raise ConfigError(f"key 'reality.step_tolerance' = {st}: must be >= 0 (0: the "
+                          "strategy's tolerance)")
+    if st > cfg.strategy.tolerance:
+        raise ConfigError(f"key 'reality.step_tolerance' = {st} is above "
+                          f"strategy.tolerance = {cfg.strategy.tolerance}: a step "
+                          "would stop before its own goal is met")
     if cfg.reality.enabled and cfg.robot.mode != "dynamic":
         raise ConfigError("key 'reality.enabled': a mismatched world is physics; it "
                           "needs robot.mode = \"dynamic\"")

@@ -275,6 +275,14 @@ class RealityConfig:
     ``damping_scale`` (the evolved joints'), ``gain_scale`` (actuator kp),
     ``noise`` (feature noise, standard deviation in feature units), ``delay_s``
     (feature latency).
+
+    How strategy ``oet`` closes its loop on that world
+    (`cgda_jax.strategies.closed_loop.run_oet_closed_loop`): ``step_tolerance``
+    (a step's evolution in the model stops below this error; 0: the strategy's
+    tolerance; the world's measurement is judged at the strategy's tolerance),
+    ``relocate_objects`` (the model's objects put where the world measured them
+    after each step), ``correct`` (the next target moved against the last
+    measured offset from the model's prediction).
     """
 
     enabled: bool = False
@@ -286,7 +294,20 @@ class RealityConfig:
     gain_scale: Any = 1.0
     noise: Any = 0.0
     delay_s: Any = 0.0
+    step_tolerance: float = 0.0
+    relocate_objects: bool = True
+    correct: bool = True
 
     def mismatch_table(self) -> dict[str, Any]:
         """The `cgda_jax.reality.mismatch.Mismatch` keys and values."""
-        return {k: v for k, v in dataclasses.asdict(self).items() if k != "enabled"}
+        return {k: v for k, v in dataclasses.asdict(self).items()
+                if k not in ("enabled", *LOOP_KEYS)}
+
+    def loop_options(self) -> dict[str, Any]:
+        """The closed loop's keyword arguments of `run_oet_closed_loop`."""
+        return {"step_tolerance": self.step_tolerance or None,
+                "relocate_objects": self.relocate_objects, "correct": self.correct}
+
+
+#: The `RealityConfig` keys that set the closed loop, not the world.
+LOOP_KEYS = ("step_tolerance", "relocate_objects", "correct")
