@@ -19,6 +19,7 @@ from typing import Any
 import jax
 
 OUT = pathlib.Path(__file__).resolve().parent / "out"
+REPO = OUT.parents[1]
 
 
 def compile_jax(fn: Callable, *args) -> tuple[Callable, float]:
@@ -98,3 +99,25 @@ def write_json(name: str, payload: dict[str, Any]) -> pathlib.Path:
     path.write_text(json.dumps(payload, indent=2, default=float))
     print(f"wrote {path}")
     return path
+
+
+def experiment_trials(name: str, n_seeds: int):
+    """``experiments/NAME.toml``'s goal and simulator as ``cgda run`` builds them,
+    and seeds 0..n_seeds-1 of its strategy as ONE batched `run_trials` call.
+
+    Returns:
+        (cfg, sim, goal, results, total_s): the config, the simulator, the goal,
+        the `ExecutionResult` per seed and the call's wall time (compile included).
+    """
+    from cgda_jax import experiment as ex, run_trials
+
+    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml")
+    goal, demos, _ = ex.build_goal(cfg)
+    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
+    s = cfg.strategy
+    t0 = time.perf_counter()
+    results = run_trials(
+        s.name, sim, goal, n_seeds, seed=0, algorithm=s.algorithm,
+        population_size=s.population_size, tolerance=s.tolerance,
+        max_generations=s.max_generations, chunk_size=s.chunk_size, **s.options)
+    return cfg, sim, goal, results, time.perf_counter() - t0

@@ -30,18 +30,15 @@ re-localization / the target's correction; ``--step-tolerance``, ``--restarts``,
 from __future__ import annotations
 
 import argparse
-import pathlib
 import time
 
 import numpy as np
-from _common import print_table, write_json
+from _common import experiment_trials, print_table, write_json
 
-from cgda_jax import experiment as ex, run_trials
 from cgda_jax.experiment.compute import reality_check
 from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 NAME = "move_push_box_mismatch"
 
 
@@ -102,16 +99,8 @@ def main() -> None:
     if args.tiny:
         tiny()
         return
-    cfg = ex.load_config(REPO / "experiments" / f"{args.config}.toml")
-    goal, demos, _ = ex.build_goal(cfg)
-    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
+    cfg, sim, goal, iet, iet_s = experiment_trials(args.config, args.seeds)
     s, table = cfg.strategy, cfg.reality.mismatch_table()
-    t0 = time.perf_counter()
-    iet = run_trials(s.name, sim, goal, args.seeds, seed=0, algorithm=s.algorithm,
-                     population_size=s.population_size, tolerance=s.tolerance,
-                     max_generations=s.max_generations, chunk_size=s.chunk_size,
-                     **s.options)
-    iet_s = time.perf_counter() - t0
     rows = []
     for res in iet:
         seed = res.info["seed"]

@@ -13,31 +13,17 @@ reports).  Target (issue 9): each experiment succeeds on at least 9 of 10 seeds.
 from __future__ import annotations
 
 import argparse
-import pathlib
-import time
 
 import numpy as np
-from _common import print_table, report_target, write_json
+from _common import experiment_trials, print_table, report_target, write_json
 
-from cgda_jax import experiment as ex
-from cgda_jax import run_trials
 from cgda_jax.experiment.compute import replay_check
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("clean_ie_dynamic", "paint_iet_dynamic")
 
 
 def run(name: str, n_seeds: int) -> tuple[list[dict], dict]:
-    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml")
-    goal, demos, _ = ex.build_goal(cfg)
-    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
-    s = cfg.strategy
-    t0 = time.perf_counter()
-    results = run_trials(
-        s.name, sim, goal, n_seeds, seed=0, algorithm=s.algorithm,
-        population_size=s.population_size, tolerance=s.tolerance,
-        max_generations=s.max_generations, chunk_size=s.chunk_size, **s.options)
-    total = time.perf_counter() - t0
+    _, sim, _, results, total = experiment_trials(name, n_seeds)
     rows = []
     for res in results:
         replay = replay_check(sim, res)
