@@ -146,18 +146,10 @@ def test_mjx_kinematics_equals_mujoco_c_on_every_shipped_model(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [
     "tiny_arm.xml", "teo.xml",
-    # measured 2026-12-02: MJX's features differ from MuJoCo C's by up to 33 mm on the
-    # Panda (motors through the PD with gravity compensation) under its implicitfast
-    # integrator at 0.01 s; the same model with integrator="Euler" at 0.002 s agrees
-    # within 4e-7 m.  Not resolved yet: a known failure, not a loosened tolerance
-    pytest.param("panda.xml", marks=pytest.mark.xfail(
-        strict=True, reason="MJX vs MuJoCo C differ by up to 33 mm on the Panda's "
-                            "PD under implicitfast (Euler agrees)")),
-    # likewise the iiwa (position servos, implicitfast, 0.01 s): the first waypoint
-    # agrees within 1e-7 m, the second (the arm still moving at 0.1 s) by 8.4 mm
-    pytest.param("iiwa14.xml", marks=pytest.mark.xfail(
-        strict=True, reason="MJX vs MuJoCo C differ by 8.4 mm on the iiwa's moving "
-                            "arm under implicitfast")),
+    # the Panda (motors through the PD, gravity compensation) and the iiwa (force-limited
+    # servos) under implicitfast: 33 mm / 8.4 mm apart with plain mjx.step, which keeps
+    # a saturated actuator's velocity derivative (cgda_jax.sim.mjx_step)
+    "panda.xml", "iiwa14.xml",
 ])
 def test_mjx_physics_equals_mujoco_c_on_every_shipped_model(name):
     joints, site, key = SHIPPED[name]

@@ -48,6 +48,7 @@ import numpy as np
 from jax import Array
 
 from cgda_jax.sim._mujoco_env import mjx_module
+from cgda_jax.sim.mjx_step import step_fn
 
 __all__ = ["PHYSICS", "MjxBackend", "MujocoBackend", "Physics", "resolve_physics"]
 
@@ -277,8 +278,11 @@ class MjxBackend:
     def __init__(self, physics: Physics):
         self.physics = physics
         mjx = mjx_module()
+        m = physics.mjx_model()
+        # mjx.step, or MuJoCo C's rule for saturated forces under implicitfast
+        self._step = step_fn(m)
         with jax.ensure_compile_time_eval():
-            self.model = mjx.put_model(physics.mjx_model(), impl="jax")
+            self.model = mjx.put_model(m, impl="jax")
             self._data0 = mjx.make_data(self.model, impl="jax")
 
     def _data(self, state):
@@ -295,7 +299,7 @@ class MjxBackend:
         mjx = mjx_module()
 
         def body(d, c):
-            d = mjx.step(self.model, d.replace(ctrl=c))
+            d = self._step(self.model, d.replace(ctrl=c))
             return d, d.sensordata  # of the state before this step
 
         d, xs = jax.lax.scan(body, self._data(state), ctrl)
