@@ -299,6 +299,10 @@ def test_a_worker_killed_by_a_signal_leaves_no_helper_and_no_noise():
     assert "Traceback" not in err.getvalue() and "parent gone" not in err.getvalue()
     helper = int(next(line for line in out.getvalue().splitlines()
                       if "helper" in line).split()[-1])
+    # SIGKILL is delivered asynchronously: the process may take a moment to die
+    deadline = time.monotonic() + 5.0
+    while _running(helper) and time.monotonic() < deadline:
+        time.sleep(0.05)
     assert not _running(helper)
 
 
