@@ -138,7 +138,7 @@ def test_unknown_feature_name_lists_the_world(tmp_path):
         build_goal(cfg)
 
 
-@pytest.mark.parametrize("name", ["move_push_box", "rotate_valve"])
+@pytest.mark.parametrize("name", ["move_push_box", "iiwa14_move_push_box", "rotate_valve"])
 def test_object_experiments_build(name):
     cfg = load_config(EXPERIMENTS / f"{name}.toml")
     validate_config(cfg)
@@ -148,7 +148,7 @@ def test_object_experiments_build(name):
     assert all("[" in n for n in sim.feature_names)  # units in the names
     assert sim.mode == "dynamic" and sim.scene.goal_path.shape == (len(goal), 3)
     span = np.abs(goal[-1] - goal[0])
-    if name == "move_push_box":
+    if name.endswith("move_push_box"):
         assert np.linalg.norm(goal[-1] - goal[0]) >= 0.20
     else:
         assert span[0] >= np.radians(90)
