@@ -390,8 +390,10 @@ def test_lines_printed_as_a_job_ends_are_held_and_dropped(hold_s, tmp_path, tag)
                     drop=lambda line: line.startswith("[Gloo] "),
                     keep=lambda line: line.startswith("cgda: "))
     assert (end.status, end.reason, end.process) == (3, "failed", 0)
-    assert err.getvalue() == ("[p1] cgda: error: process 1's own line\n"
-                              "[p0] my own error\n")
+    # two processes' pipes are relayed by their own threads: the order of lines from
+    # different processes is not fixed (seen under load), their content is
+    assert sorted(err.getvalue().splitlines(keepends=True)) == [
+        "[p0] my own error\n", "[p1] cgda: error: process 1's own line\n"]
     noise = "[p1] NOISE as process 0 ends\n"
     assert out.getvalue() == "[p0] hello\n" + ("" if hold_s else noise)
     none_left(tag)
