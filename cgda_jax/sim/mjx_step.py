@@ -33,37 +33,39 @@ __all__ = ["clamped_implicit_step", "needs_clamped_step", "step_fn"]
 _JOINT_TRN = (int(mujoco.mjtTrn.mjTRN_JOINT), int(mujoco.mjtTrn.mjTRN_JOINTINPARENT))
 
 
+def _clamp_bounds(m: mujoco.MjModel):
+    """Per actuator: its own force bounds, the dof of the joint it drives and that
+    joint's ``actuatorfrcrange`` (+-inf where there is none)."""
+    own = np.asarray(m.actuator_forcelimited, bool)
+    own_lo = np.where(own, m.actuator_forcerange[:, 0], -np.inf).astype(np.float32)
+    own_hi = np.where(own, m.actuator_forcerange[:, 1], np.inf).astype(np.float32)
+    dof = np.zeros(m.nu, np.int32)
+    j_lo = np.full(m.nu, -np.inf, np.float32)
+    j_hi = np.full(m.nu, np.inf, np.float32)
+    for a in range(m.nu):
+        if int(m.actuator_trntype[a]) in _JOINT_TRN:
+            j = int(m.actuator_trnid[a, 0])
+            dof[a] = int(m.jnt_dofadr[j])
+            if m.jnt_actfrclimited[j]:
+                j_lo[a], j_hi[a] = m.jnt_actfrcrange[j]
+    return own_lo, own_hi, dof, j_lo, j_hi
+
+
 def needs_clamped_step(m: mujoco.MjModel) -> bool:
     """Whether ``mjx.step`` integrates ``m`` differently from MuJoCo C when a force
     saturates: ``implicitfast`` and a force limit on an actuator or on a joint an
     actuator drives."""
     if int(m.opt.integrator) != int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST) or not m.nu:
         return False
-    if np.any(m.actuator_forcelimited):
-        return True
-    joints = [int(m.actuator_trnid[a, 0]) for a in range(m.nu)
-              if int(m.actuator_trntype[a]) in _JOINT_TRN]
-    return bool(np.any(m.jnt_actfrclimited[joints])) if joints else False
+    own_lo, own_hi, _, j_lo, j_hi = _clamp_bounds(m)
+    return not np.all(np.isinf([own_lo, own_hi, j_lo, j_hi]))
 
 
 def clamped_implicit_step(m: mujoco.MjModel) -> Callable:
     """``step(mx, d) -> d``: an ``implicitfast`` step of the MJX model ``mx`` (put from
     ``m``) without the velocity derivative of the actuators clamped in this step."""
     mjx = mjx_module()
-    nu = m.nu
-    own_lim = np.asarray(m.actuator_forcelimited, bool)
-    own_lo = np.where(own_lim, m.actuator_forcerange[:, 0], -np.inf).astype(np.float32)
-    own_hi = np.where(own_lim, m.actuator_forcerange[:, 1], np.inf).astype(np.float32)
-    # the joint-level clamp: the actuator's joint's dof, where it has a range
-    dof = np.zeros(nu, np.int32)
-    j_lo = np.full(nu, -np.inf, np.float32)
-    j_hi = np.full(nu, np.inf, np.float32)
-    for a in range(nu):
-        if int(m.actuator_trntype[a]) in _JOINT_TRN:
-            j = int(m.actuator_trnid[a, 0])
-            dof[a] = int(m.jnt_dofadr[j])
-            if m.jnt_actfrclimited[j]:
-                j_lo[a], j_hi[a] = m.jnt_actfrcrange[j]
+    own_lo, own_hi, dof, j_lo, j_hi = _clamp_bounds(m)
 
     def step(mx, d):
         d = mjx.forward(mx, d)
