@@ -67,6 +67,12 @@ def main() -> None:
         rows, summary = run(arm, args.seeds)
         all_rows += rows
         summaries.append(summary)
+        # each arm's rows as soon as it ends (a long run stopped early keeps them)
+        print_table(rows, ["arm", "seed", "success", "max_point_error_mm",
+                           "generations", "replay_success", "motion_feasible"])
+        print(summary, flush=True)
+        write_json("bench_builtin_arms", {"rows": all_rows, "summaries": summaries,
+                                          "complete": False})
     teo = {r["seed"]: r["generations"] for r in all_rows if r["arm"] == "teo"}
     for r in all_rows:
         r["x_teo_generations"] = r["generations"] / max(teo[r["seed"]], 1)

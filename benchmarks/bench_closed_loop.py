@@ -20,8 +20,9 @@ plan replayed open loop against OET closed loop.
 
 ``--config rotate_valve_mismatch``: the valve variant (the lever twice as heavy,
 3 degree offsets on the abduction and the elbow, 0.01 rad of angle noise).
-``--no-relocate`` / ``--no-correct``: the closed loop without the objects'
-re-localization / the target's correction; ``--step-tolerance``, ``--restarts``,
+``--no-relocate`` / ``--no-correct`` / ``--no-calibrate``: the closed loop without
+the objects' re-localization / the target's correction / the joint offsets estimated
+from the measured tool; ``--step-tolerance``, ``--restarts``,
 ``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).
 
     python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny] [--config NAME]
@@ -87,6 +88,9 @@ def main() -> None:
                         help="closed loop without the objects' re-localization")
     parser.add_argument("--no-correct", action="store_true",
                         help="closed loop without the target's correction")
+    parser.add_argument("--no-calibrate", action="store_true",
+                        help="closed loop without the joint offsets estimated "
+                             "from the measured tool")
     parser.add_argument("--step-tolerance", type=float, default=None,
                         help="closed loop: a step's evolution stops below this "
                              "(default: the config's tolerance; judged at that)")
@@ -112,10 +116,13 @@ def main() -> None:
             tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
             algorithm_params=s.options.get("algorithm_params"),
             relocate_objects=not args.no_relocate, correct=not args.no_correct,
+            calibrate=not args.no_calibrate,
             step_tolerance=args.step_tolerance, restarts=args.restarts,
             stagnation=args.stagnation)
         steps = closed.info["closed_loop"]
+        cal = closed.info["calibration"]
         print({"seed": seed, "relocalized": closed.info["relocalized"],
+               "offsets_deg": cal and np.round(cal["offsets_deg"], 2).tolist(),
                "step_error_mm": np.round(1e3 * np.asarray(steps["error"]), 1).tolist(),
                "targets": closed.info["targets"],
                "box_end": np.round(closed.features[-1], 4).tolist(),
@@ -138,7 +145,7 @@ def main() -> None:
     print_table(rows, [k for k in rows[0] if k != "closed_step_error_mm"])
     summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
                "relocate_objects": not args.no_relocate,
-               "correct": not args.no_correct,
+               "correct": not args.no_correct, "calibrate": not args.no_calibrate,
                "step_tolerance": args.step_tolerance, "restarts": args.restarts,
                "stagnation": args.stagnation,
                "open_loop_successes": sum(r["open_loop_success"] for r in rows),

@@ -104,6 +104,8 @@ _LAZY.update({
     "RealityError": "cgda_jax.reality.protocol",
     "Mismatch": "cgda_jax.reality.mismatch",
     "MismatchedWorld": "cgda_jax.reality.mismatch",
+    "estimate_offsets": "cgda_jax.reality.calibrate",
+    "OffsetEstimate": "cgda_jax.reality.calibrate",
     "export_trajectory": "cgda_jax.experiment.export",
     "check_exported": "cgda_jax.experiment.export",
     "run_oet_closed_loop": "cgda_jax.strategies.closed_loop",
@@ -171,6 +173,7 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.generalize import (  # noqa: F401
         GeneralizedAction, generalize, rbf_interpolate,
     )
+    from cgda_jax.reality.calibrate import OffsetEstimate, estimate_offsets  # noqa: F401
     from cgda_jax.reality.export import ExportedTrajectory, time_parameterize  # noqa: F401
     from cgda_jax.reality.files import load_trajectory, save_trajectory  # noqa: F401
     from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld  # noqa: F401

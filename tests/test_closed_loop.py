@@ -191,7 +191,8 @@ def test_the_reality_section_sets_the_closed_loop_of_cgda_run(sim, goal):
                                     "reality.seed=5"])
     validate_config(cfg)
     assert cfg.reality.loop_options() == {"step_tolerance": 0.005,
-                                          "relocate_objects": True, "correct": False}
+                                          "relocate_objects": True, "correct": False,
+                                          "calibrate": True}
     assert "step_tolerance" not in cfg.reality.mismatch_table()
     strategy = types.SimpleNamespace(
         algorithm="CMA_ES", population_size=KW["population_size"],
@@ -209,6 +210,12 @@ def test_the_reality_section_sets_the_closed_loop_of_cgda_run(sim, goal):
                         "point_errors": [0.1], "max_point_error": 0.1,
                         "success": False, "closed_loop": got}, "m")[1]
     assert "steps evolved to 0.005, targets not corrected |" in row
+    # the world measures its tool: the offsets drawn in [-3, 3] deg are estimated
+    assert "; joint offsets estimated from the measured tool: " in row
+    off = load_config(None, tiny + ["reality.calibrate=false",
+                                    "reality.marker_noise=0.002"]).reality
+    assert off.loop_options()["calibrate"] is False
+    assert off.mismatch_table()["marker_noise"] == 0.002
     for bad, match in (("reality.step_tolerance=-1", "must be >= 0"),
                        ("reality.step_tolerance=0.05", "above strategy.tolerance")):
         with pytest.raises(ConfigError, match=match):

@@ -217,6 +217,7 @@ def closed_loop_check(sim, goal, strategy, reality) -> dict:
         "compile_time_s": res.compile_time_s,
         "relocalized": res.info["relocalized"],
         "not_relocalized": res.info["not_relocalized"],
+        "calibration": res.info["calibration"],
         "options": loop,
     }
 

@@ -161,6 +161,15 @@ def _not_relocalized(table: dict | None) -> str:
     return " (not " + "; ".join(f"{', '.join(c)}: {w}" for w, c in by.items()) + ")"
 
 
+def _calibration(cal: dict | None) -> str:
+    """The closed loop's joint offsets estimated from the measured tool, in words."""
+    if not cal:
+        return ""
+    offs = ", ".join(f"{x:.2f}" for x in cal["offsets_deg"])
+    return (f"; joint offsets estimated from the measured tool: {offs} deg "
+            f"({cal['pairs']} postures, tool fit {cal['residual_mm']:.2g} mm rms)")
+
+
 def _loop_options(options: dict | None) -> str:
     """The closed loop's settings that differ from the defaults, in words."""
     if not options:
@@ -172,6 +181,8 @@ def _loop_options(options: dict | None) -> str:
         said.append("objects not re-localized")
     if options.get("correct") is False:
         said.append("targets not corrected")
+    if options.get("calibrate") is False:
+        said.append("joint offsets not estimated")
     return "; " + ", ".join(said) if said else ""
 
 
@@ -202,6 +213,7 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
             f"{sum(closed['execution_s']):.3g} s; objects re-localized from "
             f"{', '.join(closed.get('relocalized') or []) or 'no feature'}"
             f"{_not_relocalized(closed.get('not_relocalized'))}"
+            f"{_calibration(closed.get('calibration'))}"
             f"{_loop_options(closed.get('options'))} |")
     return rows
 

@@ -274,7 +274,7 @@ class RealityConfig:
     ``friction_scale`` (sliding friction), ``joint_offset_deg`` (per evolved joint),
     ``damping_scale`` (the evolved joints'), ``gain_scale`` (actuator kp),
     ``noise`` (feature noise, standard deviation in feature units), ``delay_s``
-    (feature latency).
+    (feature latency), ``marker_noise`` (the tool's measured position, m).
 
     How strategy ``oet`` closes its loop on that world
     (`cgda_jax.strategies.closed_loop.run_oet_closed_loop`): ``step_tolerance``
@@ -282,7 +282,8 @@ class RealityConfig:
     tolerance; the world's measurement is judged at the strategy's tolerance),
     ``relocate_objects`` (the model's objects put where the world measured them
     after each step), ``correct`` (the next target moved against the last
-    measured offset from the model's prediction).
+    measured offset from the model's prediction), ``calibrate`` (the joints'
+    offsets estimated from the measured tool, `cgda_jax.reality.calibrate`).
     """
 
     enabled: bool = False
@@ -294,9 +295,11 @@ class RealityConfig:
     gain_scale: Any = 1.0
     noise: Any = 0.0
     delay_s: Any = 0.0
+    marker_noise: Any = 0.0
     step_tolerance: float = 0.0
     relocate_objects: bool = True
     correct: bool = True
+    calibrate: bool = True
 
     def mismatch_table(self) -> dict[str, Any]:
         """The `cgda_jax.reality.mismatch.Mismatch` keys and values."""
@@ -306,8 +309,9 @@ class RealityConfig:
     def loop_options(self) -> dict[str, Any]:
         """The closed loop's keyword arguments of `run_oet_closed_loop`."""
         return {"step_tolerance": self.step_tolerance or None,
-                "relocate_objects": self.relocate_objects, "correct": self.correct}
+                "relocate_objects": self.relocate_objects, "correct": self.correct,
+                "calibrate": self.calibrate}
 
 
 #: The `RealityConfig` keys that set the closed loop, not the world.
-LOOP_KEYS = ("step_tolerance", "relocate_objects", "correct")
+LOOP_KEYS = ("step_tolerance", "relocate_objects", "correct", "calibrate")

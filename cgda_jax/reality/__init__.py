@@ -15,4 +15,6 @@ Modules, in their import order:
 5. :mod:`~cgda_jax.reality.mismatch`: the shipped `Reality`, a `MismatchedWorld`
    (the scene in MuJoCo C with perturbed masses, friction, joint offsets, damping,
    gains, feature noise and delay: `Mismatch`).
+6. :mod:`~cgda_jax.reality.calibrate`: joint offsets estimated from the measured
+   tool (`estimate_offsets`, `OffsetEstimate`), as the closed loop keeps them.
 """

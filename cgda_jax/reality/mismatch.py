@@ -17,7 +17,10 @@ uniformly with its ``seed`` (`Mismatch.draw`):
 - ``noise``: the features measured with Gaussian noise of this standard deviation
   (feature units), drawn from the same seed, new at every measurement;
 - ``delay_s``: the features are those of this long before the measurement (a
-  sensor's latency; within one `execute` call, at least its start).
+  sensor's latency; within one `execute` call, at least its start);
+- ``marker_noise``: the tool's position (``Measurement.marker``, the simulator's
+  marker point, measured at the features' time) with Gaussian noise of this
+  standard deviation [m].
 
 `MismatchedWorld` needs a dynamic-mode simulator (its physics model).  With the
 default `Mismatch` (nothing perturbed) it measures what the simulator computes.
@@ -40,9 +43,10 @@ __all__ = ["FIELDS", "Mismatch", "MismatchedWorld"]
 
 #: The perturbations, their neutral values and what each may be.
 FIELDS = {"mass_scale": 1.0, "friction_scale": 1.0, "joint_offset_deg": 0.0,
-          "damping_scale": 1.0, "gain_scale": 1.0, "noise": 0.0, "delay_s": 0.0}
+          "damping_scale": 1.0, "gain_scale": 1.0, "noise": 0.0, "delay_s": 0.0,
+          "marker_noise": 0.0}
 _POSITIVE = ("mass_scale", "friction_scale", "gain_scale")
-_NONNEGATIVE = ("damping_scale", "noise", "delay_s")
+_NONNEGATIVE = ("damping_scale", "noise", "delay_s", "marker_noise")
 
 
 def _value(name: str, v) -> float | tuple[float, float] | dict[str, float]:
@@ -85,6 +89,7 @@ class Mismatch:
     gain_scale: Any = 1.0
     noise: Any = 0.0
     delay_s: Any = 0.0
+    marker_noise: Any = 0.0
     seed: int = 0
 
     def __post_init__(self):
@@ -171,6 +176,7 @@ class MismatchedWorld:
         m.actuator_gainprm[:, 0] *= self.drawn["gain_scale"]
         m.actuator_biasprm[:, 1] *= self.drawn["gain_scale"]
         self._rng = np.random.default_rng([self.mismatch.seed, 1])
+        self._marker_rng = np.random.default_rng([self.mismatch.seed, 2])
         self._data = None
 
     def __repr__(self) -> str:
@@ -182,6 +188,11 @@ class MismatchedWorld:
         else:
             f = self._tracker.advance(markers)
         return f + self._rng.normal(0.0, 1.0, f.shape) * self.drawn["noise"]
+
+    def _tool(self, marker: np.ndarray) -> np.ndarray:
+        """The tool's measured position (3,): the marker, with ``marker_noise``."""
+        return (np.asarray(marker, np.float64)
+                + self._marker_rng.normal(0.0, 1.0, 3) * self.drawn["marker_noise"])
 
     def reset(self) -> Measurement:
         """The start posture (offset as the world's joints are), at rest."""
@@ -196,7 +207,7 @@ class MismatchedWorld:
         self._tracker = SceneTracker(self.sim.scene, marker)
         self._commanded = start
         f = self._features(d.sensordata.copy(), marker[None])
-        return Measurement(f[None], start[None])
+        return Measurement(f[None], start[None], self._tool(marker)[None])
 
     def execute(self, trajectory: ExportedTrajectory) -> Measurement:
         """Follow the position targets of ``trajectory`` (linear between its
@@ -237,11 +248,12 @@ class MismatchedWorld:
                           n_steps)
         delay = round(self.drawn["delay_s"] / dt)
         markers = sens[:, phys.marker_adr:phys.marker_adr + 3]
-        feats, joints, prev = [], [], 0
+        feats, joints, tools, prev = [], [], [], 0
         for e in ends:
             seen = max(0, e - delay)
             feats.append(self._features(sens[seen], markers[prev + 1:seen + 1]
                                         if seen > prev else markers[seen:seen + 1]))
+            tools.append(self._tool(markers[seen]))
             prev = max(prev, seen)
             q = states[e - 1, 1:1 + phys.nq] if e > 0 else d.qpos
             joints.append(np.asarray(q)[phys.gene_qadr] - self.drawn["joint_offset"])
@@ -250,4 +262,4 @@ class MismatchedWorld:
         mujoco.mj_setState(m, d, states[n_steps - 1], spec)
         mujoco.mj_forward(m, d)
         self._commanded = np.asarray(trajectory.q[-1], np.float64)
-        return Measurement(np.asarray(feats), np.asarray(joints))
+        return Measurement(np.asarray(feats), np.asarray(joints), np.asarray(tools))

@@ -33,10 +33,16 @@ class Measurement(NamedTuple):
             (1, F), at the start posture).
         joints: (N, DoF) the joints measured there (radians / metres, in the
             robot's own frame: what its encoders read).
+        marker: optional (N, 3) the tool (the simulator's marker point) measured
+            there, in the model's world frame [m] (a tracker on the hand, a camera
+            that sees the tool); None: not measured.  With it a closed loop
+            estimates the joints' calibration offsets
+            (`cgda_jax.reality.calibrate`).
     """
 
     features: np.ndarray
     joints: np.ndarray
+    marker: np.ndarray | None = None
 
 
 @runtime_checkable
@@ -96,10 +102,18 @@ def measure(reality: Reality, trajectory: ExportedTrajectory | None = None
         raise RealityError(f"{_name(reality)}.{call} measured features "
                            f"{feats.shape} and joints {joints.shape}; expected "
                            f"({n}, {f}) and ({n}, {dof})")
-    for what, arr in (("features", feats), ("joints", joints)):
+    marker = getattr(out, "marker", None)
+    checked = [("features", feats), ("joints", joints)]
+    if marker is not None:
+        marker = np.asarray(marker, np.float64)
+        if marker.shape != (n, 3):
+            raise RealityError(f"{_name(reality)}.{call} measured the tool (marker) "
+                               f"{marker.shape}; expected ({n}, 3) or None")
+        checked.append(("marker", marker))
+    for what, arr in checked:
         if not np.all(np.isfinite(arr)):
             rows = sorted(set(np.flatnonzero(~np.all(np.isfinite(arr), axis=1))))
             raise RealityError(f"{_name(reality)}.{call} measured NaN or inf "
                                f"{what} (waypoints {[int(r) + 1 for r in rows]}): the "
                                "run stops")
-    return Measurement(feats, joints)
+    return Measurement(feats, joints, marker)

@@ -42,6 +42,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from cgda_jax.reality.calibrate import OffsetEstimate
 from cgda_jax.reality.export import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
 from cgda_jax.sim.relocate import ObjectLocator
@@ -101,7 +102,7 @@ def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
     joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`, the
     objects re-localized by ``locator`` when given; ``correct`` a traced bool),
     and ``start(state, joints, features, predicted)`` (`OETPlan.start_at` on
-    `measured_state` of the reality's start measurement; None without a locator).
+    `measured_state` of the reality's start measurement).
     Compiled once
     per simulator, goal and settings (the seed is an argument): the last few are
     kept, so a loop over seeds or realities compiles once."""
@@ -144,7 +145,7 @@ def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
         spec((goal_np.shape[1],), jnp.float32), spec((), jnp.bool_)).compile()
     feat = spec((goal_np.shape[1],), jnp.float32)
     start_c = jax.jit(start).lower(s, spec((plan.n_dof,), jnp.float32), feat,
-                                   feat).compile() if locator is not None else None
+                                   feat).compile()
     while len(_COMPILED) >= _KEEP:
         _COMPILED.pop(next(iter(_COMPILED)))
     out = (plan, init_c, advance_c, relocate_c, start_c)
@@ -179,6 +180,8 @@ def run_oet_closed_loop(
     correct: bool = True,
     relocate_objects: bool = True,
     step_tolerance: float | None = None,
+    calibrate: bool = True,
+    min_offset_deg: float = 0.1,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Any = None,
@@ -206,6 +209,16 @@ def run_oet_closed_loop(
             ``tolerance``.  A tighter one keeps the model from accepting a push
             that lands anywhere within the tolerance, which a world that
             slides further (a heavier box on less friction) overshoots.
+        calibrate: when the reality measures the tool (``Measurement.marker``),
+            the joints' calibration offsets are estimated from every measured
+            (joints, tool) pair so far (`cgda_jax.reality.calibrate`): the model
+            plans in the corrected frame (encoders + offsets) and the robot is
+            sent ``planned - offsets``.  False, or a reality without the tool:
+            the encoders are taken as they read.
+        min_offset_deg: an estimated offset below this [deg] is not applied
+            (a slide's, in metres, against the same value in radians): below what
+            the tool's measurement resolves, and a world without offsets stays
+            OET's.
         algorithm, population_size, tolerance, max_generations, max_steps,
             lookahead, restarts, stagnation, seed, algorithm_kwargs,
             algorithm_params: as in `cgda_jax.strategies.oet.run_oet`.
@@ -216,13 +229,19 @@ def run_oet_closed_loop(
         devices: None or 1: the loop runs on one device.
 
     Returns:
-        An `ExecutionResult` (strategy "oet") whose joints are the commanded
-        postures (S, DoF) and features the MEASURED ones (S, F), judged per goal
-        point as OET (`ordered_point_errors`); ``fitness_history`` holds each
-        step's final best fitness only. ``info["closed_loop"]`` per step:
-        ``planning_s``, ``execution_s``, ``error`` (measured features to the step's
-        target point), ``predicted_features`` (the model's, before re-localizing),
-        ``measured_joints``; and ``compile_time_s``.
+        An `ExecutionResult` (strategy "oet") whose joints are the planned
+        postures (S, DoF) in the model's frame (the commanded ones plus the
+        estimated offsets; without calibration the commanded ones) and features
+        the MEASURED ones (S, F), judged per goal point as OET
+        (`ordered_point_errors`); ``fitness_history`` holds each step's final best
+        fitness only. ``info["closed_loop"]`` per step: ``planning_s``,
+        ``execution_s``, ``error`` (measured features to the step's target
+        point), ``predicted_features`` (the model's, before re-localizing),
+        ``measured_joints`` (as the encoders read), ``commanded_joints`` (what
+        the robot was sent), ``offsets_deg`` (the estimate after the step);
+        ``info["calibration"]``: the final ``offsets_deg``, the tool fit's
+        ``residual_mm`` and ``pairs``, or None (not calibrated: ``why``); and
+        ``compile_time_s``.
 
     Raises:
         RealityError: the reality raised, measured NaN / inf or wrong shapes, or
@@ -252,16 +271,33 @@ def run_oet_closed_loop(
     plan, init_c, advance_c, relocate_c, start_c = compiled_loop(sim, goal, settings,
                                                                  locator)
     compile_time = time.perf_counter() - t0
+    est = None
+    if calibrate and first.marker is not None:
+        est = OffsetEstimate(sim.robot)
+        est.add(first.joints, first.marker)
+    floor = np.deg2rad(min_offset_deg)
+
+    def offsets() -> np.ndarray:
+        if est is None:
+            return np.zeros(plan.n_dof)
+        return np.where(np.abs(est.offsets) >= floor, est.offsets, 0.0)
+
     key = seed_keys([seed])[0]
     s = init_c(key)
-    if start_c is not None:  # the objects where the reality measured them at its start
-        s = start_c(s, jnp.asarray(first.joints[0], jnp.float32),
+    off = offsets()
+    if locator is not None or np.any(off):
+        # the objects where the reality measured them at its start; the arm where
+        # the calibrated encoders say it is
+        predicted = (start_features(sim, s.sim_state) if locator is not None
+                     else first.features[0])  # (only the locator reads it)
+        s = start_c(s, jnp.asarray(first.joints[0] + off, jnp.float32),
                     jnp.asarray(first.features[0], jnp.float32),
-                    jnp.asarray(start_features(sim, s.sim_state), jnp.float32))
+                    jnp.asarray(predicted, jnp.float32))
 
     t1 = time.perf_counter()
     steps: dict[str, list] = {"planning_s": [], "execution_s": [], "error": [],
-                              "predicted_features": [], "measured_joints": []}
+                              "predicted_features": [], "measured_joints": [],
+                              "commanded_joints": [], "offsets_deg": []}
     best: list[float] = []
     commanded = None
     goal_np = np.asarray(goal, np.float64)
@@ -274,7 +310,7 @@ def run_oet_closed_loop(
         if n == int(s.steps):  # stuck: no valid posture, nothing executed
             s = new
             break
-        q = np.asarray(new.joints[n - 1], np.float64)
+        q = np.asarray(new.joints[n - 1], np.float64) - off  # what the robot is sent
         traj = trajectory_of(sim, q[None], rate=rate, start=commanded)
         te = time.perf_counter()
         got = measure(reality, traj)
@@ -286,8 +322,13 @@ def run_oet_closed_loop(
         steps["error"].append(float(np.linalg.norm(feats - goal_np[target])))
         steps["predicted_features"].append(np.asarray(new.features[n - 1]).tolist())
         steps["measured_joints"].append(got.joints[-1].tolist())
+        steps["commanded_joints"].append(traj.q[-1].tolist())
         best.append(float(fit))
-        s = relocate_c(new, prev_k, jnp.asarray(got.joints[-1], jnp.float32),
+        if est is not None and got.marker is not None:
+            est.add(got.joints, got.marker)
+        off = offsets()
+        steps["offsets_deg"].append(np.rad2deg(off).tolist())
+        s = relocate_c(new, prev_k, jnp.asarray(got.joints[-1] + off, jnp.float32),
                        jnp.asarray(feats, jnp.float32), jnp.asarray(bool(correct)))
         commanded = np.asarray(traj.q[-1], np.float64)
         if progress_fn is not None:
@@ -313,5 +354,14 @@ def run_oet_closed_loop(
                      "relocalized": list(found.located) if found else [],
                      "not_relocalized": dict(found.not_located) if found else {},
                      "reality": type(reality).__name__,
+                     "calibration": None if est is None else {
+                         "offsets_deg": np.rad2deg(offsets()).tolist(),
+                         "estimated_deg": np.rad2deg(est.offsets).tolist(),
+                         "residual_mm": 1e3 * est.residual,
+                         "pairs": est.pairs},
+                     "calibration_why": (
+                         None if est is not None else "off (calibrate=False)"
+                         if not calibrate else "the reality does not measure the "
+                         "tool (Measurement.marker is None)"),
                      "step_tolerance": step_tolerance})
     return res
