@@ -25,7 +25,13 @@ the objects' re-localization / the target's correction / the joint offsets estim
 from the measured tool; ``--step-tolerance``, ``--restarts``,
 ``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).
 
+``--levels 0 0.5 1 1.5``: a sweep of mismatch levels (`scaled_table`: each scale
+factor raised to the level, each offset, noise and delay times it; the tool's
+``marker_noise`` is the sensor's and stays), every seed at every level; ``--open-only``
+the open loop alone (cheap: the IET batch once, one replay per seed and level).
+
     python benchmarks/bench_closed_loop.py [--seeds 5] [--tiny] [--config NAME]
+        [--levels 0.5 1] [--open-only]
 """
 
 from __future__ import annotations
@@ -41,6 +47,22 @@ from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop
 
 NAME = "move_push_box_mismatch"
+_SCALES = ("mass_scale", "friction_scale", "damping_scale", "gain_scale")
+_ADDED = ("joint_offset_deg", "noise", "delay_s")
+
+
+def scaled_table(table: dict, level: float) -> dict:
+    """The ``[reality]`` values at mismatch ``level`` (1: as given, 0: the model):
+    scale factors to the power ``level``, offsets, noise and delay times it (a
+    ``[low, high]`` range and a per-joint table element-wise)."""
+    def one(name, v):
+        if isinstance(v, dict):
+            return {k: one(name, x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [one(name, x) for x in v]
+        return float(v) ** level if name in _SCALES else float(v) * level
+
+    return {k: one(k, v) if k in _SCALES + _ADDED else v for k, v in table.items()}
 
 
 def tiny() -> None:
@@ -88,6 +110,10 @@ def main() -> None:
                         help="closed loop without the objects' re-localization")
     parser.add_argument("--no-correct", action="store_true",
                         help="closed loop without the target's correction")
+    parser.add_argument("--levels", type=float, nargs="+", default=[1.0],
+                        help="mismatch levels (1: the config's; see scaled_table)")
+    parser.add_argument("--open-only", action="store_true",
+                        help="the open loop only (no closed-loop OET)")
     parser.add_argument("--no-calibrate", action="store_true",
                         help="closed loop without the joint offsets estimated "
                              "from the measured tool")
@@ -104,56 +130,74 @@ def main() -> None:
         tiny()
         return
     cfg, sim, goal, iet, iet_s = experiment_trials(args.config, args.seeds)
-    s, table = cfg.strategy, cfg.reality.mismatch_table()
-    rows = []
-    for res in iet:
-        seed = res.info["seed"]
-        open_loop = reality_check(sim, res, table)
-        t1 = time.perf_counter()
-        closed = run_oet_closed_loop(
-            sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
-            algorithm=s.algorithm, population_size=s.population_size,
-            tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
-            algorithm_params=s.options.get("algorithm_params"),
-            relocate_objects=not args.no_relocate, correct=not args.no_correct,
-            calibrate=not args.no_calibrate,
-            step_tolerance=args.step_tolerance, restarts=args.restarts,
-            stagnation=args.stagnation)
-        steps = closed.info["closed_loop"]
-        cal = closed.info["calibration"]
-        print({"seed": seed, "relocalized": closed.info["relocalized"],
-               "offsets_deg": cal and np.round(cal["offsets_deg"], 2).tolist(),
-               "step_error_mm": np.round(1e3 * np.asarray(steps["error"]), 1).tolist(),
-               "targets": closed.info["targets"],
-               "box_end": np.round(closed.features[-1], 4).tolist(),
-               "goal_end": np.round(goal[-1], 4).tolist()}, flush=True)
-        rows.append({
-            "seed": seed, "iet_model_success": res.success,
-            "open_loop_success": open_loop["success"],
-            "open_loop_max_err_mm": 1e3 * open_loop["max_point_error"],
-            "closed_loop_success": closed.success,
-            "closed_loop_max_err_mm": 1e3 * float(closed.max_point_error),
-            "closed_steps": len(closed.joints),
-            "planning_s": float(np.sum(steps["planning_s"])),
-            "execution_s": float(np.sum(steps["execution_s"])),
-            "closed_compile_s": closed.compile_time_s,
-            "closed_step_error_mm": np.round(1e3 * np.asarray(steps["error"]),
-                                             1).tolist(),
-            "closed_total_s": time.perf_counter() - t1,
-        })
-        print(rows[-1], flush=True)
-    print_table(rows, [k for k in rows[0] if k != "closed_step_error_mm"])
-    summary = {"seeds": args.seeds, "iet_batch_s": iet_s,
+    s, given = cfg.strategy, cfg.reality.mismatch_table()
+    rows, summaries = [], []
+    for level in args.levels:
+        table = scaled_table(given, level)
+        level_rows = []
+        for res in iet:
+            row = {"level": level, **one_seed(args, sim, goal, s, res, table)}
+            level_rows.append(row)
+            print(row, flush=True)
+        rows += level_rows
+        summaries.append({
+            "level": level, "seeds": args.seeds,
+            "open_loop_successes": sum(r["open_loop_success"] for r in level_rows),
+            "closed_loop_successes": None if args.open_only else sum(
+                r["closed_loop_success"] for r in level_rows),
+            "mismatch": level_rows[0]["mismatch"]})
+        print(summaries[-1], flush=True)
+    print_table(rows, [k for k in rows[0] if k not in ("closed_step_error_mm",
+                                                       "mismatch")])
+    print()
+    print_table(summaries, ["level", "seeds", "open_loop_successes",
+                            "closed_loop_successes"])
+    summary = {"seeds": args.seeds, "iet_batch_s": iet_s, "levels": args.levels,
                "relocate_objects": not args.no_relocate,
                "correct": not args.no_correct, "calibrate": not args.no_calibrate,
                "step_tolerance": args.step_tolerance, "restarts": args.restarts,
-               "stagnation": args.stagnation,
-               "open_loop_successes": sum(r["open_loop_success"] for r in rows),
-               "closed_loop_successes": sum(r["closed_loop_success"] for r in rows),
-               "mismatch": open_loop["mismatch"]}
-    print(summary)
+               "stagnation": args.stagnation, "per_level": summaries}
     write_json("bench_closed_loop" + ("" if args.config == NAME else f"_{args.config}"),
                {"rows": rows, "summary": summary})
+
+
+def one_seed(args, sim, goal, s, res, table: dict) -> dict:
+    """Seed ``res``'s IET result open loop, and (unless ``--open-only``) closed-loop
+    OET of the same seed, on the world of ``table``."""
+    seed = res.info["seed"]
+    open_loop = reality_check(sim, res, table)
+    row = {"seed": seed, "iet_model_success": res.success,
+           "open_loop_success": open_loop["success"],
+           "open_loop_max_err_mm": 1e3 * open_loop["max_point_error"],
+           "mismatch": open_loop["mismatch"]}
+    if args.open_only:
+        return row
+    t1 = time.perf_counter()
+    closed = run_oet_closed_loop(
+        sim, goal, MismatchedWorld(sim, Mismatch.from_dict(table)),
+        algorithm=s.algorithm, population_size=s.population_size,
+        tolerance=s.tolerance, max_generations=s.max_generations, seed=seed,
+        algorithm_params=s.options.get("algorithm_params"),
+        relocate_objects=not args.no_relocate, correct=not args.no_correct,
+        calibrate=not args.no_calibrate,
+        step_tolerance=args.step_tolerance, restarts=args.restarts,
+        stagnation=args.stagnation)
+    steps = closed.info["closed_loop"]
+    cal = closed.info["calibration"]
+    return row | {
+        "closed_loop_success": closed.success,
+        "closed_loop_max_err_mm": 1e3 * float(closed.max_point_error),
+        "closed_steps": len(closed.joints),
+        "planning_s": float(np.sum(steps["planning_s"])),
+        "execution_s": float(np.sum(steps["execution_s"])),
+        "closed_compile_s": closed.compile_time_s,
+        "offsets_deg": cal and np.round(cal["offsets_deg"], 2).tolist(),
+        "closed_step_error_mm": np.round(1e3 * np.asarray(steps["error"]),
+                                         1).tolist(),
+        "targets": closed.info["targets"],
+        "end": np.round(closed.features[-1], 4).tolist(),
+        "closed_total_s": time.perf_counter() - t1,
+    }
 
 
 if __name__ == "__main__":
