@@ -162,6 +162,15 @@ def _check_names(sim, reality: Reality) -> None:
                                f"not the simulator's {list(ours)}")
 
 
+def _why_not_calibrated(est: OffsetEstimate | None, calibrate: bool) -> str | None:
+    """Why the loop ran without joint offsets (None: it estimated them)."""
+    if est is not None:
+        return None
+    if not calibrate:
+        return "off (calibrate=False)"
+    return "the reality does not measure the tool (Measurement.marker is None)"
+
+
 def run_oet_closed_loop(
     sim: Any,
     goal: Any,
@@ -359,9 +368,6 @@ def run_oet_closed_loop(
                          "estimated_deg": np.rad2deg(est.offsets).tolist(),
                          "residual_mm": 1e3 * est.residual,
                          "pairs": est.pairs},
-                     "calibration_why": (
-                         None if est is not None else "off (calibrate=False)"
-                         if not calibrate else "the reality does not measure the "
-                         "tool (Measurement.marker is None)"),
+                     "calibration_why": _why_not_calibrated(est, calibrate),
                      "step_tolerance": step_tolerance})
     return res
