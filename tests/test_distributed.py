@@ -36,7 +36,7 @@ goal = sim.execute(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
 WORKER = """
 import os, pickle, sys
 from cgda_jax import distributed as dist
-assert dist.initialize(timeout_s=60, heartbeat_timeout_s=20)
+assert dist.initialize(timeout_s=60, heartbeat_timeout_s=90)
 import jax
 assert jax.process_count() == 2 and len(jax.devices()) == 2, jax.devices()
 assert dist.is_writer() == (jax.process_index() == 0)
