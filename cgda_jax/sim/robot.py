@@ -31,6 +31,7 @@ import numpy as np
 from jax import Array
 
 from cgda_jax.builtin import model_path
+from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sim._mujoco_env import mjx_module
 from cgda_jax.sim.marker import (
     MARKER_POINT_SITE,
@@ -43,6 +44,8 @@ from cgda_jax.sim.mjx_prep import collision_free
 from cgda_jax.sim.posture import FIXED_RANGE_TOL, start_posture
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
+
+exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
 
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
+from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sharding import shard_population
 from cgda_jax.strategies.algorithms import (
     ALGORITHMS as ALGORITHMS,
@@ -50,8 +51,10 @@ from cgda_jax.strategies.evolution import (
 )
 from cgda_jax.strategies.result import ExecutionResult
 
-
 # --------------------------------------------------------------------------- gene bounds
+exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
+
+
 def to_joints(u: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
     """Maps normalized genes (..., DoF) to joint angles inside [lower, upper]."""
     mid = 0.5 * (upper + lower)
