@@ -9,11 +9,13 @@ way `cgda_jax.sim.feasibility.Feasibility.move` does:
   (both ends) ``mj_kinematics`` places the geoms and ``mj_geomDistance`` (MuJoCo's
   own signed distance) measures each pair that our `Feasibility` kept
   (``relevant_pairs``: the same pairs, so the same work);
-- between samples ``k``, ``k + 1`` a pair's distance stays above
+- the depth is minus the most negative sampled distance, and must stay ``margin``
+  inside the penetration limit (``allowed = penetration - margin``); with
+  ``certify``, between samples ``k``, ``k + 1`` a pair's distance stays above
   ``(d_k + d_k+1 - L / samples) / 2`` with ``L = pair_reach @ |dq|`` (our Collider's
-  per-pair reach: a constant of the model, taken from it); the depth is the most
-  negative of these bounds and of the samples;
-- the violation ``max(relu(peak / limit - 1), relu(depth - penetration) /
+  per-pair reach: a constant of the model, taken from it), the depth is the most
+  negative of these bounds and of the samples, and ``allowed = penetration``;
+- the violation ``max(relu(peak / limit - 1), relu(depth - allowed) /
   penetration, relu(max |dq| / max_step - 1))`` with the min-jerk peaks ``1.875 |dq| /
   T`` and ``5.7735 |dq| / T^2`` (the approach, the first move, over ``approach_s``
   and not capped by ``max_step``), and the penalty ``fitness + penalty * (1 +
@@ -80,11 +82,13 @@ class MujocoFeasibility:
         penetration: metres tolerated; penalty: fitness added when infeasible, times
             (1 + violation); samples: collision samples a move (plus its start);
         max_step: the largest joint change between two waypoints (radians).
+        margin: metres the sampled depth must stay below ``penetration``;
+        certify: bound the distance between samples instead.
     """
 
     def __init__(self, model, joints: Sequence[str], qpos0, pairs, reach, velocity,
                  acceleration, *, penetration: float, penalty: float, samples: int,
-                 max_step: float):
+                 max_step: float, margin: float = 0.002, certify: bool = False):
         self.model = model
         self.data = mujoco.MjData(model)
         jids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, j) for j in joints]
@@ -105,6 +109,8 @@ class MujocoFeasibility:
         self.penetration, self.penalty = float(penetration), float(penalty)
         self.samples, self.max_step = int(samples), float(max_step)
         self.alphas = np.arange(self.samples + 1) / self.samples
+        self.certify = bool(certify)
+        self.allowed = self.penetration - (0.0 if self.certify else float(margin))
 
     @classmethod
     def from_feasibility(cls, feas, robot, obstacles: Sequence[dict] = ()):
@@ -118,7 +124,8 @@ class MujocoFeasibility:
                    np.zeros((0, robot.n_dof)) if col is None else col.pair_reach,
                    feas.limits.velocity, feas.limits.acceleration,
                    penetration=feas.penetration, penalty=feas.penalty,
-                   samples=feas.samples, max_step=feas.max_step)
+                   samples=feas.samples, max_step=feas.max_step,
+                   margin=feas.margin, certify=feas.certify)
 
     def distances(self, q) -> np.ndarray:
         """(pairs,) signed distances (m) at the posture ``q`` (DoF,)."""
@@ -130,14 +137,20 @@ class MujocoFeasibility:
                          for a, b in self.pairs])
 
     def depth(self, q0, dq) -> float:
-        """Bound (m, >= 0) on the deepest penetration of the move from ``q0`` by
-        ``dq``."""
+        """The deepest penetration (m, >= 0) of the move from ``q0`` by ``dq`` at
+        its samples (``certify``: a bound on the whole move)."""
+        return max(self.worst(q0, dq), 0.0)
+
+    def worst(self, q0, dq) -> float:
+        """Minus the smallest sampled distance (``certify``: minus its bound)."""
         if not self.pairs:
-            return 0.0
+            return -math.inf
         d = np.stack([self.distances(q0 + a * dq) for a in self.alphas])
+        if not self.certify:
+            return -float(np.min(d))
         rate = self.reach @ np.abs(dq)
         low = 0.5 * (d[:-1] + d[1:] - rate / self.samples)
-        return max(-float(np.min(np.minimum(low, d[1:]))), 0.0)
+        return -float(np.min(np.minimum(low, d[1:])))
 
     def limit_violation(self, dq, duration: float) -> float:
         """Relative excess of the min-jerk move's peaks over the limits."""
@@ -157,7 +170,7 @@ class MujocoFeasibility:
         worst = self.limit_violation(dq, duration)
         if not approach:
             worst = max(worst, float(np.max(np.abs(dq))) / self.max_step - 1.0)
-        over = (self.depth(q0, dq) - self.penetration) / self.penetration
+        over = (self.worst(q0, dq) - self.allowed) / self.penetration
         worst = max(worst, over)
         return max(worst, 0.0)
 

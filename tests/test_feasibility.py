@@ -57,28 +57,55 @@ def test_a_posture_through_the_board_is_infeasible(teo_paint):
     through = jnp.deg2rad(jnp.asarray([70.0, 0.0, 20.0]))
     new, _ = jax.jit(sim.step)(state, through)
     assert float(new.move_violation) > 0
-    assert float(sim.feasibility.depth(jnp.zeros(3), through)) > 0.05
+    assert float(sim.feasibility.depth(jnp.zeros(3), through)) > 0.02
     # a small, slow move near the start: feasible
     new, _ = jax.jit(sim.step)(state, jnp.deg2rad(jnp.asarray([10.0, -5.0, 10.0])))
     assert float(new.move_violation) == 0.0
 
 
-def test_path_bound_is_below_the_dense_distance(teo_paint):
-    """The sampled distance less the reach slack lower-bounds the distance on the
-    whole move: no penetration slips between the samples."""
-    feas = teo_paint.feasibility
-    col = feas.collider
-    rng = np.random.default_rng(0)
-    lo, hi = np.asarray(teo_paint.lower), np.asarray(teo_paint.upper)
-    q0 = rng.uniform(lo, hi, (40, 3)).astype(np.float32)
-    q1 = rng.uniform(lo, hi, (40, 3)).astype(np.float32)
-    bound = np.asarray(jax.jit(jax.vmap(feas.depth))(q0, q1 - q0))
+def _random_moves(sim, n, seed=0):
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(sim.lower), np.asarray(sim.upper)
+    q0 = rng.uniform(lo, hi, (n, 3)).astype(np.float32)
+    q1 = rng.uniform(lo, hi, (n, 3)).astype(np.float32)
     alphas = np.linspace(0, 1, 301, dtype=np.float32)
     path = q0[:, None] + alphas[None, :, None] * (q1 - q0)[:, None]
+    col = sim.feasibility.collider
     dense = np.asarray(jax.jit(jax.vmap(jax.vmap(col.distances)))(path))
-    true_depth = np.maximum(-dense.min(axis=(1, 2)), 0)
+    return q0, q1 - q0, np.maximum(-dense.min(axis=(1, 2)), 0)
+
+
+def test_path_bound_is_below_the_dense_distance(teo_paint):
+    """With ``certify`` the sampled distance less the reach slack lower-bounds the
+    distance on the whole move: no penetration slips between the samples."""
+    feas = Feasibility(teo_paint.robot, obstacles=[teo_paint.scene.board],
+                       certify=True)
+    assert feas.collider.pair_names == teo_paint.feasibility.collider.pair_names
+    q0, dq, true_depth = _random_moves(teo_paint, 40)
+    bound = np.asarray(jax.jit(jax.vmap(feas.depth))(q0, dq))
     assert np.all(bound >= true_depth - 1e-4)
     assert np.any(true_depth > 0.01)  # some of these moves do pass through
+
+
+def test_the_sampled_check_with_its_margin_lets_no_deep_move_through(teo_paint):
+    """The default check: sampled distances 2 mm inside the limit.  A sample is a
+    posture of the move, so it never overstates the depth; of 600 random moves
+    (some through the board), none it accepts goes deeper than the limit on a
+    30 x denser path, and it accepts moves that the bound rejects."""
+    feas = teo_paint.feasibility
+    assert not feas.certify and feas.allowed == pytest.approx(0.003)
+    q0, dq, true_depth = _random_moves(teo_paint, 600, seed=1)
+    sampled = np.asarray(jax.jit(jax.vmap(feas.depth))(q0, dq))
+    assert np.all(sampled <= true_depth + 1e-6)
+    accepted = sampled <= feas.allowed
+    assert np.all(true_depth[accepted] <= feas.penetration)
+    assert np.sum(true_depth > 0.02) > 50 and np.sum(~accepted) > 50
+    certify = Feasibility(teo_paint.robot, obstacles=[teo_paint.scene.board],
+                          certify=True)
+    bound = np.asarray(jax.jit(jax.vmap(certify.depth))(q0, dq))
+    assert np.sum(accepted & (bound > certify.penetration)) > 0
+    with pytest.raises(ValueError, match="margin"):
+        Feasibility(teo_paint.robot, margin=0.005)
 
 
 def test_speed_limit_makes_a_fast_move_infeasible(tiny):

@@ -374,7 +374,8 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
             robot, nested_limits(cfg.robot.limits) or None, scene_obstacles(scene),
             penetration=f.penetration, penalty=f.penalty, collisions=f.collisions,
             self_collision=f.self_collision, exclude=list(f.exclude),
-            samples=f.samples, physics_contacts=cfg.robot.mode == "dynamic",
+            samples=f.samples, margin=f.margin, certify=f.certify,
+            physics_contacts=cfg.robot.mode == "dynamic",
             max_step=math.radians(f.max_step_deg))
     except KeyError as e:
         raise ConfigError(f"key 'feasibility.exclude': {e.args[0]}") from None

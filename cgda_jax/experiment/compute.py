@@ -249,7 +249,8 @@ def compute_execution(
     summary.update({"kind": "execution", "name": cfg.name,
                     "feature_names": list(sim.feature_names),
                     "feature_labels": labels, "error_unit": error_unit(labels),
-                    "build": {"waypoint_s": waypoint_s}})
+                    "build": {"waypoint_s": waypoint_s},
+                    "waypoint_s": float(sim.waypoint_s)})
     arrays = {k: np.asarray(v) for k, v in res.arrays().items()}
     if gen is not None:  # the generalization and demonstrations, in the goal's units
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)

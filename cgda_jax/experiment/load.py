@@ -149,7 +149,7 @@ RUN_FIELDS = {
 EXECUTION_FIELDS = {
     "feature_names": "list[str]", "error_unit": "str|null", "build": "object",
     "replay": "object", "export": "object", "reality": "object", "motion": "object",
-    "physics": "object", "substeps": "int",
+    "physics": "object", "substeps": "int", "waypoint_s": "number",
     "render": "object|null",
 }
 RECOGNITION_FIELDS = {

@@ -56,7 +56,7 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     lines = ["## Feasibility", "",
              f"Independent check of the reported joints: **{verdict}**."]
     if optimiser_feasible is not None:
-        lines += ["", "The strategy's own check (every move, bounded between its "
+        lines += ["", "The strategy's own check (every move at its collision "
                   f"samples): {'feasible' if optimiser_feasible else 'infeasible'}."]
     lines += ["", f"Approach from the start posture: {motion['approach_s']:.2f} s; "
               f"every other move {motion['move_s']:.2f} s; whole motion "

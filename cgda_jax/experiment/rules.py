@@ -117,6 +117,10 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'feasibility.{key}' must be a number > 0, got {v}")
     if f.samples < 1:
         raise ConfigError(f"key 'feasibility.samples' must be >= 1, got {f.samples}")
+    if not (math.isfinite(f.margin) and 0 <= f.margin < f.penetration):
+        raise ConfigError(f"key 'feasibility.margin' must be >= 0 and below "
+                          f"'feasibility.penetration' ({f.penetration:g} m), got "
+                          f"{f.margin}")
     from cgda_jax.sim.limits import KINDS as LIMIT_KINDS
 
     for key in cfg.robot.limits:

@@ -235,7 +235,10 @@ class FeasibilityConfig:
     itself or the world; ``penalty``: fitness added to an infeasible candidate
     (times 1 + its violation); ``collisions``: check collisions (false: limits
     only); ``self_collision``: the robot's own pairs too; ``exclude``: geom names
-    left out of the check; ``samples``: collision samples per move;
+    left out of the check; ``samples``: collision samples per move; ``margin``
+    [m]: how far the sampled distances must stay above the penetration limit, for
+    what passes between samples; ``certify``: bound the distance between samples
+    instead (a guarantee, far stricter on long moves near obstacles);
     ``max_step_deg``: the largest change of a joint between two waypoints (a larger
     one is flailing; the approach from the start posture excepted).
     """
@@ -246,6 +249,8 @@ class FeasibilityConfig:
     self_collision: bool = True
     exclude: list[str] = dataclasses.field(default_factory=list)
     samples: int = 10
+    margin: float = 0.002
+    certify: bool = False
     max_step_deg: float = 90.0
 
 

@@ -9,11 +9,20 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
   and themselves / the world / the scene's obstacles (the paint board) along the
   move (`cgda_jax.sim.collision.Collider`), against ``penetration`` (default 5 mm).
   The distances are taken at ``samples + 1`` postures equally spaced along the
-  move (both ends included); between two samples ``k``, ``k + 1`` a pair's
-  distance changes at most at the rate ``L = Collider.pair_reach @ |dq|`` (per
-  unit of the move), so it stays above ``(d_k + d_k+1 - L / samples) / 2``: a lower
-  bound of the distance on the whole continuous move, so nothing passes through
-  between samples (a long move near an obstacle is judged conservatively);
+  move (both ends included), and must stay ``margin`` (default 2 mm) above the
+  limit, for what may pass between two samples: a move is infeasible when its
+  deepest sampled penetration exceeds ``penetration - margin``.  With
+  ``certify=True`` the check is a guarantee instead: between two samples ``k``,
+  ``k + 1`` a pair's distance changes at most at the rate
+  ``L = Collider.pair_reach @ |dq|`` (per unit of the move), so it stays above
+  ``(d_k + d_k+1 - L / samples) / 2``, a lower bound of the distance on the whole
+  continuous move.  The bound is far from tight on long moves near an obstacle:
+  on TEO's paint board, of 60 moves that paint the hardest square without passing
+  5 mm into the board (200 samples each) the bound at 10 samples accepts none,
+  while 10 samples with the 2 mm margin accept 51 and let no move deeper than
+  5 mm through, of 55,000 random moves (`benchmarks/RESULTS.md`, "Feasible
+  motions").  The independent check of a result (`cgda_jax.sim.motion`) looks
+  at four times as many postures;
 - **no flailing**: no joint changes by more than ``max_step`` (90 degrees) between
   two waypoints (the approach excepted);
 - **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
@@ -40,10 +49,9 @@ joint limits to respect the speed and acceleration limits
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
-
-import math
 
 import jax
 import jax.numpy as jnp
@@ -51,14 +59,17 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["DEFAULT_PENALTY", "DEFAULT_PENETRATION", "Feasibility", "penalized",
-           "relevant_pairs", "scene_obstacles"]
+__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION", "Feasibility",
+           "penalized", "relevant_pairs", "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
 
 #: Penetration (m) below which a contact counts as touching, not passing through.
 DEFAULT_PENETRATION = 0.005
+#: How far (m) the sampled distances must stay above the penetration limit, for
+#: what passes between two samples (`Feasibility`, ``certify=False``).
+DEFAULT_MARGIN = 0.002
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -93,6 +104,11 @@ class Feasibility:
         self_collision: include the robot's own pairs.
         exclude: geom or obstacle names the collision check leaves out.
         samples: collision samples per move (plus its start posture).
+        margin: metres the sampled distances must stay above ``-penetration``
+            (0 <= margin < penetration; not used with ``certify``).
+        certify: bound the distance between the samples (a guarantee, but far
+            stricter than needed on long moves near obstacles) instead of the
+            margin.
         max_step: the largest change of a joint (radians) between two waypoints
             (default 90 degrees; inf: no cap): a larger one is flailing, infeasible.
             The approach is not capped (its duration keeps it within the limits).
@@ -119,6 +135,8 @@ class Feasibility:
         samples: int = 10,
         physics_contacts: bool = False,
         max_step: float = math.pi / 2,
+        margin: float = DEFAULT_MARGIN,
+        certify: bool = False,
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
 
@@ -138,6 +156,11 @@ class Feasibility:
             raise ValueError(f"feasibility max_step must be > 0 radians, got {max_step}")
         self.max_step = float(max_step)
         self.samples = int(samples)
+        if not (np.isfinite(margin) and 0 <= margin < penetration):
+            raise ValueError(f"feasibility margin must be >= 0 and below the "
+                             f"penetration ({penetration:g} m), got {margin}")
+        self.margin = float(margin)
+        self.certify = bool(certify)
         self.collider = None
         self.overlapping: list[tuple[str, str]] = []
         self.physical: list[tuple[str, str]] = []
@@ -160,8 +183,9 @@ class Feasibility:
 
     def __repr__(self) -> str:
         pairs = 0 if self.collider is None else self.collider.n_pairs
+        check = "certify" if self.certify else f"margin={self.margin:g}"
         return (f"Feasibility(pairs={pairs}, penetration={self.penetration:g}, "
-                f"limits={self.limits!r})")
+                f"samples={self.samples}, {check}, limits={self.limits!r})")
 
     def approach_s(self, robot, floor: float) -> float:
         """Duration (s) of the approach from the robot's start posture: a min-jerk
@@ -181,25 +205,40 @@ class Feasibility:
         return violation(speed, acc, self.limits)
 
     def depth(self, q0: Array, dq: Array) -> Array:
-        """A bound (m, >= 0) on the deepest penetration of the straight joint-space
-        move from ``q0`` by ``dq`` (DoF,) each (see the module doc)."""
+        """The deepest penetration (m, >= 0) of the straight joint-space move from
+        ``q0`` by ``dq`` (DoF,) each, at its samples (with ``certify``: a bound on
+        the whole move; see the module doc)."""
+        return jnp.maximum(self.worst(q0, dq), 0.0)
+
+    def worst(self, q0: Array, dq: Array) -> Array:
+        """Minus the smallest signed distance (m) of the move's pairs at its
+        ``samples + 1`` postures, or with ``certify`` minus its lower bound on the
+        whole move: > 0 penetrates, < 0 is the clearance."""
         if self.collider is None:
-            return jnp.float32(0.0)
+            return jnp.float32(-jnp.inf)
         alphas = jnp.arange(self.samples + 1, dtype=jnp.float32) / self.samples
         path = q0 + alphas[:, None] * dq  # (S + 1, DoF)
         d = jax.vmap(self.collider.distances)(path)  # (S + 1, pairs)
+        if not self.certify:
+            return -jnp.min(d)
         # between two samples h = 1/S apart the distance changes at most at the
         # rate L = reach @ |dq| per unit of the move: above (d_k + d_k+1 - L h) / 2
         rate = jnp.asarray(self._reach) @ jnp.abs(dq)  # (pairs,)
         low = 0.5 * (d[:-1] + d[1:] - rate / self.samples)  # (S, pairs)
-        return jnp.maximum(-jnp.min(jnp.minimum(low, d[1:])), 0.0)
+        return -jnp.min(jnp.minimum(low, d[1:]))
+
+    @property
+    def allowed(self) -> float:
+        """The deepest sampled penetration (m) a feasible move may have:
+        ``penetration - margin`` (``penetration`` with ``certify``)."""
+        return self.penetration - (0.0 if self.certify else self.margin)
 
     def move(self, q0: Array, dq: Array, duration: Array,
              approach: Array | bool = False) -> Array:
         """Violation (scalar, 0 = feasible) of one move from ``q0`` by ``dq``
         (DoF,) each in ``duration`` seconds (``approach``: the move from the start
         posture, which `max_step` does not cap)."""
-        over = (jnp.maximum(self.depth(q0, dq) - self.penetration, 0.0)
+        over = (jnp.maximum(self.worst(q0, dq) - self.allowed, 0.0)
                 / self.penetration)
         flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
@@ -257,7 +296,7 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     gid = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g): g for g in range(m.ngeom)}
     obs = {o.name: o for o in obstacles}
     lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
-    n = max(2, int(round(GRID_POSTURES ** (1.0 / robot.n_dof))))
+    n = max(2, round(GRID_POSTURES ** (1.0 / robot.n_dof)))
     axes = [np.linspace(lo, hi, n) for lo, hi in zip(lower, upper)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, robot.n_dof)
     data = mujoco.MjData(m)
