@@ -149,3 +149,18 @@ def test_missing_gl_gives_one_warning_not_a_crash(tmp_path):
     saved = json.loads((tmp_path / "r/result.json").read_text())
     assert saved["render"]["ok"] is False
     assert "Frames not rendered" in (tmp_path / "r/report.md").read_text()
+
+
+def test_the_demo_runs_the_experiment_files_of_the_same_name():
+    """`cgda demo` keeps its own tables (it must run from a wheel); they hold the
+    settings of ``experiments/NAME.toml`` (a re-tuned file without its demo twin
+    would show users another run than the one documented)."""
+    from cgda_jax.builtin import resolve_config
+    from cgda_jax.experiment import load_config
+    from cgda_jax.experiment.demo import demo_configs
+
+    for cfg in demo_configs():
+        exp = load_config(resolve_config(cfg.name))
+        for section in ("data", "robot", "strategy", "feasibility", "recognition"):
+            assert getattr(cfg, section) == getattr(exp, section), (cfg.name, section)
+        assert cfg.scene.kind == exp.scene.kind

@@ -23,7 +23,7 @@ DEMO_EXPERIMENTS: dict[str, dict[str, Any]] = {
     "paint_iet": {
         "kind": "execution",
         "data": {"source": "paint_ramp", "goal_points": 17},
-        "robot": {"fixed": {"r_forearm_rotation": 45.0}},
+        "robot": {"fixed": {"r_forearm_rotation": 45.0}, "waypoint_s": 1.5},
         "scene": {"kind": "paint"},
         "strategy": {"name": "iet", "population_size": 32, "tolerance": 3.0,
                      "max_generations": 200, "options": {"backtracks": 24}},
