@@ -125,6 +125,7 @@ def main() -> None:
         t_peer, want = peer(sims["mujoco"], pop, args.repeats)
         rows.append({"P": p, "method": "peer mujoco.rollout", "compile_s": "",
                      "time_s": t_peer, "steps_per_s": n_steps / t_peer})
+        print(f"  {t_peer:.3f} s, {n_steps / t_peer:.3g} steps/s", flush=True)
         for name, sim in sims.items():
             if p not in (args.pops if name == "mujoco" else args.mjx_pops):
                 continue
@@ -134,6 +135,9 @@ def main() -> None:
                          "steps_per_s": n_steps / r["time_s"],
                          "ratio": t_peer / r["time_s"],
                          "note": f"max|diff| vs peer {np.abs(out - want).max():.1e} m"})
+            # as it ends, so a time-boxed run (a lent GPU) keeps its figures
+            print(f"  {r['time_s']:.3f} s (compile {r['compile_s']:.1f} s), ratio "
+                  f"{t_peer / r['time_s']:.2f}x, {rows[-1]['note']}", flush=True)
     print(f"TEO dynamic, {N_WAYPOINTS} waypoints x {steps} steps "
           f"(timestep {sims['mujoco'].physics.timestep:g} s), "
           f"{sims['mujoco'].physics.nq} simulated joints")

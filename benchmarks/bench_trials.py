@@ -89,6 +89,8 @@ def main() -> None:
                 runs.setdefault(name, []).append(float(np.sum(walls)))
                 compiles.setdefault(name, float(np.sum(comp)))
                 extra[name] = {"successes": ok, "generations_sum": int(np.sum(gens))}
+                print(f"  {name}: run {runs[name][-1]:.3f} s, {ok}/{n} succeed",
+                      flush=True)  # as it ends: a time-boxed run keeps its figures
                 continue
             t0 = time.perf_counter()
             mode = "auto" if name.startswith("points") else name
@@ -98,6 +100,9 @@ def main() -> None:
             total = time.perf_counter() - t0
             runs.setdefault(name, []).append(res[0].wall_time_s)
             compiles.setdefault(name, res[0].compile_time_s)  # the first (cold) one
+            print(f"  {name}: run {res[0].wall_time_s:.3f} s (compile "
+                  f"{res[0].compile_time_s:.1f} s), {sum(r.success for r in res)}/{n} "
+                  f"succeed", flush=True)
             extra[name] = {
                 "successes": sum(r.success for r in res),
                 "generations_max": max(r.generations for r in res),
