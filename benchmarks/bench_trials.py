@@ -100,15 +100,15 @@ def main() -> None:
             total = time.perf_counter() - t0
             runs.setdefault(name, []).append(res[0].wall_time_s)
             compiles.setdefault(name, res[0].compile_time_s)  # the first (cold) one
-            print(f"  {name}: run {res[0].wall_time_s:.3f} s (compile "
-                  f"{res[0].compile_time_s:.1f} s), {sum(r.success for r in res)}/{n} "
-                  f"succeed", flush=True)
             extra[name] = {
                 "successes": sum(r.success for r in res),
                 "generations_max": max(r.generations for r in res),
                 "batch_sizes": res[0].info.get("batch_sizes"),
                 "total_s_last": total,
             }
+            print(f"  {name}: run {res[0].wall_time_s:.3f} s (compile "
+                  f"{res[0].compile_time_s:.1f} s), {extra[name]['successes']}/{n} "
+                  f"succeed", flush=True)
         print(f"repeat {rep + 1}/{args.repeats} done (load {loads[-1]:.1f})",
               flush=True)
 

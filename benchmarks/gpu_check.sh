@@ -46,6 +46,8 @@ step "${TESTS_S:-150}" tests python3 -m pytest -q -p no:cacheprovider $PER_TEST 
 step "${DYNAMIC_S:-220}" bench_dynamic python3 benchmarks/bench_dynamic.py --pops \
   --mjx-pops 1024 4096 16384 --repeats 2
 step "${TRIALS_S:-100}" bench_trials python3 benchmarks/bench_trials.py --repeats 2
-tar czf "$OUTDIR/bench_json.tgz" -C benchmarks out --exclude gpu_check.log \
-  --exclude bench_json.tgz 2>/dev/null
+# the benchmarks' JSON (exclusions before the folder: GNU tar's are positional),
+# written outside the folder it reads
+tar czf /tmp/bench_json.tgz --exclude gpu_check.log --exclude bench_json.tgz \
+  -C benchmarks out && mv /tmp/bench_json.tgz "$OUTDIR/bench_json.tgz"
 echo "=== done $(date -u +%T)" | tee -a "$LOG"
