@@ -27,7 +27,8 @@ float32 (< 1e-5 m) for every type pair except those of a cylinder against a box 
 cylinder, which sample the cylinder's side at 32 angles (overestimate by at most
 0.098 x its radius, ~0.005 x in the usual face-to-side case; `Collider.error_bounds`).
 Penetration values are minus the depth of the deepest point of one shape's core
-(segment / point, or box edges, cylinder generators) inside the other, plus radii:
+(segment / point, or box edges, cylinder generators) inside the other, plus radii,
+and for two boxes minus the shortest separating translation, as MuJoCo measures it:
 negative exactly when the shapes overlap (MuJoCo's pair functions measure depth
 their own way: signs agree in the tests, magnitudes may differ by centimetres for deep
 overlaps; MuJoCo's capsule-box even reports a separation for a thin capsule that
@@ -307,11 +308,16 @@ class Collider:
         return (jnp.concatenate([R, self._const_R]),
                 jnp.concatenate([p, self._const_p]))
 
-    def distances(self, genes: Array) -> Array:
+    def distances(self, genes: Array, *, exact: bool = True) -> Array:
         """Signed distance of every pair (m; negative = penetration depth).
 
         Args:
             genes: (DoF,) evolved joint values (radians / metres).
+            exact: False gives separated box-box pairs a lower bound of their
+                distance (`distance_fns.box_box_sat`, about 30 times cheaper)
+                instead of the distance; penetration and every other pair are
+                the same.  For checks that need the depth, not the clearance
+                (`cgda_jax.sim.feasibility`).
 
         Returns:
             (n_pairs,) float32, in `pair_names` order.
@@ -320,7 +326,8 @@ class Collider:
         out = []
         for ta, tb, ia, ib, sa, sb in self._groups:
             def one(ia, ib, sa, sb, ta=ta, tb=tb):
-                return pair_distance(ta, tb, sa, R[ia], p[ia], sb, R[ib], p[ib])
+                return pair_distance(ta, tb, sa, R[ia], p[ia], sb, R[ib], p[ib],
+                                     exact=exact)
 
             out.append(jax.vmap(one)(ia, ib, sa, sb))
         if not out:

@@ -13,9 +13,11 @@ Methods, by pair (`pair_distance`; "round" = sphere or capsule, a point or segme
 - round vs round: closed-form segment-segment distance minus both radii.  Exact.
 - anything vs plane: the support point along the plane's normal, closed form.  Exact.
 - round vs box / cylinder: the signed distance function (sdf) of a convex set is
-  convex, so along the core segment it is unimodal: golden-section search
-  (`GOLDEN_ITERS` iterations, bracket ``0.618**(GOLDEN_ITERS + 1)`` of the segment's
-  length, the sdf is 1-Lipschitz) minus the radius.  Exact to < 1e-6 m.
+  convex, so along the core segment it is unimodal: against a box, its minimum at
+  one of 37 candidate points in closed form (`segment_box_min`); against a
+  cylinder, golden-section search (`GOLDEN_ITERS` iterations, bracket
+  ``0.618**(GOLDEN_ITERS + 1)`` of the segment's length, the sdf is 1-Lipschitz);
+  minus the radius.  Exact to < 1e-6 m.
 - box / cylinder vs box / cylinder: the smallest sdf of each shape over the other's
   "feature" segments (a box's 12 edges; `N_GENERATORS` straight generator lines on a
   cylinder's side, ending on its rims), each by golden-section search of
@@ -28,6 +30,11 @@ Methods, by pair (`pair_distance`; "round" = sphere or capsule, a point or segme
   penetration the value is minus the depth of the deepest feature point inside the
   other shape (not MuJoCo's penetration depth, which is the shortest separating
   translation): negative whenever the shapes overlap.
+- box vs box in penetration: the separating axis theorem (`box_box_sat`, 15 axes,
+  closed form) gives minus the shortest separating translation, MuJoCo's depth (to
+  3e-8 m against ``mj_geomDistance`` in the tests, where the feature search was up
+  to 10 cm off); separated, the feature search above, or with ``exact=False`` the
+  separating-axis value, a lower bound of the distance at 1/30 of the cost.
 
 For round pairs and round vs box/cylinder in penetration the value is likewise
 minus (the deepest core point's depth + the radius): never more negative than the
@@ -49,6 +56,9 @@ __all__ = [
     "N_GENERATORS",
     "BASE_ERROR",
     "ROUND",
+    "SAT_PARALLEL",
+    "box_box_sat",
+    "segment_box_min",
     "error_bound",
     "feature_scale",
     "features",
@@ -74,6 +84,10 @@ ROUND = ("sphere", "capsule")
 _INV_PHI = (math.sqrt(5.0) - 1.0) / 2.0
 #: float32 round-off and golden-section slack on any pair (m).
 BASE_ERROR = 1e-5
+#: `box_box_sat` skips an edge-edge axis whose edges are this close to parallel
+#: (the sine of their angle): its direction is noise in float32, and the face
+#: axes already stand for it (skipping can only make the value smaller).
+SAT_PARALLEL = 1e-3
 
 
 def sdf_local(kind: str, size: Array, x: Array) -> Array:
@@ -118,6 +132,57 @@ def segment_min(f, a: Array, b: Array, iters: int = GOLDEN_ITERS) -> Array:
 
     *_, f1, f2 = jax.lax.fori_loop(0, iters, step, state)
     return jnp.minimum(jnp.minimum(f1, f2), jnp.minimum(g(0.0), g(1.0)))
+
+
+def _box_sdf_rows(size: Array, x: Array) -> Array:
+    """`sdf_local` of a box at each row of ``x`` (K, 3)."""
+    q = jnp.abs(x) - size
+    return (jnp.linalg.norm(jnp.maximum(q, 0.0), axis=-1)
+            + jnp.minimum(jnp.max(q, axis=-1), 0.0))
+
+
+def segment_box_min(size: Array, a: Array, b: Array) -> Array:
+    """Minimum of a box's signed distance on the segment ``a``-``b`` (3,), both in
+    the box's frame; closed form.
+
+    The box sdf is convex along the segment, so its minimum is at one of 37
+    parameters, all evaluated: the ends; the segment's points nearest each of the
+    8 vertices and the lines of the 12 edges (outside the box the nearest box point
+    is a vertex, an edge or a face, and a face's distance is linear along the
+    segment); and the kinks of ``max_i(|x_i| - h_i)``, the sdf inside the box (a
+    coordinate crossing 0, two coordinates' terms equal).  Exact up to float32
+    round-off, with no iterations.
+    """
+    d = b - a
+    dd = jnp.dot(d, d)
+    h = size
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                      for sz in (-1, 1)], np.float32)
+    verts = signs * h  # (8, 3)
+
+    def ratio(num, den):
+        ok = jnp.abs(den) > 1e-12
+        return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
+
+    t_vert = ratio((verts - a) @ d, dd)  # (8,)
+    t_edge = []
+    for k in range(3):  # edges along axis k, at (+-h_i, +-h_j) in the others
+        o = [i for i in range(3) if i != k]
+        do = d[jnp.array(o)]
+        for s1 in (-1, 1):
+            for s2 in (-1, 1):
+                c = jnp.stack([s1 * h[o[0]], s2 * h[o[1]]])
+                t_edge.append(ratio(jnp.dot(c - a[jnp.array(o)], do),
+                                    jnp.dot(do, do)))
+    t_kink = [ratio(-a[i], d[i]) for i in range(3)]
+    for i, j in ((0, 1), (0, 2), (1, 2)):  # s_i x_i - h_i = s_j x_j - h_j
+        for si in (-1.0, 1.0):
+            for sj in (-1.0, 1.0):
+                t_kink.append(ratio(h[i] - h[j] - si * a[i] + sj * a[j],
+                                    si * d[i] - sj * d[j]))
+    t = jnp.clip(jnp.concatenate([jnp.array([0.0, 1.0], jnp.float32), t_vert,
+                                  jnp.stack(t_edge), jnp.stack(t_kink)]), 0.0, 1.0)
+    return jnp.min(_box_sdf_rows(h, a + t[:, None] * d))
 
 
 def segment_segment(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
@@ -207,14 +272,49 @@ def _min_over_features(kind_a, size_a, kind_b, size_b, Ra, pa, Rb, pb):
     return jnp.min(per)
 
 
-def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb) -> Array:
+def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:
+    """The separating-axis value of two boxes: the largest gap between their
+    projections on the 15 axes of the separating axis theorem (3 face normals of
+    each box, 9 cross products of their edges), closed form.
+
+    Overlapping boxes: minus the penetration depth, the shortest translation that
+    separates them (the depth MuJoCo's box-box collision reports; the shortest
+    translation of two convex polyhedra is along one of these axes), up to float32
+    round-off.  Separated boxes: a value in ``(0, distance]``, equal to the
+    distance when the closest features are a face and anything, or the insides of
+    two edges, smaller for vertex-vertex and vertex-edge closest points.  Edge
+    pairs within `SAT_PARALLEL` of parallel are skipped (their face axes stand
+    for them), which can only make the value smaller.
+    """
+    t = pb - pa
+    cross = jnp.cross(Ra.T[:, None, :], Rb.T[None, :, :]).reshape(9, 3)
+    norm = jnp.linalg.norm(cross, axis=-1)
+    ok = norm > SAT_PARALLEL
+    axes = jnp.concatenate([Ra.T, Rb.T,
+                            cross / jnp.where(ok, norm, 1.0)[:, None]])  # (15, 3)
+    gap = (jnp.abs(axes @ t) - jnp.abs(axes @ Ra) @ size_a
+           - jnp.abs(axes @ Rb) @ size_b)
+    valid = jnp.concatenate([jnp.ones(6, bool), ok])
+    return jnp.max(jnp.where(valid, gap, -jnp.inf))
+
+
+def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
+                  exact: bool = True) -> Array:
     """Signed distance between geom a and geom b (types static; canonical order,
     see `swap_needed`).
+
+    Box-box pairs in penetration are minus the penetration depth (`box_box_sat`:
+    the shortest separating translation); separated, with ``exact`` their distance
+    by the feature search (module doc), without it the separating-axis value, a
+    lower bound of the distance that costs about 1/30 as much (a feasibility check
+    needs the depth, not the clearance).  ``exact`` changes nothing else.
 
     Args:
         kind_a, kind_b: geom types (`KINDS`).
         size_a, size_b: (3,) MuJoCo sizes.
         Ra, Rb: (3, 3) world rotations; pa, pb: (3,) world centres.
+        exact: separated box-box pairs get their distance (True) or a lower
+            bound (False).
     """
     if kind_a == "plane" and kind_b == "plane":
         raise ValueError("no distance between two planes")
@@ -231,11 +331,19 @@ def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb) -> A
 
         if kind_a == "sphere":
             return sdf_b(pa) - ra
+        if kind_b == "box":
+            return segment_box_min(size_b, Rb.T @ (a0 - pb), Rb.T @ (a1 - pb)) - ra
         return segment_min(sdf_b, a0, a1) - ra
-    return jnp.minimum(
+    sat = None
+    if kind_a == kind_b == "box":
+        sat = box_box_sat(size_a, Ra, pa, size_b, Rb, pb)
+        if not exact:
+            return sat
+    search = jnp.minimum(
         _min_over_features(kind_a, size_a, kind_b, size_b, Ra, pa, Rb, pb),
         _min_over_features(kind_b, size_b, kind_a, size_a, Rb, pb, Ra, pa),
     )
+    return search if sat is None else jnp.where(sat <= 0.0, sat, search)
 
 
 def swap_needed(kind_a: str, kind_b: str) -> bool:
