@@ -141,6 +141,38 @@ def _box_sdf_rows(size: Array, x: Array) -> Array:
             + jnp.minimum(jnp.max(q, axis=-1), 0.0))
 
 
+def _segment_box_tables():
+    """Constant tables of `segment_box_min`'s candidate parameters: the 8 vertex
+    signs; per edge of the 12 (along axis k at signs s1, s2 in the other two
+    axes) its selection (2, 3) and signs (2,); per kink of the 15 ``t = -(u.h +
+    w.a) / (w.d)`` its rows ``u``, ``w`` (3,)."""
+    verts = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                      for sz in (-1, 1)], np.float32)
+    sel, sgn = [], []
+    for k in range(3):
+        o = [i for i in range(3) if i != k]
+        for s1 in (-1, 1):
+            for s2 in (-1, 1):
+                sel.append(np.eye(3, dtype=np.float32)[o])
+                sgn.append([s1, s2])
+    u, w = [], []
+    for i in range(3):  # a coordinate crosses 0
+        u.append(np.zeros(3))
+        w.append(np.eye(3)[i])
+    for i, j in ((0, 1), (0, 2), (1, 2)):  # s_i x_i - h_i = s_j x_j - h_j
+        for si in (-1.0, 1.0):
+            for sj in (-1.0, 1.0):
+                uk, wk = np.zeros(3), np.zeros(3)
+                uk[i], uk[j], wk[i], wk[j] = 1.0, -1.0, -si, sj
+                u.append(uk)
+                w.append(wk)
+    return (verts, np.asarray(sel, np.float32), np.asarray(sgn, np.float32),
+            np.asarray(u, np.float32), np.asarray(w, np.float32))
+
+
+_SEGMENT_BOX = _segment_box_tables()
+
+
 def segment_box_min(size: Array, a: Array, b: Array) -> Array:
     """Minimum of a box's signed distance on the segment ``a``-``b`` (3,), both in
     the box's frame; closed form.
@@ -153,36 +185,21 @@ def segment_box_min(size: Array, a: Array, b: Array) -> Array:
     coordinate crossing 0, two coordinates' terms equal).  Exact up to float32
     round-off, with no iterations.
     """
+    verts, sel, sgn, u, w = _SEGMENT_BOX
     d = b - a
-    dd = jnp.dot(d, d)
-    h = size
-    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
-                      for sz in (-1, 1)], np.float32)
-    verts = signs * h  # (8, 3)
 
     def ratio(num, den):
         ok = jnp.abs(den) > 1e-12
         return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
-    t_vert = ratio((verts - a) @ d, dd)  # (8,)
-    t_edge = []
-    for k in range(3):  # edges along axis k, at (+-h_i, +-h_j) in the others
-        o = [i for i in range(3) if i != k]
-        do = d[jnp.array(o)]
-        for s1 in (-1, 1):
-            for s2 in (-1, 1):
-                c = jnp.stack([s1 * h[o[0]], s2 * h[o[1]]])
-                t_edge.append(ratio(jnp.dot(c - a[jnp.array(o)], do),
-                                    jnp.dot(do, do)))
-    t_kink = [ratio(-a[i], d[i]) for i in range(3)]
-    for i, j in ((0, 1), (0, 2), (1, 2)):  # s_i x_i - h_i = s_j x_j - h_j
-        for si in (-1.0, 1.0):
-            for sj in (-1.0, 1.0):
-                t_kink.append(ratio(h[i] - h[j] - si * a[i] + sj * a[j],
-                                    si * d[i] - sj * d[j]))
+    t_vert = ratio((verts * size - a) @ d, jnp.dot(d, d))  # (8,)
+    do = sel @ d  # (12, 2): the segment's direction across each edge
+    t_edge = ratio(jnp.sum((sgn * (sel @ size) - sel @ a) * do, -1),
+                   jnp.sum(do * do, -1))  # (12,)
+    t_kink = ratio(-(u @ size + w @ a), w @ d)  # (15,)
     t = jnp.clip(jnp.concatenate([jnp.array([0.0, 1.0], jnp.float32), t_vert,
-                                  jnp.stack(t_edge), jnp.stack(t_kink)]), 0.0, 1.0)
-    return jnp.min(_box_sdf_rows(h, a + t[:, None] * d))
+                                  t_edge, t_kink]), 0.0, 1.0)
+    return jnp.min(_box_sdf_rows(size, a + t[:, None] * d))
 
 
 def segment_segment(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
