@@ -117,8 +117,14 @@ class Feasibility:
             itself, e.g. the hand pushing a box); False: every pair.
 
     Attributes:
-        limits, collider (None without collisions or pairs), penetration, penalty,
+        limits: the `cgda_jax.sim.limits.JointLimits` judged against.
+        collider: the `cgda_jax.sim.collision.Collider` of the kept pairs (None
+            without collisions or pairs).
+        penetration: metres of penetration tolerated.
+        penalty: fitness added to an infeasible candidate, times (1 + violation).
         overlapping: pairs left out because they overlap in the start posture.
+        physical: pairs left out because the physics collides them
+            (``physics_contacts``).
     """
 
     def __init__(
