@@ -15,11 +15,14 @@ TWO_BOXES = """<mujoco><worldbody>
   <body name="A" mocap="true"><geom name="a" type="box" size="0.05 0.1 0.03"/></body>
   <body name="B" mocap="true"><geom name="b" type="box" size="0.2 0.02 0.08"/></body>
 </worldbody></mujoco>"""
+BOX_CYLINDER = TWO_BOXES.replace('type="box" size="0.2 0.02 0.08"',
+                                 'type="cylinder" size="0.12 0.02"')
 
 
-def _random_box_pairs(n, seed):
-    """MuJoCo's distance of two boxes in n random relative poses, and our inputs."""
-    m = mujoco.MjModel.from_xml_string(TWO_BOXES)
+def _random_box_pairs(n, seed, xml=TWO_BOXES):
+    """MuJoCo's distance of geoms a and b in n random relative poses, and our
+    inputs."""
+    m = mujoco.MjModel.from_xml_string(xml)
     d = mujoco.MjData(m)
     rng = np.random.default_rng(seed)
     ref, args = [], []
@@ -54,6 +57,21 @@ def test_box_box_depth_is_mujocos_and_clearance_a_lower_bound():
     assert np.max(np.abs(sat[sep] - ref[sep])) > 1e-3  # vertex cases below it
     bound = df.error_bound("box", [0.05, 0.1, 0.03], "box", [0.2, 0.02, 0.08])
     assert np.max(np.abs(exact[sep] - ref[sep])) <= bound
+
+
+def test_box_cylinder_bound_is_never_above_mujoco_and_near_its_depth():
+    ref, args = _random_box_pairs(1500, seed=4, xml=BOX_CYLINDER)
+    fast = np.asarray(jax.jit(jax.vmap(df.box_cylinder_sat))(*args))
+    cheap = np.asarray(jax.jit(jax.vmap(
+        lambda sa, Ra, pa, sb, Rb, pb: df.pair_distance(
+            "cylinder", "box", sb, Rb, pb, sa, Ra, pa, exact=False)))(*args))
+    np.testing.assert_array_equal(cheap, fast)  # either order
+    pen, sep = ref < -1e-4, ref > 1e-4
+    assert pen.sum() > 100 and sep.sum() > 1000
+    assert np.all(fast <= ref + 1e-6)  # a lower bound, penetration never shallower
+    gap = ref[pen] - fast[pen]
+    assert np.max(gap) < 1e-3 and np.mean(gap < 1e-4) > 0.85
+    assert np.all(fast[sep] > -1e-3)
 
 
 def test_box_box_sat_parallel_boxes_stay_finite():
@@ -92,7 +110,9 @@ def test_cheap_mode_changes_only_separated_box_pairs():
          "r_elbow", "r_forearm_rotation", "r_wrist"], "marker")
     board = Obstacle("board", "box", (0.3, -0.4, 0.2), (0.02, 0.3, 0.3),
                      (0.966, 0.0, 0.259, 0.0))
-    col = Collider(robot, [board])
+    post = Obstacle("post", "cylinder", (0.25, -0.45, 0.0), (0.06, 0.2),
+                    (0.9, 0.2, 0.3, 0.0))
+    col = Collider(robot, [board, post])
     rng = np.random.default_rng(2)
     genes = jnp.asarray(rng.uniform(np.asarray(robot.lower), np.asarray(robot.upper),
                                     (300, 6)), jnp.float32)
@@ -100,9 +120,15 @@ def test_cheap_mode_changes_only_separated_box_pairs():
     cheap = np.asarray(jax.jit(jax.vmap(
         lambda q: col.distances(q, exact=False)))(genes))
     boxes = np.array([t == ("box", "box") for t in col.pair_types])
-    assert boxes.any() and (~boxes).any()
-    np.testing.assert_allclose(cheap[:, ~boxes], exact[:, ~boxes], atol=1e-6)
+    cyl = np.array([set(t) == {"box", "cylinder"} for t in col.pair_types])
+    same = ~boxes & ~cyl
+    assert boxes.any() and cyl.any() and same.any()
+    np.testing.assert_allclose(cheap[:, same], exact[:, same], atol=1e-6)
     e, c = exact[:, boxes], cheap[:, boxes]
     assert (e < 0).any() and (e > 0).any()
     np.testing.assert_allclose(c[e <= 0], e[e <= 0], atol=1e-6)
     assert np.all(c[e > 0] <= e[e > 0] + 1e-6) and np.all(c[e > 1e-5] > 0)
+    # box-cylinder: a lower bound of the exact mode's value (the feature search's
+    # depth is the deepest feature point, never deeper than the true depth)
+    e, c = exact[:, cyl], cheap[:, cyl]
+    assert (e < 0).any() and np.all(c <= e + 1e-5)

@@ -35,6 +35,9 @@ Methods, by pair (`pair_distance`; "round" = sphere or capsule, a point or segme
   3e-8 m against ``mj_geomDistance`` in the tests, where the feature search was up
   to 10 cm off); separated, the feature search above, or with ``exact=False`` the
   separating-axis value, a lower bound of the distance at 1/30 of the cost.
+- box vs cylinder with ``exact=False``: projections on 67 axes with the exact
+  support functions (`box_cylinder_sat`): a lower bound of the signed distance,
+  within 0.8 mm of MuJoCo's depth in penetration in the tests.
 
 For round pairs and round vs box/cylinder in penetration the value is likewise
 minus (the deepest core point's depth + the radius): never more negative than the
@@ -58,6 +61,7 @@ __all__ = [
     "ROUND",
     "SAT_PARALLEL",
     "box_box_sat",
+    "box_cylinder_sat",
     "segment_box_min",
     "error_bound",
     "feature_scale",
@@ -315,6 +319,80 @@ def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:
     return jnp.max(jnp.where(valid, gap, -jnp.inf))
 
 
+def _box_corners():
+    """The 8 vertex signs of a box and its 12 edges as vertex index pairs."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+                      for sz in (-1, 1)], np.float32)
+    edges = [(i, j) for i in range(8) for j in range(i + 1, 8)
+             if np.sum(signs[i] != signs[j]) == 1]
+    return signs, np.asarray(edges, np.int32)
+
+
+_BOX_SIGNS, _BOX_EDGES = _box_corners()
+
+
+def _unit_rows(v: Array, fallback: Array) -> Array:
+    """Rows of ``v`` (K, 3) normalized; rows of (near) zero length -> ``fallback``."""
+    n = jnp.linalg.norm(v, axis=-1, keepdims=True)
+    ok = n > 1e-9
+    return jnp.where(ok, v / jnp.where(ok, n, 1.0), fallback)
+
+
+def box_cylinder_sat(size_box, Rb, pb, size_cyl, Rc, pc) -> Array:
+    """A lower bound of the signed distance of a box and a cylinder: the largest
+    gap between their projections over 67 axes, with their exact support
+    functions (box ``sum_i h_i |b_i . L|``, cylinder ``h |c . L| + r |L x c|``).
+
+    Any axis gives a lower bound (separated: the projections' gap is at most the
+    distance; overlapping: their overlap is at least the shortest separating
+    translation), so the value is never above the signed distance.  The axes are
+    those of each kind of closest or deepest contact: the box's face normals (a
+    box face against anything), the cylinder's axis (its flat caps), the box's
+    edges across the axis, the radial directions through the box's vertices and
+    through each edge's point nearest the axis (a vertex or edge against the
+    curved side), the directions from each vertex to the nearest point of each
+    rim circle (a vertex against a rim), and for an edge against a rim the common
+    normal of the edge and the rim's tangent where the edge crosses the rim's
+    plane (exact when the edge crosses it at the contact).  On 3,000 random poses
+    the depth was never shallower than MuJoCo's and at most 0.74 mm deeper (93 %
+    within 0.1 mm; `tests/test_box_distances.py`).  Closed form, about 1/4 of the
+    feature search's cost.
+    """
+    Rl = Rc.T @ Rb  # the box's axes (columns) in the cylinder's frame
+    t = Rc.T @ (pb - pc)  # the box's centre in the cylinder's frame
+    r, hz = size_cyl[0], size_cyl[1]
+    z = jnp.array([0.0, 0.0, 1.0], jnp.float32)
+    verts = t + (_BOX_SIGNS * size_box) @ Rl.T  # (8, 3)
+    ea, eb = verts[_BOX_EDGES[:, 0]], verts[_BOX_EDGES[:, 1]]  # (12, 3) each
+    de = eb - ea
+    dxy = jnp.sum(de[:, :2] ** 2, -1)
+    s = jnp.clip(jnp.where(dxy > 1e-12, -jnp.sum(ea[:, :2] * de[:, :2], -1)
+                           / jnp.where(dxy > 1e-12, dxy, 1.0), 0.0), 0.0, 1.0)
+    near_axis = ea + s[:, None] * de  # (12, 3)
+    flat = jnp.array([1.0, 1.0, 0.0], jnp.float32)
+    xy = _unit_rows(verts * flat, jnp.array([1.0, 0.0, 0.0], jnp.float32))
+    rims = jnp.concatenate([r * xy + hz * z, r * xy - hz * z])  # nearest rim points
+    # an edge against a rim: the common normal of the edge and the rim's tangent
+    # where the edge crosses the rim's plane
+    ez = jnp.where(jnp.abs(de[:, 2]) > 1e-12, de[:, 2], 1e-12)
+    cross_pts = jnp.concatenate([
+        ea + jnp.clip((hz - ea[:, 2]) / ez, 0.0, 1.0)[:, None] * de,
+        ea + jnp.clip((-hz - ea[:, 2]) / ez, 0.0, 1.0)[:, None] * de])  # (24, 3)
+    radial = _unit_rows(cross_pts * flat, jnp.array([1.0, 0.0, 0.0], jnp.float32))
+    tangent = jnp.stack([-radial[:, 1], radial[:, 0], jnp.zeros(24)], -1)
+    axes = jnp.concatenate([
+        Rl.T, z[None], jnp.cross(Rl.T, z),
+        verts * flat, near_axis * flat,
+        jnp.concatenate([verts, verts]) - rims,
+        jnp.cross(jnp.concatenate([de, de]), tangent),
+    ])
+    axes = _unit_rows(axes, z)  # (43, 3)
+    lz = axes[:, 2]
+    gap = (jnp.abs(axes @ t) - jnp.abs(axes @ Rl) @ size_box
+           - hz * jnp.abs(lz) - r * jnp.linalg.norm(axes[:, :2], axis=-1))
+    return jnp.max(gap)
+
+
 def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
                   exact: bool = True) -> Array:
     """Signed distance between geom a and geom b (types static; canonical order,
@@ -324,7 +402,10 @@ def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
     the shortest separating translation); separated, with ``exact`` their distance
     by the feature search (module doc), without it the separating-axis value, a
     lower bound of the distance that costs about 1/30 as much (a feasibility check
-    needs the depth, not the clearance).  ``exact`` changes nothing else.
+    needs the depth, not the clearance).  Without ``exact`` a box and a cylinder
+    get `box_cylinder_sat`: never above the signed distance, the depth within
+    0.8 mm of MuJoCo's in the tests, at about 1/4 of the cost.  ``exact`` changes
+    nothing else.
 
     Args:
         kind_a, kind_b: geom types (`KINDS`).
@@ -356,6 +437,10 @@ def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
         sat = box_box_sat(size_a, Ra, pa, size_b, Rb, pb)
         if not exact:
             return sat
+    if not exact and {kind_a, kind_b} == {"box", "cylinder"}:
+        if kind_a == "box":
+            return box_cylinder_sat(size_a, Ra, pa, size_b, Rb, pb)
+        return box_cylinder_sat(size_b, Rb, pb, size_a, Ra, pa)
     search = jnp.minimum(
         _min_over_features(kind_a, size_a, kind_b, size_b, Ra, pa, Rb, pb),
         _min_over_features(kind_b, size_b, kind_a, size_a, Rb, pb, Ra, pa),
