@@ -320,15 +320,17 @@ def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:
 
 
 def _box_corners():
-    """The 8 vertex signs of a box and its 12 edges as vertex index pairs."""
+    """The 8 vertex signs of a box, and its 12 edges' start signs and directions
+    (end minus start signs)."""
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
                       for sz in (-1, 1)], np.float32)
     edges = [(i, j) for i in range(8) for j in range(i + 1, 8)
              if np.sum(signs[i] != signs[j]) == 1]
-    return signs, np.asarray(edges, np.int32)
+    start = np.asarray([signs[i] for i, _ in edges])
+    return signs, start, np.asarray([signs[j] for _, j in edges]) - start
 
 
-_BOX_SIGNS, _BOX_EDGES = _box_corners()
+_BOX_SIGNS, _EDGE_START, _EDGE_DIR = _box_corners()
 
 
 def _unit_rows(v: Array, fallback: Array) -> Array:
@@ -363,8 +365,8 @@ def box_cylinder_sat(size_box, Rb, pb, size_cyl, Rc, pc) -> Array:
     r, hz = size_cyl[0], size_cyl[1]
     z = jnp.array([0.0, 0.0, 1.0], jnp.float32)
     verts = t + (_BOX_SIGNS * size_box) @ Rl.T  # (8, 3)
-    ea, eb = verts[_BOX_EDGES[:, 0]], verts[_BOX_EDGES[:, 1]]  # (12, 3) each
-    de = eb - ea
+    ea = t + (_EDGE_START * size_box) @ Rl.T  # (12, 3) edges' starts
+    de = (_EDGE_DIR * size_box) @ Rl.T  # and directions
     dxy = jnp.sum(de[:, :2] ** 2, -1)
     s = jnp.clip(jnp.where(dxy > 1e-12, -jnp.sum(ea[:, :2] * de[:, :2], -1)
                            / jnp.where(dxy > 1e-12, dxy, 1.0), 0.0), 0.0, 1.0)
