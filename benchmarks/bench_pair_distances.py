@@ -7,10 +7,12 @@ sizes (half of them overlapping or near): ``distance_fns.pair_distance`` with
 check), `jax.vmap`-ed over the N poses, against a Python loop over MuJoCo C's
 ``mj_geomDistance`` on the same poses (the peer a user would write). Prints per type
 the time per pair (median of repeats, compile apart), the ratios, and how the values
-agree: separated pairs (ours exact vs MuJoCo; cheap <= MuJoCo), overlapping pairs (the
-depth: ours vs MuJoCo's, which is the shortest separating translation).
+agree: separated pairs (ours exact vs MuJoCo; ``cheap_above_mm``: how far the cheap
+mode ever lies above MuJoCo, 0 for a lower bound), overlapping pairs (the depth: ours
+vs MuJoCo's, the shortest separating translation; ours is the deepest core point's
+depth for round shapes and the exact mode's box-cylinder, so it may be shallower).
 
-    python benchmarks/bench_pair_distances.py [--n 4096] [--repeats 5]
+    python benchmarks/bench_pair_distances.py [--n 4096] [--repeats 15]
 """
 
 from __future__ import annotations
@@ -68,7 +70,7 @@ def poses(kind_a: str, kind_b: str, n: int, seed: int):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4096)
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=15)
     args = ap.parse_args()
     rows = []
     for ka, kb in PAIRS:
@@ -101,20 +103,28 @@ def main() -> None:
             ours = np.asarray(fn(*cols))
             s = median_time(lambda: jax.block_until_ready(fn(*cols)), args.repeats)
             tag = "exact" if exact else "cheap"
-            sep, pen = ref > 1e-4, ref < -1e-4
+            # MuJoCo's capsule-box reports a separation for a thin capsule that
+            # pierces a box (tests/test_collision.py checks ours by brute force
+            # there): poses whose signs disagree are counted, not compared
+            agree = ~((np.abs(ref) > 1e-4) & (np.sign(ours) != np.sign(ref)))
+            sep, pen = (ref > 1e-4) & agree, (ref < -1e-4) & agree
             row[f"{tag}_us"] = 1e6 * s / args.n
             row[f"{tag}_x"] = peer_s / s
             row[f"{tag}_compile_s"] = compile_s
+            row[f"{tag}_signs_differ"] = int(np.sum(~agree))
             row[f"{tag}_sep_err_mm"] = 1e3 * float(np.max(np.abs(ours[sep] - ref[sep])))
-            row[f"{tag}_above_mm"] = 1e3 * float(np.max(ours - ref))
-            row[f"{tag}_depth_err_mm"] = (1e3 * float(np.max(np.abs(ours[pen] - ref[pen])))
-                                          if pen.any() else 0.0)
+            row[f"{tag}_above_mm"] = 1e3 * float(np.max((ours - ref)[agree]))
+            gap = np.abs(ours[pen] - ref[pen]) if pen.any() else np.zeros(1)
+            row[f"{tag}_depth_err_mm"] = 1e3 * float(np.max(gap))
+            row[f"{tag}_depth_within_0.1mm"] = float(np.mean(gap < 1e-4))
         print({k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()},
               flush=True)
         rows.append(row)
     print_table(rows, ["pair", "n", "overlapping", "mujoco_us", "exact_us", "exact_x",
-                       "cheap_us", "cheap_x", "exact_sep_err_mm", "cheap_above_mm",
-                       "exact_depth_err_mm", "cheap_depth_err_mm"])
+                       "cheap_us", "cheap_x", "exact_signs_differ", "exact_sep_err_mm",
+                       "cheap_above_mm", "exact_depth_err_mm",
+                       "exact_depth_within_0.1mm", "cheap_depth_err_mm",
+                       "cheap_depth_within_0.1mm"])
     write_json("pair_distances", {"machine": machine(), "rows": rows})
 
 
