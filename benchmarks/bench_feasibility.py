@@ -14,7 +14,14 @@ Targets (issue 21): paint IET kinematic and dynamic >= 9 / 10 feasible successes
 iron and clean 10 / 10; a feasible run's run time within 2 x the unconstrained one and
 its compile time within 1.5 x.
 
+``--export`` also exports each trial's joints as a controller's trajectory (100 Hz,
+ruckig), writes and reads it back as JSON and replays it on MuJoCo C 4 x finer, as
+``cgda run`` does (`cgda_jax.experiment.compute.export_check`): issue 22's target is
+the replay within the run's tolerance on 10 of 10 seeds of every execution
+experiment. ``--on-only`` skips the unconstrained runs.
+
     python benchmarks/bench_feasibility.py [--trials 10] [--only paint_iet ...]
+        [--export] [--on-only]
 """
 
 from __future__ import annotations
@@ -38,7 +45,7 @@ TARGETS = {"paint_iet": 9, "paint_iet_dynamic": 9, "iron_ie_xgnitive": 10,
            "clean_ie": 10, "clean_ie_dynamic": 10, "clean_fte": 10}
 
 
-def run(name: str, trials: int, feasible: bool) -> dict:
+def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
     cfg = load_config(resolve_config(name),
                       [f"strategy.feasibility={'true' if feasible else 'false'}"])
     goal, demos, _ = build_goal(cfg)
@@ -61,7 +68,21 @@ def run(name: str, trials: int, feasible: bool) -> dict:
     effort = [max([v for v in c.get("peak_effort", {}).values() if v is not None]
                   or [0.0]) for c in checks if c]
     jumps = [c["moves_over_max_step"] for c in checks if c]
-    return {
+    exported = {}
+    if export:
+        from cgda_jax.experiment.compute import export_check
+
+        ex = [export_check(sim, r) for r in results]
+        exported = {
+            "export_ok": sum(bool(e["success"]) for e in ex),
+            "export_ok_of_successes": sum(bool(e["success"]) for e, a in zip(ex, ok)
+                                          if a),
+            "export_worst_error": max(e.get("max_point_error", float("nan"))
+                                      for e in ex),
+            "export_feature_diff": max(e.get("max_feature_difference", 0.0)
+                                       for e in ex),
+        }
+    return {**exported,
         "experiment": name, "feasibility": feasible, "trials": trials,
         "success": sum(ok), "feasible_success": sum(a and b for a, b in zip(ok, clean)),
         "max_penetration_mm": 1e3 * max(pen or [0.0]),
@@ -78,6 +99,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=10)
     ap.add_argument("--only", nargs="*", default=None)
+    ap.add_argument("--export", action="store_true",
+                    help="replay each trial's exported trajectory on MuJoCo C")
+    ap.add_argument("--on-only", action="store_true",
+                    help="only the feasible runs (no unconstrained baseline)")
     args = ap.parse_args()
     names = args.only or EXPERIMENTS
     if "iron_ie_xgnitive" in names and not os.environ.get("CGDA_XGNITIVE_DIR"):
@@ -85,24 +110,27 @@ def main() -> None:
         names = [n for n in names if n != "iron_ie_xgnitive"]
     rows = []
     for name in names:
-        for feasible in (False, True):
-            row = run(name, args.trials, feasible)
+        for feasible in (True,) if args.on_only else (False, True):
+            row = run(name, args.trials, feasible, args.export)
             print({k: row[k] for k in ("experiment", "feasibility", "success",
-                                       "feasible_success", "run_s", "compile_s")},
-                  flush=True)
+                                       "feasible_success", "run_s", "compile_s",
+                                       "export_ok") if k in row}, flush=True)
             rows.append(row)
     for row in rows:
-        if row["feasibility"]:
-            base = next(r for r in rows if r["experiment"] == row["experiment"]
-                        and not r["feasibility"])
+        base = next((r for r in rows if r["experiment"] == row["experiment"]
+                     and not r["feasibility"]), None)
+        if row["feasibility"] and base is not None:
             row["run_ratio"] = row["run_s"] / max(base["run_s"], 1e-9)
             row["compile_ratio"] = row["compile_s"] / max(base["compile_s"], 1e-9)
+        if row["feasibility"]:
             target = TARGETS.get(row["experiment"])
             row["target"] = "-" if target is None else (
                 f">= {target}: {'met' if row['feasible_success'] >= target else 'MISSED'}")
     print_table(rows, ["experiment", "feasibility", "success", "feasible_success",
                        "max_penetration_mm", "max_speed", "max_effort", "moves_over_90",
-                       "run_s", "compile_s", "run_ratio", "compile_ratio", "target"])
+                       "run_s", "compile_s", "run_ratio", "compile_ratio", "target"]
+                + (["export_ok", "export_ok_of_successes", "export_worst_error",
+                    "export_feature_diff"] if args.export else []))
     for row in rows:
         if row["problems"]:
             print(f"{row['experiment']} feasibility={row['feasibility']}: "
