@@ -1,4 +1,4 @@
-"""Closed-form box distances (cgda_jax.sim.distance_fns) against MuJoCo C and brute
+"""Closed-form box distances (cgda_jax.sim.box_distances) against MuJoCo C and brute
 force, and the feasibility check's cheap mode (``Collider.distances(exact=False)``)."""
 
 import jax
@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from cgda_jax import Robot, model_path
+from cgda_jax.sim import box_distances as bd
 from cgda_jax.sim import distance_fns as df
 from cgda_jax.sim.collision import Collider, Obstacle
 
@@ -42,7 +43,7 @@ def _random_box_pairs(n, seed, xml=TWO_BOXES):
 
 def test_box_box_depth_is_mujocos_and_clearance_a_lower_bound():
     ref, args = _random_box_pairs(1500, seed=1)
-    sat = np.asarray(jax.jit(jax.vmap(df.box_box_sat))(*args))
+    sat = np.asarray(jax.jit(jax.vmap(bd.box_box_sat))(*args))
     exact = np.asarray(jax.jit(jax.vmap(
         lambda sa, Ra, pa, sb, Rb, pb: df.pair_distance("box", "box", sa, Ra, pa,
                                                         sb, Rb, pb)))(*args))
@@ -61,7 +62,7 @@ def test_box_box_depth_is_mujocos_and_clearance_a_lower_bound():
 
 def test_box_cylinder_bound_is_never_above_mujoco_and_near_its_depth():
     ref, args = _random_box_pairs(1500, seed=4, xml=BOX_CYLINDER)
-    fast = np.asarray(jax.jit(jax.vmap(df.box_cylinder_sat))(*args))
+    fast = np.asarray(jax.jit(jax.vmap(bd.box_cylinder_sat))(*args))
     cheap = np.asarray(jax.jit(jax.vmap(
         lambda sa, Ra, pa, sb, Rb, pb: df.pair_distance(
             "cylinder", "box", sb, Rb, pb, sa, Ra, pa, exact=False)))(*args))
@@ -77,7 +78,7 @@ def test_box_cylinder_bound_is_never_above_mujoco_and_near_its_depth():
 def test_box_box_sat_parallel_boxes_stay_finite():
     eye, size = jnp.eye(3), jnp.array([0.1, 0.1, 0.1])
     for gap in (0.05, -0.03):  # face to face, axes parallel: cross axes are 0
-        v = df.box_box_sat(size, eye, jnp.zeros(3), size, eye,
+        v = bd.box_box_sat(size, eye, jnp.zeros(3), size, eye,
                            jnp.array([0.2 + gap, 0.0, 0.0]))
         assert float(v) == pytest.approx(gap, abs=1e-6)
 
@@ -90,7 +91,7 @@ def test_segment_box_min_equals_a_dense_search():
     b = (a + rng.normal(0, 0.2, (n, 3))).astype(np.float32)
     b[:40] = a[:40]  # points
     b[40:80, 1:] = a[40:80, 1:]  # parallel to an axis
-    ours = np.asarray(jax.jit(jax.vmap(df.segment_box_min))(h, a, b))
+    ours = np.asarray(jax.jit(jax.vmap(bd.segment_box_min))(h, a, b))
     ts = np.linspace(0.0, 1.0, 20001)[:, None]
     for i in range(n):
         x = a[i] + ts * (b[i] - a[i]).astype(np.float64)
