@@ -1,5 +1,7 @@
 """Closed-form distances of boxes, for `cgda_jax.sim.distance_fns` (float32, JAX).
 
+- `box_sdf`: a box's signed distance at points in its frame (also
+  `distance_fns.sdf_local`'s);
 - `segment_box_min`: the smallest signed distance of a box along a segment (a
   capsule's core), exact at 37 candidate points, no iterations;
 - `box_box_sat`: the separating axis theorem for two boxes: minus the penetration
@@ -21,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["SAT_PARALLEL", "box_box_sat", "box_cylinder_sat", "segment_box_min"]
+__all__ = ["SAT_PARALLEL", "box_box_sat", "box_cylinder_sat", "box_sdf",
+           "segment_box_min"]
 
 #: `box_box_sat` skips an edge-edge axis whose edges are this close to parallel
 #: (the sine of their angle): its direction is noise in float32, and the face
@@ -29,20 +32,33 @@ __all__ = ["SAT_PARALLEL", "box_box_sat", "box_cylinder_sat", "segment_box_min"]
 SAT_PARALLEL = 1e-3
 
 
-def _box_sdf_rows(size: Array, x: Array) -> Array:
-    """`sdf_local` of a box at each row of ``x`` (K, 3)."""
+def box_sdf(size: Array, x: Array) -> Array:
+    """Signed distance from points ``x`` (..., 3) in a box's frame to the box of
+    half sizes ``size`` (3,): (...,)."""
     q = jnp.abs(x) - size
     return (jnp.linalg.norm(jnp.maximum(q, 0.0), axis=-1)
             + jnp.minimum(jnp.max(q, axis=-1), 0.0))
 
 
-def _segment_box_tables():
-    """Constant tables of `segment_box_min`'s candidate parameters: the 8 vertex
-    signs; per edge of the 12 (along axis k at signs s1, s2 in the other two
-    axes) its selection (2, 3) and signs (2,); per kink of the 15 ``t = -(u.h +
-    w.a) / (w.d)`` its rows ``u``, ``w`` (3,)."""
-    verts = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
+def _box_corners():
+    """The 8 vertex signs of a box, and its 12 edges' start signs and directions
+    (end minus start signs)."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
                       for sz in (-1, 1)], np.float32)
+    edges = [(i, j) for i in range(8) for j in range(i + 1, 8)
+             if np.sum(signs[i] != signs[j]) == 1]
+    start = np.asarray([signs[i] for i, _ in edges])
+    return signs, start, np.asarray([signs[j] for _, j in edges]) - start
+
+
+_BOX_SIGNS, _EDGE_START, _EDGE_DIR = _box_corners()
+
+
+def _segment_box_tables():
+    """Constant tables of `segment_box_min`'s candidate parameters: per edge of
+    the 12 (along axis k at signs s1, s2 in the other two axes) its selection
+    (2, 3) and signs (2,); per kink of the 15 ``t = -(u.h + w.a) / (w.d)`` its
+    rows ``u``, ``w`` (3,)."""
     sel, sgn = [], []
     for k in range(3):
         o = [i for i in range(3) if i != k]
@@ -61,7 +77,7 @@ def _segment_box_tables():
                 uk[i], uk[j], wk[i], wk[j] = 1.0, -1.0, -si, sj
                 u.append(uk)
                 w.append(wk)
-    return (verts, np.asarray(sel, np.float32), np.asarray(sgn, np.float32),
+    return (np.asarray(sel, np.float32), np.asarray(sgn, np.float32),
             np.asarray(u, np.float32), np.asarray(w, np.float32))
 
 
@@ -80,21 +96,21 @@ def segment_box_min(size: Array, a: Array, b: Array) -> Array:
     coordinate crossing 0, two coordinates' terms equal).  Exact up to float32
     round-off, with no iterations.
     """
-    verts, sel, sgn, u, w = _SEGMENT_BOX
+    sel, sgn, u, w = _SEGMENT_BOX
     d = b - a
 
     def ratio(num, den):
         ok = jnp.abs(den) > 1e-12
         return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
-    t_vert = ratio((verts * size - a) @ d, jnp.dot(d, d))  # (8,)
+    t_vert = ratio((_BOX_SIGNS * size - a) @ d, jnp.dot(d, d))  # (8,)
     do = sel @ d  # (12, 2): the segment's direction across each edge
     t_edge = ratio(jnp.sum((sgn * (sel @ size) - sel @ a) * do, -1),
                    jnp.sum(do * do, -1))  # (12,)
     t_kink = ratio(-(u @ size + w @ a), w @ d)  # (15,)
     t = jnp.clip(jnp.concatenate([jnp.array([0.0, 1.0], jnp.float32), t_vert,
                                   t_edge, t_kink]), 0.0, 1.0)
-    return jnp.min(_box_sdf_rows(size, a + t[:, None] * d))
+    return jnp.min(box_sdf(size, a + t[:, None] * d))
 
 
 def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:
@@ -121,20 +137,6 @@ def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:
            - jnp.abs(axes @ Rb) @ size_b)
     valid = jnp.concatenate([jnp.ones(6, bool), ok])
     return jnp.max(jnp.where(valid, gap, -jnp.inf))
-
-
-def _box_corners():
-    """The 8 vertex signs of a box, and its 12 edges' start signs and directions
-    (end minus start signs)."""
-    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1)
-                      for sz in (-1, 1)], np.float32)
-    edges = [(i, j) for i in range(8) for j in range(i + 1, 8)
-             if np.sum(signs[i] != signs[j]) == 1]
-    start = np.asarray([signs[i] for i, _ in edges])
-    return signs, start, np.asarray([signs[j] for _, j in edges]) - start
-
-
-_BOX_SIGNS, _EDGE_START, _EDGE_DIR = _box_corners()
 
 
 def _unit_rows(v: Array, fallback: Array) -> Array:

@@ -36,10 +36,11 @@ Methods, by pair (`pair_distance`; "round" = sphere or capsule, a point or segme
   closed form) gives minus the shortest separating translation, MuJoCo's depth (to
   3e-8 m against ``mj_geomDistance`` in the tests, where the feature search was up
   to 10 cm off); separated, the feature search above, or with ``exact=False`` the
-  separating-axis value, a lower bound of the distance at 1/30 of the cost.
+  separating-axis value, a lower bound of the distance at about 1/8 of the cost.
 - box vs cylinder with ``exact=False``: projections on 67 axes with the exact
-  support functions (`cgda_jax.sim.box_distances.box_cylinder_sat`): a lower bound of the signed distance,
-  within 0.8 mm of MuJoCo's depth in penetration in the tests.
+  support functions (`cgda_jax.sim.box_distances.box_cylinder_sat`): a lower bound
+  of the signed distance, within 0.8 mm of MuJoCo's depth in penetration in the
+  tests, at about 1/4 of the cost.
 
 For round pairs and round vs box/cylinder in penetration the value is likewise
 minus (the deepest core point's depth + the radius): never more negative than the
@@ -55,7 +56,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from cgda_jax.sim.box_distances import box_box_sat, box_cylinder_sat, segment_box_min
+from cgda_jax.sim.box_distances import (
+    box_box_sat,
+    box_cylinder_sat,
+    box_sdf,
+    segment_box_min,
+)
 
 __all__ = [
     "GOLDEN_ITERS",
@@ -98,8 +104,7 @@ def sdf_local(kind: str, size: Array, x: Array) -> Array:
         z = jnp.clip(x[2], -size[1], size[1])
         return jnp.linalg.norm(x - jnp.array([0.0, 0.0, 1.0]) * z) - size[0]
     if kind == "box":
-        q = jnp.abs(x) - size
-        return jnp.linalg.norm(jnp.maximum(q, 0.0)) + jnp.minimum(jnp.max(q), 0.0)
+        return box_sdf(size, x)
     if kind == "cylinder":
         q = jnp.stack([jnp.linalg.norm(x[:2]) - size[0], jnp.abs(x[2]) - size[1]])
         return jnp.linalg.norm(jnp.maximum(q, 0.0)) + jnp.minimum(jnp.max(q), 0.0)
@@ -227,14 +232,14 @@ def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
     see `swap_needed`).
 
     Box-box pairs in penetration are minus the penetration depth
-    (`cgda_jax.sim.box_distances.box_box_sat`:
-    the shortest separating translation); separated, with ``exact`` their distance
-    by the feature search (module doc), without it the separating-axis value, a
-    lower bound of the distance that costs about 1/30 as much (a feasibility check
-    needs the depth, not the clearance).  Without ``exact`` a box and a cylinder
-    get `cgda_jax.sim.box_distances.box_cylinder_sat`: never above the signed distance, the depth within
-    0.8 mm of MuJoCo's in the tests, at about 1/4 of the cost.  ``exact`` changes
-    nothing else.
+    (`cgda_jax.sim.box_distances.box_box_sat`: the shortest separating
+    translation); separated, with ``exact`` their distance by the feature search
+    (module doc), without it the separating-axis value, a lower bound of the
+    distance that costs about 1/8 as much (a feasibility check needs the depth,
+    not the clearance).  Without ``exact`` a box and a cylinder get
+    `cgda_jax.sim.box_distances.box_cylinder_sat`: never above the signed
+    distance, the depth within 0.8 mm of MuJoCo's in the tests, at about 1/4 of
+    the cost.  ``exact`` changes nothing else.
 
     Args:
         kind_a, kind_b: geom types (`KINDS`).

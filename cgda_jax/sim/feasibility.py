@@ -224,7 +224,8 @@ class Feasibility:
             return jnp.float32(-jnp.inf)
         alphas = jnp.arange(self.samples + 1, dtype=jnp.float32) / self.samples
         path = q0 + alphas[:, None] * dq  # (S + 1, DoF)
-        # the depth is what counts: separated box-box pairs get a lower bound
+        # the depth is what counts: separated box-box and box-cylinder pairs
+        # get a lower bound of their distance (Collider.distances)
         d = jax.vmap(lambda q: self.collider.distances(q, exact=False))(path)
         if not self.certify:
             return -jnp.min(d)
