@@ -77,8 +77,9 @@ def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
             "export_ok": sum(bool(e["success"]) for e in ex),
             "export_ok_of_successes": sum(bool(e["success"]) for e, a in zip(ex, ok)
                                           if a),
-            "export_worst_error": max(e.get("max_point_error", float("nan"))
-                                      for e in ex),
+            # a trial without postures to export has no error: NaN, not skipped
+            "export_worst_error": float(np.max([e.get("max_point_error", np.nan)
+                                                for e in ex])),
             "export_feature_diff": max(e.get("max_feature_difference", 0.0)
                                        for e in ex),
         }

@@ -42,7 +42,8 @@ SECOND = {"box": (0.2, 0.02, 0.08), "capsule": (0.04, 0.2, 0.0),
 
 
 def poses(kind_a: str, kind_b: str, n: int, seed: int):
-    """MuJoCo's distances of n random poses of geoms a and b, and our inputs."""
+    """n random poses of geoms a and b: MuJoCo's model and data, each pose's
+    ``(geom_xpos, geom_xmat)`` for the peer, and our inputs (6 stacked arrays)."""
     xml = f"""<mujoco><worldbody>
       <body name="A" mocap="true"><geom type="{kind_a}" size="{' '.join(
           str(x) for x in SIZES[kind_a] if x)}"/></body>
@@ -52,19 +53,19 @@ def poses(kind_a: str, kind_b: str, n: int, seed: int):
     d = mujoco.MjData(m)
     rng = np.random.default_rng(seed)
     cols = [[] for _ in range(6)]
-    states = []
+    frames = []
     for _ in range(n):
         for k in range(2):
             q = rng.normal(size=4)
             d.mocap_quat[k] = q / np.linalg.norm(q)
         d.mocap_pos[1] = rng.uniform(-0.25, 0.25, 3)
         mujoco.mj_kinematics(m, d)
-        states.append((d.mocap_quat.copy(), d.mocap_pos.copy()))
+        frames.append((d.geom_xpos.copy(), d.geom_xmat.copy()))
         for k, x in enumerate((m.geom_size[0], d.geom_xmat[0].reshape(3, 3),
                                d.geom_xpos[0], m.geom_size[1],
                                d.geom_xmat[1].reshape(3, 3), d.geom_xpos[1])):
             cols[k].append(np.array(x, np.float32))
-    return m, d, states, [jnp.asarray(np.stack(c)) for c in cols]
+    return m, d, frames, [jnp.asarray(np.stack(c)) for c in cols]
 
 
 def main() -> None:
@@ -74,16 +75,12 @@ def main() -> None:
     args = ap.parse_args()
     rows = []
     for ka, kb in PAIRS:
-        m, d, states, cols = poses(ka, kb, args.n, seed=0)
-        xmats = []  # the peer's poses, computed once: only its distances are timed
-        for q, p in states:
-            d.mocap_quat[:], d.mocap_pos[:] = q, p
-            mujoco.mj_kinematics(m, d)
-            xmats.append((d.geom_xpos.copy(), d.geom_xmat.copy()))
+        # the peer's poses are computed once: only its distances are timed
+        m, d, frames, cols = poses(ka, kb, args.n, seed=0)
 
         def peer():
-            out = np.empty(len(xmats))
-            for i, (xp, xm) in enumerate(xmats):
+            out = np.empty(len(frames))
+            for i, (xp, xm) in enumerate(frames):
                 d.geom_xpos[:], d.geom_xmat[:] = xp, xm
                 out[i] = mujoco.mj_geomDistance(m, d, 0, 1, 10.0, None)
             return out
