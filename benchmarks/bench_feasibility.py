@@ -14,11 +14,13 @@ Targets (issue 21): paint IET kinematic and dynamic >= 9 / 10 feasible successes
 iron and clean 10 / 10; a feasible run's run time within 2 x the unconstrained one and
 its compile time within 1.5 x.
 
-``--export`` also exports each trial's joints as a controller's trajectory (100 Hz,
-ruckig), writes and reads it back as JSON and replays it on MuJoCo C 4 x finer, as
-``cgda run`` does (`cgda_jax.experiment.compute.export_check`): issue 22's target is
-the replay within the run's tolerance on 10 of 10 seeds of every execution
-experiment. ``--on-only`` skips the unconstrained runs.
+``--export`` also replays each trial's joints on the 4 x finer simulator
+(``replay_ok``, `cgda_jax.experiment.compute.replay_check`), exports them as a
+controller's trajectory (100 Hz, the run's minimum-jerk ramp), writes and reads it
+back as JSON and replays it on MuJoCo C 4 x finer, as ``cgda run`` does
+(`cgda_jax.experiment.compute.export_check`): issue 22's target is the replay within
+the run's tolerance on 10 of 10 seeds of every execution experiment. ``--on-only``
+skips the unconstrained runs.
 
     python benchmarks/bench_feasibility.py [--trials 10] [--only paint_iet ...]
         [--export] [--on-only]
@@ -70,10 +72,13 @@ def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
     jumps = [c["moves_over_max_step"] for c in checks if c]
     exported = {}
     if export:
-        from cgda_jax.experiment.compute import export_check
+        from cgda_jax.experiment.compute import export_check, replay_check
 
         ex = [export_check(sim, r) for r in results]
         exported = {
+            # the run's own joints on the 4x finer simulator (cgda run's replay row)
+            "replay_ok": sum(bool(replay_check(sim, r)["success"]) for r in results
+                             if np.all(np.isfinite(r.joints))),
             "export_ok": sum(bool(e["success"]) for e in ex),
             "export_ok_of_successes": sum(bool(e["success"]) for e, a in zip(ex, ok)
                                           if a),
@@ -115,7 +120,8 @@ def main() -> None:
             row = run(name, args.trials, feasible, args.export)
             print({k: row[k] for k in ("experiment", "feasibility", "success",
                                        "feasible_success", "run_s", "compile_s",
-                                       "export_ok") if k in row}, flush=True)
+                                       "replay_ok", "export_ok") if k in row},
+                  flush=True)
             rows.append(row)
     for row in rows:
         base = next((r for r in rows if r["experiment"] == row["experiment"]
@@ -130,8 +136,8 @@ def main() -> None:
     print_table(rows, ["experiment", "feasibility", "success", "feasible_success",
                        "max_penetration_mm", "max_speed", "max_effort", "moves_over_90",
                        "run_s", "compile_s", "run_ratio", "compile_ratio", "target"]
-                + (["export_ok", "export_ok_of_successes", "export_worst_error",
-                    "export_feature_diff"] if args.export else []))
+                + (["replay_ok", "export_ok", "export_ok_of_successes",
+                    "export_worst_error", "export_feature_diff"] if args.export else []))
     for row in rows:
         if row["problems"]:
             print(f"{row['experiment']} feasibility={row['feasibility']}: "

@@ -1,6 +1,7 @@
-"""Exported trajectories (issue 22): ruckig time parameterization checked on the
-samples themselves, the files (a ROS JointTrajectory in JSON, CSV, NPZ) round-trip,
-and the exported file replayed on MuJoCo C gives each strategy's features."""
+"""Exported trajectories (issue 22): the time parameterization (the run's own
+minimum-jerk ramp, or ruckig's jerk-limited profile) checked on the samples
+themselves, the files (a ROS JointTrajectory in JSON, CSV, NPZ) round-trip, and the
+exported file replayed on MuJoCo C gives each strategy's features."""
 
 import json
 
@@ -28,13 +29,13 @@ V, A = np.array([1.5, 2.0, 3.0]), np.array([6.0, 4.0, 10.0])
 LOWER, UPPER = np.full(3, -1.0), np.full(3, 1.0)
 
 
-@pytest.fixture(scope="module")
-def limited():
+@pytest.fixture(scope="module", params=["min_jerk", "ruckig"])
+def limited(request):
     """Six moves within velocity / acceleration limits, 0.6 s each + 0.4 s hold
     (waypoints partly outside [-1, 1]: clipped as the simulator clips them)."""
     return time_parameterize(START, WAYPOINTS, [0.6] * 6, [0.4] * 6, rate=100.0,
                              velocity=V, acceleration=A, lower=LOWER, upper=UPPER,
-                             joint_names=JOINTS)
+                             joint_names=JOINTS, profile=request.param)
 
 
 def test_samples_respect_every_limit_and_describe_one_motion(limited):
@@ -78,6 +79,10 @@ def test_starts_at_the_start_and_passes_every_waypoint_on_straight_moves(limited
                                2 * np.sqrt(a_dq / A)))
         if fits:
             assert kr - k0 == 60
+        if tr.info["profile"] == "min_jerk":  # just long enough, to the period
+            least = max(0.6, np.max(1.875 * a_dq / V),
+                        np.sqrt(np.max(10 / np.sqrt(3) * a_dq / A)))
+            assert kr - k0 == np.ceil(least * tr.rate - 1e-6)
         if bang > 0.6:
             assert (kr - k0) / tr.rate >= bang
         if kr - k0 > 60:
@@ -89,17 +94,54 @@ def test_starts_at_the_start_and_passes_every_waypoint_on_straight_moves(limited
         assert (kf - kr) / tr.rate == pytest.approx(0.4)
         prev, k0 = wps[i], kf
     assert [m["move"] for m in tr.info["stretched"]] == need
-    assert 0 < len(need) < len(wps)
+    # ruckig's near time-optimal profile fits some moves the minimum-jerk ramp
+    # (peak speed 1.875 x the mean) cannot
+    assert 0 < len(need) < len(wps) if tr.info["profile"] == "ruckig" else need
 
 
-def test_a_move_the_limits_cannot_fit_is_stretched_and_said():
+@pytest.mark.parametrize("profile", ["min_jerk", "ruckig"])
+def test_a_move_the_limits_cannot_fit_is_stretched_and_said(profile):
     tr = time_parameterize([0.0], [[2.0]], [0.5], [0.0], velocity=1.0,
-                           acceleration=5.0)
+                           acceleration=5.0, profile=profile)
     # 2 rad at <= 1 rad/s takes > 2 s, not the run's 0.5 s
     assert tr.duration > 2.0 and np.abs(tr.qd).max() <= 1 + 1e-9
     assert tr.info["stretched"][0]["move"] == 1
+    if profile == "min_jerk":  # just long enough: 1.875 * 2 rad / 1 rad/s = 3.75 s
+        assert tr.duration == pytest.approx(3.75)
+        assert np.abs(tr.qd).max() == pytest.approx(1.0, abs=1e-3)
     with pytest.raises(ValueError, match="waypoints \\[2\\] are NaN"):
         time_parameterize([0.0], [[1.0], [np.nan]], [0.5, 0.5], [0.1, 0.1])
+
+
+def test_min_jerk_sends_the_simulator_s_own_reference():
+    """The default profile's samples are the minimum-jerk reference the dynamic
+    simulator commands (`cgda_jax.sim.timing.min_jerk`, the paper's ramp) at the
+    same times, and its velocities and accelerations are that ramp's derivatives
+    (against an independent high-order finite difference)."""
+    move, hold = 0.553, 0.447  # a move time that is not a whole number of periods
+    tr = time_parameterize(START, WAYPOINTS[:3], [move] * 3, [hold] * 3, rate=200.0)
+    assert tr.info["profile"] == "min_jerk" and not tr.info["stretched"]
+    prev, k0 = START, 0
+    for i in range(3):
+        kr = tr.reached_index[i]
+        t = tr.t[k0:kr + 1] - tr.t[k0]
+        tau = np.minimum(t / move, 1.0)
+        s = 10 * tau**3 - 15 * tau**4 + 6 * tau**5  # written out, not imported
+        np.testing.assert_allclose(tr.q[k0:kr + 1], prev + s[:, None] * (
+            WAYPOINTS[i] - prev), rtol=0, atol=1e-12)
+        prev, k0 = WAYPOINTS[i], tr.feature_index[i]
+    # five-point central differences of the positions (inside the moves)
+    h = 1 / tr.rate
+    fd = (-tr.q[4:] + 8 * tr.q[3:-1] - 8 * tr.q[1:-3] + tr.q[:-4]) / (12 * h)
+    np.testing.assert_allclose(fd, tr.qd[2:-2], rtol=0, atol=2e-3)
+    fd2 = (-tr.q[4:] + 16 * tr.q[3:-1] - 30 * tr.q[2:-2] + 16 * tr.q[1:-3]
+           - tr.q[:-4]) / (12 * h * h)
+    inside = np.ones(len(fd2), bool)  # the five-point stencil straddles no corner
+    for k in (*tr.reached_index, *tr.feature_index):
+        inside[max(0, k - 4):k + 1] = False
+    np.testing.assert_allclose(fd2[inside], tr.qdd[2:-2][inside], rtol=0, atol=0.05)
+    with pytest.raises(ValueError, match="profile must be one of"):
+        time_parameterize(START, WAYPOINTS[:1], [move], [hold], profile="linear")
 
 
 @pytest.mark.parametrize("fmt", ["json", "csv", "npz"])
@@ -178,8 +220,8 @@ def test_the_exported_file_replayed_on_mujoco_gives_the_run_s_features(strategy,
     back = load_trajectory(save_trajectory(traj, tmp_path / "t.json"))
     feats = replay_trajectory(sim, back)
     assert feats.shape == res.features.shape
-    # kinematic: the same straight path, 4x finer; dynamic: a jerk-limited profile
-    # of the same timing instead of minimum jerk, settled in the same holds
+    # kinematic: the same straight path, 4x finer; dynamic: the same minimum-jerk
+    # reference at 100 Hz (linear between samples), 4x finer physics
     atol = 1e-4 if mode == "kinematic" else 2e-3
     np.testing.assert_allclose(feats, res.features, rtol=0, atol=atol)
     if strategy == "fte":  # paint: the path swept, not only the waypoints, counts
@@ -191,7 +233,7 @@ def test_the_exported_file_replayed_on_mujoco_gives_the_run_s_features(strategy,
     np.testing.assert_allclose(check["max_point_error"], res.max_point_error,
                                atol=atol)
     row = export_rows(check, "m")[0]
-    assert row.startswith("| exported trajectory (ruckig") and "MuJoCo C" in row
+    assert row.startswith("| exported trajectory (minimum jerk") and "MuJoCo C" in row
 
 
 def test_a_bent_path_would_be_caught():

@@ -12,12 +12,14 @@ examples:
   cgda export results/paint_iet                    # results/paint_iet/trajectory.json
   cgda export results/paint_iet --rate 250 --format csv
   cgda export results/paint_iet --out /tmp/paint.npz --no-check
+  cgda export results/move_push_box --profile ruckig --jerk 50
 
 Joint positions, velocities and accelerations of the evolved joints at the control
 rate (default 100 Hz), from the start posture through every waypoint along the
-straight joint-space moves the simulator made, each move jerk-limited by ruckig
-within the robot's velocity and acceleration limits and lasting at least the run's
-move time, each waypoint held as long as the run held it. Units: rad (m for a
+straight joint-space moves the simulator made, each move on the run's own
+minimum-jerk ramp over its move time (made longer only where the robot's velocity,
+acceleration or --jerk limits need it), or with --profile ruckig jerk-limited by
+ruckig within those limits, each waypoint held as long as the run held it. Units: rad (m for a
 slide), per s, per s^2; the JSON's "joint_trajectory" is a ROS
 trajectory_msgs/JointTrajectory field for field. Unless --no-check the file is
 read back and replayed on MuJoCo C (the run's model, scene and timing) and its
@@ -43,6 +45,10 @@ def add_export_parser(sub, fmt) -> None:
                    help="the file (default: FOLDER/trajectory.FORMAT)")
     p.add_argument("--jerk", type=float, default=None, metavar="RAD_S3",
                    help="jerk limit of every joint (default: the run's own moves')")
+    p.add_argument("--profile", choices=("min_jerk", "ruckig"), default="min_jerk",
+                   help="each move's profile: the run's own minimum-jerk ramp "
+                        "(default; what the run was judged on) or ruckig's "
+                        "jerk-limited one")
     p.add_argument("--no-check", action="store_true",
                    help="do not replay the written file on MuJoCo C")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
@@ -76,7 +82,8 @@ def cmd_export(args) -> int:
     if not pathlib.Path(out).parent.is_dir():
         raise FileNotFoundError(f"--out: folder {pathlib.Path(out).parent} not found")
     sim = run.simulator()
-    traj = export_trajectory(run, args.rate, jerk=args.jerk, sim=sim)
+    traj = export_trajectory(run, args.rate, jerk=args.jerk, sim=sim,
+                             profile=args.profile)
     save_trajectory(traj, out, fmt)
     say(args, f"[{run.name}] {traj.n_samples} samples at {traj.rate:g} Hz, "
         f"{traj.duration:.2f} s, joints {', '.join(traj.joint_names)} -> {out}")

@@ -126,19 +126,21 @@ def point_errors(strategy: str, features: np.ndarray, goal: np.ndarray,
     return np.linalg.norm(features - goal, axis=-1)
 
 
-def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4) -> dict:
+def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4,
+                 profile: str = "min_jerk") -> dict:
     """The reported joints exported as a controller's trajectory
     (`cgda_jax.reality.export.trajectory_of`, ``rate`` Hz), written as its JSON file
     and read back (`cgda_jax.reality.files`), then replayed on MuJoCo C
     (`cgda_jax.reality.replay.replay_trajectory`, ``factor`` x finer): its features
     against the goal and the run's features, and its samples against the limits.
-    A result without postures to export (NaN joints) says why instead."""
+    ``profile``: each move's (`cgda_jax.reality.profiles.PROFILES`).  A result
+    without postures to export (NaN joints) says why instead."""
     from cgda_jax.reality.export import trajectory_of
     from cgda_jax.reality.files import from_json_dict, to_json_dict
     from cgda_jax.reality.replay import replay_trajectory
 
     try:
-        traj = trajectory_of(sim, res.joints, rate=rate)
+        traj = trajectory_of(sim, res.joints, rate=rate, profile=profile)
     except ValueError as e:
         return {"exported": False, "reason": str(e), "success": False}
     traj = from_json_dict(json.loads(json.dumps(to_json_dict(traj))))  # the file
@@ -152,7 +154,8 @@ def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4) -> dict:
         over[kind] = float((peak[finite] / lim[finite]).max()) if finite.any() else None
     return {
         "exported": True, "rate_hz": traj.rate, "samples": traj.n_samples,
-        "duration_s": traj.duration, "method": "ruckig " + str(traj.info["ruckig"]),
+        "duration_s": traj.duration, "profile": traj.info["profile"],
+        **({"ruckig": traj.info["ruckig"]} if "ruckig" in traj.info else {}),
         "stretched_moves": len(traj.info["stretched"]),
         "limit_ratio": over,  # largest |sample| / limit per kind (None: no limit)
         "replay": ({"timestep": sim.physics.timestep / factor}

@@ -4,8 +4,8 @@
     >>> cgda_jax.save_trajectory(traj, "paint.json")   # a ROS JointTrajectory inside
     >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
 
-The trajectory itself is `cgda_jax.reality.export`'s (ruckig, straight joint-space
-moves with the run's timing); its files are `cgda_jax.reality.files`'.
+The trajectory itself is `cgda_jax.reality.export`'s (straight joint-space moves
+with the run's timing, on its minimum-jerk ramp or ruckig's profile); its files are `cgda_jax.reality.files`'.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def _run(run: Run | str | os.PathLike) -> Run:
 
 
 def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *,
-                      jerk=None, sim=None):
+                      jerk=None, sim=None, profile: str = "min_jerk"):
     """The run's best joints as a time-parameterized trajectory at ``rate`` Hz.
 
     Args:
@@ -36,6 +36,8 @@ def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *
         jerk: optional jerk limit(s) [rad/s^3], scalar or per joint; None: the
             run's own minimum-jerk peaks.
         sim: the run's simulator if already built (default `Run.simulator()`).
+        profile: each move's profile, ``"min_jerk"`` (the run's own ramp) or
+            ``"ruckig"`` (`cgda_jax.reality.profiles.PROFILES`).
 
     Returns:
         `cgda_jax.reality.export.ExportedTrajectory` (positions, velocities and
@@ -51,6 +53,7 @@ def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *
     run = _run(run)
     sim = sim if sim is not None else run.simulator()
     return trajectory_of(sim, run.arrays["joints"], rate=rate, jerk=jerk,
+                         profile=profile,
                          info={"run": str(run.folder), "name": run.name,
                                "strategy": run.result.get("strategy")})
 

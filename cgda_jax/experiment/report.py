@@ -142,7 +142,10 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
     lim = {k: "no limit" if v is None else f"{v:.2f}"
            for k, v in export["limit_ratio"].items()}
     within = all(v is None or v <= 1 + 1e-6 for v in export["limit_ratio"].values())
-    return [(f"| exported trajectory ({export['method']}, {export['rate_hz']:g} Hz, "
+    # "method" is how results written before the profiles were named said it
+    how = {"min_jerk": "minimum jerk", "ruckig": f"ruckig {export.get('ruckig', '')}"
+           }.get(export.get("profile"), export.get("method", "?")).strip()
+    return [(f"| exported trajectory ({how}, {export['rate_hz']:g} Hz, "
             f"{export['samples']} samples, {export['duration_s']:.2f} s) replayed on "
             f"MuJoCo C at {where} | success {export['success']}, max point error "
             f"{_with_unit(export['max_point_error'], unit)}, max feature difference "

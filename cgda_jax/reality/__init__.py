@@ -6,15 +6,17 @@ mismatched MuJoCo world as the shipped implementation).
 
 Modules, in their import order:
 
-1. :mod:`~cgda_jax.reality.export`: time parameterization with ruckig
-   (`time_parameterize`, `trajectory_of`, `ExportedTrajectory`).
-2. :mod:`~cgda_jax.reality.files`: CSV, JSON (a ROS ``JointTrajectory``) and NPZ.
-3. :mod:`~cgda_jax.reality.replay`: the exported samples on MuJoCo C -> features.
-4. :mod:`~cgda_jax.reality.protocol`: the `Reality` a result runs against (the
+1. :mod:`~cgda_jax.reality.profiles`: one move's profile (the run's minimum-jerk
+   ramp, or ruckig's jerk-limited one).
+2. :mod:`~cgda_jax.reality.export`: time parameterization along the run's
+   straight moves (`time_parameterize`, `trajectory_of`, `ExportedTrajectory`).
+3. :mod:`~cgda_jax.reality.files`: CSV, JSON (a ROS ``JointTrajectory``) and NPZ.
+4. :mod:`~cgda_jax.reality.replay`: the exported samples on MuJoCo C -> features.
+5. :mod:`~cgda_jax.reality.protocol`: the `Reality` a result runs against (the
    user's robot driver implements it), `measure` (a checked call).
-5. :mod:`~cgda_jax.reality.mismatch`: the shipped `Reality`, a `MismatchedWorld`
+6. :mod:`~cgda_jax.reality.mismatch`: the shipped `Reality`, a `MismatchedWorld`
    (the scene in MuJoCo C with perturbed masses, friction, joint offsets, damping,
    gains, feature noise and delay: `Mismatch`).
-6. :mod:`~cgda_jax.reality.calibrate`: joint offsets estimated from the measured
+7. :mod:`~cgda_jax.reality.calibrate`: joint offsets estimated from the measured
    tool (`estimate_offsets`, `OffsetEstimate`), as the closed loop keeps them.
 """

@@ -5,20 +5,31 @@ The simulator moves from the start posture to each waypoint in turn along the
 STRAIGHT joint-space segment between them (the minimum-jerk move of
 `cgda_jax.sim.timing`, every joint on the same profile), then holds the waypoint
 until its time is up; a paint wall sees the swept path.  The export must follow
-that same path, so each move is time-parameterized as a 1-DoF motion of the path
-parameter ``s`` in [0, 1] (``q = q0 + s (q1 - q0)``) with **ruckig** (Berscheid &
-Kroeger, "Jerk-limited real-time trajectory generation with arbitrary target
-states", RSS 2021; `ruckig` on PyPI): a jerk-limited, time-optimal profile between
-rest states, stretched to a minimum duration (the run's move time).  Why ruckig and
-not toppra: the moves are rest-to-rest along straight lines, which is exactly the
-case ruckig solves in closed form (microseconds per move, no path discretisation,
-limits on jerk as well as velocity and acceleration, and a ``minimum_duration`` so
-a move takes the run's own time instead of the fastest one); toppra's strength,
-time-optimal speed along a curved geometric path, is not needed here, and it
-does not limit jerk.  ruckig's own multi-DoF phase synchronization does not keep
-the line when a minimum duration is set (it falls back to time synchronization),
-so the line is kept by construction: one path parameter, limits mapped onto it,
-``v_s = min_j v_j / |dq_j|`` (same for acceleration and jerk).
+that same path, so each move is a 1-DoF motion of the path parameter ``s`` in
+[0, 1] (``q = q0 + s (q1 - q0)``), with one of two profiles (`PROFILES`):
+
+- ``"min_jerk"`` (the default): the simulator's own ramp
+  ``s = 10 tau^3 - 15 tau^4 + 6 tau^5`` over the run's move time, sampled at the
+  control rate, so the robot is sent the motion the run was evolved and judged on.
+  Where its peaks (``1.875 |dq| / T``, ``5.7735 |dq| / T^2``, ``60 |dq| / T^3``)
+  exceed a limit, the move is made just long enough (closed form).  Why the
+  default: where contacts carry the result (a pushed box, a turned valve, a
+  square painted at the edge of its radius) a different velocity profile over the
+  same time gives a different outcome; measured on the 10-seed export sweep
+  (benchmarks/RESULTS.md), ruckig's profile missed the tolerance on 2 of 10 seeds
+  of move_push_box and rotate_valve where the run's own ramp did not.
+- ``"ruckig"``: **ruckig** (Berscheid & Kroeger, "Jerk-limited real-time
+  trajectory generation with arbitrary target states", RSS 2021; `ruckig` on
+  PyPI): a jerk-limited, time-optimal profile between rest states within the
+  limits, stretched to a minimum duration (the run's move time): for a controller
+  that wants bang-bang-like jerk-limited segments.  Why ruckig and not toppra: the
+  moves are rest-to-rest along straight lines, which ruckig solves in closed form
+  (microseconds per move, no path discretisation, jerk limited as well as velocity
+  and acceleration, and a ``minimum_duration``); toppra's strength, time-optimal
+  speed along a curved path, is not needed, and it does not limit jerk.  ruckig's
+  own multi-DoF synchronization does not keep the line when a minimum duration is
+  set, so the line is kept by construction: one path parameter, limits mapped onto
+  it, ``v_s = min_j v_j / |dq_j|`` (same for acceleration and jerk).
 
 Timing: move ``i`` lasts at least the run's move time (the approach from the start
 posture its ``approach_s``), rounded UP to a whole control period; then the waypoint
@@ -26,10 +37,10 @@ is held for the run's hold time (``waypoint_s - move_s``, rounded up), so every
 waypoint is reached exactly on a sample and held (the run reads its features at
 the end of the hold: `ExportedTrajectory.feature_t`).  Limits: the robot's
 (`cgda_jax.sim.limits.JointLimits`); where a joint has none (inf), and for jerk
-unless given, the export uses the peak of the run's own minimum-jerk move of that
-segment (``1.875 |dq| / T``, ``5.7735 |dq| / T^2``, ``60 |dq| / T^3``), so it is
-never more abrupt than the motion the run was judged on.  A move the limits
-cannot fit into the run's time is made longer (said in ``info["stretched"]``).
+unless given, ruckig uses the peak of the run's own minimum-jerk move of that
+segment, so it is never more abrupt than the motion the run was judged on.  A move
+the limits cannot fit into the run's time is made longer (said in
+``info["stretched"]``).
 
 The file formats (CSV, JSON mapping onto ROS ``trajectory_msgs/JointTrajectory``,
 NPZ) are `cgda_jax.reality.files`'.
@@ -44,13 +55,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PEAK_JERK", "ExportedTrajectory", "simulator_timing", "time_parameterize",
+from cgda_jax.reality.profiles import (
+    MOVERS,
+    PEAK_JERK,
+    PROFILES,
+    periods,
+    ruckig_version,
+)
+
+__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "simulator_timing", "time_parameterize",
            "trajectory_of"]
 
-#: |s'''| of the minimum-jerk profile is largest at tau = 0 and 1: 60.
-PEAK_JERK = 60.0
-_PEAK_SPEED = 1.875
-_PEAK_ACC = 10.0 / math.sqrt(3.0)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -122,43 +137,11 @@ class ExportedTrajectory:
                          for j in range(self.n_dof)], axis=-1)
 
 
-def _ruckig_segment(v: float, a: float, j: float, duration: float):
-    """A ruckig trajectory of the path parameter 0 -> 1 (rest to rest) within
-    ``v``, ``a``, ``j`` lasting at least ``duration`` s."""
-    from ruckig import InputParameter, Result, Ruckig, Trajectory
-
-    otg, inp, traj = Ruckig(1), InputParameter(1), Trajectory(1)
-    inp.current_position, inp.target_position = [0.0], [1.0]
-    inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
-    inp.minimum_duration = float(duration)
-    res = otg.calculate(inp, traj)
-    if res not in (Result.Working, Result.Finished):
-        raise ValueError(f"ruckig could not time a move (result {res}; limits on the "
-                         f"path v={v:g}, a={a:g}, j={j:g}, duration {duration:g} s)")
-    return traj
-
-
-def _path_limit(limit: np.ndarray, dq: np.ndarray, moving: np.ndarray,
-                own: float) -> float:
-    """The path parameter's limit: ``min_j limit_j / |dq_j|`` over the moving joints
-    with a finite limit; ``own`` (the run's own peak) where none has one."""
-    finite = moving & np.isfinite(limit)
-    if not finite.any():
-        return own
-    return float(np.min(limit[finite] / np.abs(dq[finite])))
-
-
-def _periods(seconds: float, rate: float) -> int:
-    """Whole control periods covering ``seconds`` (rounded up, tolerant of float
-    noise)."""
-    return max(0, math.ceil(seconds * rate - 1e-6))
-
-
 def time_parameterize(
     start, waypoints, move_s: Sequence[float], hold_s: Sequence[float], *,
     rate: float = 100.0, velocity=None, acceleration=None, jerk=None,
     joint_names: Sequence[str] | None = None, units: Sequence[str] | None = None,
-    lower=None, upper=None,
+    lower=None, upper=None, profile: str = "min_jerk",
 ) -> ExportedTrajectory:
     """Time-parameterize straight joint-space moves ``start -> waypoints[0] -> ...``.
 
@@ -174,14 +157,20 @@ def time_parameterize(
         joint_names, units: per joint (default ``j0, j1, ...`` and ``"rad"``).
         lower, upper: (DoF,) joint position limits: the start and the waypoints are
             clipped into them (None: not clipped).
+        profile: ``"min_jerk"`` (default): each move on the simulator's own
+            minimum-jerk ramp over its time, made longer only where a limit needs
+            it; ``"ruckig"``: ruckig's jerk-limited profile within the limits
+            (see the module doc for which to take).
 
     Returns:
         The `ExportedTrajectory`.
 
     Raises:
-        ValueError: shapes, non-finite waypoints, bad timing or rate, a limit <= 0.
+        ValueError: shapes, non-finite waypoints, bad timing or rate, a limit <= 0,
+            an unknown profile.
     """
-    import ruckig
+    if profile not in PROFILES:
+        raise ValueError(f"profile must be one of {list(PROFILES)}, got {profile!r}")
 
     wps = np.asarray(waypoints, np.float64)
     q0 = np.asarray(start, np.float64).reshape(-1)
@@ -227,23 +216,16 @@ def time_parameterize(
         dq = wps[i] - prev
         moving = dq != 0
         t_run = float(move_s[i])
-        move_k = max(1, _periods(t_run, rate))
+        move_k = max(1, periods(t_run, rate))
         if moving.any():
-            v = _path_limit(lims["velocity"], dq, moving, _PEAK_SPEED / t_run)
-            a = _path_limit(lims["acceleration"], dq, moving, _PEAK_ACC / t_run**2)
-            j = _path_limit(lims["jerk"], dq, moving, PEAK_JERK / t_run**3)
-            traj = _ruckig_segment(v, a, j, move_k * dt)
-            if traj.duration > move_k * dt + 1e-9:  # the limits need longer
-                move_k = _periods(traj.duration, rate)
-                traj = _ruckig_segment(v, a, j, move_k * dt)
+            move_k, s, longer = MOVERS[profile](dq, moving, t_run, move_k, rate, lims)
+            if longer:
                 stretched.append({"move": i + 1, "run_s": t_run,
                                   "export_s": move_k * dt})
-            s = np.array([traj.at_time(m * dt) for m in range(1, move_k + 1)],
-                         np.float64)[..., 0]  # (move_k, 3): s, s', s''
             qs.append(prev + s[:, 0:1] * dq)
             qds.append(s[:, 1:2] * dq)
             qdds.append(s[:, 2:3] * dq)
-            # ruckig ends at rest on 1 to rounding: the waypoint itself, at rest
+            # the profile ends at rest on 1 to rounding: the waypoint itself, at rest
             qs[-1][-1], qds[-1][-1], qdds[-1][-1] = wps[i], 0.0, 0.0
         else:
             qs.append(np.repeat(wps[i][None], move_k, axis=0))
@@ -251,7 +233,7 @@ def time_parameterize(
             qdds.append(np.zeros((move_k, n_dof)))
         k += move_k
         reached.append(k)
-        hold_k = _periods(t_run + float(hold_s[i]), rate) - _periods(t_run, rate)
+        hold_k = periods(t_run + float(hold_s[i]), rate) - periods(t_run, rate)
         if hold_k > 0:
             qs.append(np.repeat(wps[i][None], hold_k, axis=0))
             qds.append(np.zeros((hold_k, n_dof)))
@@ -272,9 +254,8 @@ def time_parameterize(
         reached_index=np.asarray(reached, np.int64),
         feature_index=np.asarray(features, np.int64),
         limits={kk: np.where(np.isinf(vv), np.nan, vv) for kk, vv in lims.items()},
-        info={"method": "ruckig: jerk-limited rest-to-rest moves of the path "
-              "parameter along straight joint-space segments",
-              "ruckig": getattr(ruckig, "__version__", "?"),
+        info={"profile": profile, "method": PROFILES[profile],
+              **({"ruckig": ruckig_version()} if profile == "ruckig" else {}),
               "move_s": move_s.tolist(), "hold_s": hold_s.tolist(),
               "stretched": stretched})
 
@@ -297,7 +278,8 @@ def _units(robot) -> tuple[str, ...]:
 
 
 def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
-                  info: dict | None = None, start=None) -> ExportedTrajectory:
+                  info: dict | None = None, start=None,
+                  profile: str = "min_jerk") -> ExportedTrajectory:
     """The exported trajectory of ``joints`` (N, DoF) as ``sim`` executes them: from
     the robot's start posture, with the run's timing (`simulator_timing`) and the
     limits its motion was judged against (the feasibility's, else the model's).
@@ -311,6 +293,7 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
         start: (DoF,) where the robot is (default its start posture, the first
             move the approach); given, every move is a ``sim.move_s`` move (a
             segment of a run already under way, as a closed loop sends it).
+        profile: each move's profile (`PROFILES`; default the run's own ramp).
     """
     from cgda_jax.sim.limits import read_limits
 
@@ -329,7 +312,7 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
         acceleration=np.asarray(limits.acceleration, np.float64), jerk=jerk,
         joint_names=robot.joint_names, units=_units(robot),
         lower=np.asarray(robot.lower, np.float64),
-        upper=np.asarray(robot.upper, np.float64))
+        upper=np.asarray(robot.upper, np.float64), profile=profile)
     traj.info.update({"mode": sim.mode, "waypoint_s": float(sim.waypoint_s),
                       **(info or {})})
     return traj
