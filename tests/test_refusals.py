@@ -60,6 +60,7 @@ def model_file(tmp_path, text: str, name: str = "arm.xml") -> pathlib.Path:
     ("clean_ie", "keys=[1, 2]", ["keys", "only a Python caller"]),
     ("paint_iet", "backtracks=-1", ["backtracks", ">= 0"]),
     ("clean_fte", "min_improvement=1.5", ["min_improvement", "in [0, 1)"]),
+    ("move_push_box", "aim=0", ["aim", "in (0, 1]"]),
     ("clean_fte", 'init="x"', ["init", "'x' is not one of"]),
     ("clean_fte", "refine_gamma=inf", ["refine_gamma", "finite number > 0"]),
     ("clean_fte", "algorithm_params=3", ["algorithm_params", "table"]),

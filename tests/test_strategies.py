@@ -317,11 +317,28 @@ def test_iet_commits_best_try_when_every_try_fails(sim):
         ({"tolerance": -1.0}, "tolerance"),
         ({"max_generations": 0}, "max_generations"),
         ({"algorithm_params": {"no_such": 1.0}}, "no_such"),
+        ({"aim": 0.0}, "aim must be in \\(0, 1\\]"),
+        ({"aim": 1.5}, "aim"),
     ],
 )
 def test_bad_configuration_raises(sim, goal, kwargs, match):
     with pytest.raises(ValueError, match=match):
         run_ie(sim, goal, **kwargs)
+
+
+@pytest.mark.parametrize("run", [run_ie, run_iet, run_oet])
+def test_an_aim_below_the_tolerance_is_still_judged_at_it(sim, goal, run):
+    """``aim``: every point's evolution stops below aim x tolerance,
+    the result is still judged (and reports) the tolerance; without it the same
+    run stops as soon as a point is within the tolerance."""
+    kw = {"population_size": 12, "tolerance": 0.03, "max_generations": 80, "seed": 2}
+    loose = run(sim, goal, **kw)
+    tight = run(sim, goal, aim=0.4, **kw)
+    assert loose.success and tight.success
+    assert tight.tolerance == loose.tolerance == 0.03
+    assert tight.info["aim"] == 0.4 and "aim" not in loose.info
+    assert tight.point_errors.max() < 0.03 * 0.4 < loose.point_errors.max()
+    assert tight.evaluations > loose.evaluations  # the tighter aim costs more
 
 
 def test_goal_feature_count_mismatch_raises(sim, paint_sim, goal):

@@ -272,7 +272,8 @@ OPTION_KINDS: dict[str, tuple[str, Any]] = {
     "restarts": ("int", 0), "restart_samples": ("int", 0), "backtracks": ("int", 0),
     "stagnation": ("int", 1), "init_samples": ("int", 1), "refine_steps": ("int", 1),
     "max_steps": ("int", 1), "lookahead": ("int", 1),
-    "min_improvement": ("number", "in [0, 1)"), "init_std": ("number", "> 0"),
+    "min_improvement": ("number", "in [0, 1)"), "aim": ("number", "in (0, 1]"),
+    "init_std": ("number", "> 0"),
     "refine_gamma": ("number", "> 0"),
     "reach_check": ("bool", None), "warm_start": ("bool", None),
     "init": ("choice", "fte.INITS"), "refine": ("choice", "refine.REFINE"),
@@ -292,6 +293,8 @@ def _choices(where: str) -> tuple[str, ...]:
 def _number_ok(value: float, rule: str) -> bool:
     if rule == "in [0, 1)":
         return 0 <= value < 1
+    if rule == "in (0, 1]":
+        return 0 < value <= 1
     return value > 0
 
 

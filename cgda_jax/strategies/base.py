@@ -176,6 +176,7 @@ class PlanBase:
         info: dict[str, Any] | None = None,
         sharding: NamedSharding | None = None,
         stagnation: int | None = None,
+        aim: float = 1.0,
     ):
         self.sim, self.goal = sim, goal
         self.sharding = sharding
@@ -185,6 +186,14 @@ class PlanBase:
         self.n_dof = int(sim.n_dof)
         self.n_genes = int(n_genes)
         self.tolerance = float(tolerance)
+        aim = float(aim)
+        if not (np.isfinite(aim) and 0.0 < aim <= 1.0):
+            raise ValueError(f"aim must be in (0, 1] (a share of the tolerance); "
+                             f"got {aim}")
+        #: what each point's evolution aims for: ``aim * tolerance``; the run is
+        #: still judged at ``tolerance`` (the difference is room for a finer
+        #: replay, the exported trajectory or a robot to differ a little)
+        self.aim_tolerance = self.tolerance * aim
         self.max_generations = int(max_generations)
         self.max_generations_total = self.max_generations
         self.stagnation = check_stagnation(stagnation)
@@ -201,6 +210,8 @@ class PlanBase:
         self.info = {
             "algorithm": algorithm_name(algorithm),
             "population_size": int(population_size),
+            **({"aim": aim, "aim_tolerance": self.aim_tolerance}
+               if aim < 1.0 else {}),
             **(info or {}),
         }
 
@@ -266,16 +277,18 @@ class PlanBase:
         return penalized(fitness, violation, self.feasibility.penalty)
 
     def least_motion(self, state: Any, pop_u: jax.Array, error: jax.Array) -> jax.Array:
-        """With feasibility: a point's ``error`` (P,) where it meets the tolerance
-        replaced by ``tolerance * m / (m + 1)``, ``m`` the joint motion (radians,
+        """With feasibility: a point's ``error`` (P,) where it meets the aim
+        (``aim_tolerance``, the tolerance unless ``aim`` < 1) replaced by
+        ``aim_tolerance * m / (m + 1)``, ``m`` the joint motion (radians,
         Euclidean) from the state's posture: every candidate that meets the
-        tolerance still does, and the one that moves least ranks first (no
+        aim still does, and the one that moves least ranks first (no
         flailing: the committed posture is the nearest good one the generation
         found).  Without feasibility: ``error`` as is (the paper's fitness)."""
         if self.feasibility is None:
             return error
         m = jnp.linalg.norm(self.joints(pop_u) - state.genes, axis=-1)
-        return jnp.where(error < self.tolerance, self.tolerance * m / (m + 1.0), error)
+        aim = self.aim_tolerance
+        return jnp.where(error < aim, aim * m / (m + 1.0), error)
 
     def point_outcome(self, state: Any, pop_u: jax.Array) -> tuple[jax.Array, Any]:
         """Features (P, F) and the move's violation (P,) (None without
@@ -316,8 +329,9 @@ class PlanBase:
         return fitness_u
 
     def stop(self, evo: Evolution) -> jax.Array:
-        """Per-point stop: error below tolerance or generation budget spent."""
-        return (evo.best_fitness < self.tolerance) | (
+        """Per-point stop: error below the aim (``aim * tolerance``) or
+        generation budget spent."""
+        return (evo.best_fitness < self.aim_tolerance) | (
             evo.generation >= self.max_generations
         )
 

@@ -244,7 +244,7 @@ class FTEPlan(PlanBase):
         return self._start(key, mean, self.try_params)
 
     def _met(self, errors):
-        return jnp.all(errors < self.tolerance)
+        return jnp.all(errors < self.aim_tolerance)
 
     # ---- plan functions
     def init(self, key):
@@ -363,6 +363,7 @@ def run_fte(
     population_size: int = 32,
     tolerance: float = 0.02,
     stagnation: int = 10,
+    aim: float = 1.0,
     max_generations: int = 500,
     seed: int = 0,
     chunk_size: int = 10,
@@ -422,6 +423,11 @@ def run_fte(
             before the polish.
         refine_steps: optimiser steps of the polish.
         refine_gamma: soft-DTW smoothing of the polish (feature units).
+        aim: the share of the tolerance each point's evolution aims for, in
+            (0, 1]: it stops, restarts and ranks by least motion at
+            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
+            it leaves room for a finer replay, the exported trajectory or a robot
+            to differ a little (1: the paper's rule, anything within tolerance).
 
     Returns:
         `ExecutionResult`; final_fitness is the best fitness (`distance`), success =
@@ -435,6 +441,7 @@ def run_fte(
         stagnation=stagnation, distance=distance, restarts=restarts,
         min_improvement=min_improvement, init=init, init_samples=init_samples,
         init_std=init_std, refine=refine, refine_steps=refine_steps,
-        refine_gamma=refine_gamma, progress_fn=progress_fn, devices=devices,
+        refine_gamma=refine_gamma, aim=aim, progress_fn=progress_fn,
+        devices=devices,
     )
     return result

@@ -82,11 +82,11 @@ def restart_mean(plan: Any, s: Any) -> tuple[jax.Array, jax.Array]:
     t = s.tries
     k_mean, k_evo = jax.random.split(jax.random.fold_in(s.key, t))
     best = s.best_u.reshape(plan.n_points, plan.n_dof)
-    miss = ~(s.best_errors < plan.tolerance)
+    miss = ~(s.best_errors < plan.aim_tolerance)
     avoid = jnp.where((miss & jnp.isfinite(s.best_fitness))[:, None], best,
                       jnp.nan)
     if plan.init_mode == "reach":
-        fresh = pick_candidate(k_mean, s.cand_u, s.cand_err, plan.tolerance,
+        fresh = pick_candidate(k_mean, s.cand_u, s.cand_err, plan.aim_tolerance,
                                avoid)
     elif plan.init_mode == "sampled":
         fresh, _ = nearest_in_pool(s.pool_u, s.pool_f, plan.goal, key=k_mean,

@@ -240,7 +240,8 @@ class IEPlan(PlanBase):
         return IEState(
             evo=evo.replace(done=evo.done | off), keys=keys, samples=samples,
             tries=zero + 1,
-            best_u=best_u, best_fitness=best_f, done=(best_f < self.tolerance) | off,
+            best_u=best_u, best_fitness=best_f,
+            done=(best_f < self.aim_tolerance) | off,
             generations=zero, evaluations=zero, invalid=zero)
 
     def step(self, s: IEState):
@@ -252,7 +253,7 @@ class IEPlan(PlanBase):
             evo = evo.replace(best_fitness=jnp.where(
                 same & jnp.isfinite(evo.best_fitness), fresh, evo.best_fitness))
             evo = evo.replace(done=jax.vmap(self._stop)(evo))
-            s = s.replace(best_fitness=fresh, done=(fresh < self.tolerance)
+            s = s.replace(best_fitness=fresh, done=(fresh < self.aim_tolerance)
                           | (evo.done & (s.tries > self.restarts)))
         evo, metrics = jax.vmap(
             lambda e, g, st: self.evolve(e, self.point_fitness(st, g), self._stop)
@@ -270,7 +271,7 @@ class IEPlan(PlanBase):
         better = evo.best_fitness < s.best_fitness
         best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
         best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
-        met = best_f < self.tolerance
+        met = best_f < self.aim_tolerance
         # a try that stopped short of the tolerance restarts while tries are left
         again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
         if self.restarts == 0:  # never restarts (tries >= 1): nothing to trace
@@ -357,6 +358,7 @@ def run_ie(
     reach_check: bool = False,
     restarts: int = RESTARTS,
     stagnation: int | None = STAGNATION,
+    aim: float = 1.0,
     restart_samples: int = RESTART_SAMPLES,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
@@ -410,6 +412,11 @@ def run_ie(
             to a multiple of their count by repeating the last candidate, whose
             results are dropped); same results as unsharded. Multi-host: see
             `cgda_jax.sharding`.
+        aim: the share of the tolerance each point's evolution aims for, in
+            (0, 1]: it stops, restarts and ranks by least motion at
+            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
+            it leaves room for a finer replay, the exported trajectory or a robot
+            to differ a little (1: the paper's rule, anything within tolerance).
 
     Returns:
         `ExecutionResult`; success = every point's executed error < tolerance.
@@ -425,6 +432,6 @@ def run_ie(
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
         restarts=restarts, stagnation=stagnation, restart_samples=restart_samples,
-        progress_fn=progress_fn, devices=devices,
+        aim=aim, progress_fn=progress_fn, devices=devices,
     )
     return result

@@ -96,7 +96,7 @@ class IETPlan(PlanBase):
     def _stop(self, prefix_sq):
         # the frozen prefix adds a constant the point cannot change: stop on the
         # point's own error (fitness^2 - prefix), same ranking as the paper's fitness
-        tol_sq = self.tolerance**2
+        tol_sq = self.aim_tolerance**2
 
         def stop(evo):
             own_sq = evo.best_fitness**2 - prefix_sq
@@ -183,7 +183,7 @@ class IETPlan(PlanBase):
         q = self.joints(best_u)
         sim_state, feats = self.sim.step(tree_at(s.sim_states, i), q)
         own_sq = jnp.sum((feats - self.goal[i]) ** 2)
-        met = own_sq < self.tolerance**2
+        met = own_sq < self.aim_tolerance**2
         found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try
         can_restart = s.restart < self.restarts
         can_backtrack = (i > 0) & (s.backtracks < self.backtracks)
@@ -316,6 +316,7 @@ def run_iet(
     warm_start: bool = False,
     restart_samples: int = RESTART_SAMPLES,
     stagnation: int | None = STAGNATION,
+    aim: float = 1.0,
     algorithm_kwargs: dict | None = None,
     algorithm_params: dict | None = None,
     progress_fn: Callable[[dict], None] | None = None,
@@ -354,6 +355,11 @@ def run_iet(
             early instead of spending its whole budget.
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
+        aim: the share of the tolerance each point's evolution aims for, in
+            (0, 1]: it stops, restarts and ranks by least motion at
+            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
+            it leaves room for a finer replay, the exported trajectory or a robot
+            to differ a little (1: the paper's rule, anything within tolerance).
 
     Returns:
         `ExecutionResult`; success = every executed point's error < epsilon;
@@ -370,6 +376,6 @@ def run_iet(
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         restarts=restarts, backtracks=backtracks, warm_start=warm_start,
         restart_samples=restart_samples, stagnation=stagnation,
-        progress_fn=progress_fn, devices=devices,
+        aim=aim, progress_fn=progress_fn, devices=devices,
     )
     return result

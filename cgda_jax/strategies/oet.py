@@ -176,7 +176,7 @@ class OETPlan(PlanBase):
         as IE's), or after `stagnation` generations without improvement."""
 
         def stop(evo):
-            return ((evo.best_fitness < self.tolerance)
+            return ((evo.best_fitness < self.aim_tolerance)
                     | (evo.generation >= self.max_generations) | self.stalled(evo))
 
         return stop
@@ -277,7 +277,7 @@ class OETPlan(PlanBase):
 
         if self.restarts == 0:
             return execute(None)
-        again = (m.evo.best_fitness >= self.tolerance) & (s.tries <= self.restarts)
+        again = (m.evo.best_fitness >= self.aim_tolerance) & (s.tries <= self.restarts)
         return jax.lax.cond(again, lambda _: self._restart(s), execute, None)
 
     def step(self, s: OETState):
@@ -350,6 +350,7 @@ def run_oet(
     lookahead: int = 1,
     restarts: int = 0,
     stagnation: int | None = None,
+    aim: float = 1.0,
     seed: int = 0,
     chunk_size: int = 10,
     algorithm_kwargs: dict | None = None,
@@ -376,6 +377,11 @@ def run_oet(
             improvement (None: only at tolerance or `max_generations`).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
+        aim: the share of the tolerance each point's evolution aims for, in
+            (0, 1]: it stops, restarts and ranks by least motion at
+            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
+            it leaves room for a finer replay, the exported trajectory or a robot
+            to differ a little (1: the paper's rule, anything within tolerance).
 
     Returns:
         `ExecutionResult` with joints (S, DoF) / features (S, F) the executed steps;
@@ -389,6 +395,7 @@ def run_oet(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         max_steps=max_steps, lookahead=lookahead, restarts=restarts,
-        stagnation=stagnation, progress_fn=progress_fn, devices=devices,
+        stagnation=stagnation, aim=aim, progress_fn=progress_fn,
+        devices=devices,
     )
     return result

@@ -20,15 +20,15 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
                       "restarts": fte.RESTARTS, "min_improvement": fte.MIN_IMPROVEMENT,
                       "init": fte.INIT, "init_samples": fte.INIT_SAMPLES,
                       "init_std": fte.INIT_STD, "refine": "none", "refine_steps": 100,
-                      "refine_gamma": fte.REFINE_GAMMA}),
+                      "refine_gamma": fte.REFINE_GAMMA, "aim": 1.0}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
                     "refine": "none", "reach_check": False,
-                    "restart_samples": ie.RESTART_SAMPLES}),
+                    "restart_samples": ie.RESTART_SAMPLES, "aim": 1.0}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
                       "warm_start": False, "restart_samples": iet.RESTART_SAMPLES,
-                      "stagnation": iet.STAGNATION}),
+                      "stagnation": iet.STAGNATION, "aim": 1.0}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
-                      "stagnation": None}),
+                      "stagnation": None, "aim": 1.0}),
 }
 
 
