@@ -11,7 +11,8 @@ from cgda_jax.experiment import load_config, run_experiment
 
 CLEAN = ["kind=execution", "data.source=clean_circle", "scene.kind=marker",
          "strategy.name=ie", "strategy.population_size=8", "strategy.max_generations=4",
-         "strategy.tolerance=0.05", "robot.substeps=2", "output.render=false"]
+         "strategy.tolerance=0.05", "strategy.options.aim=0.5", "robot.substeps=2",
+         "output.render=false"]
 RECOGNITION = ["kind=recognition", "data.features=spatial", "data.n_repetitions=3",
                "data.n_train=2", "recognition.n_samples=30"]
 
@@ -49,7 +50,9 @@ def test_load_run_round_trips_an_execution(clean_run):
     assert run.execution_result().points == len(run.arrays["goal"])
     assert len(run.demonstrations()) == cfg.data.n_demos
     assert "max point error" in (folder / "report.md").read_text()
-    assert " m (tolerance 0.05 m)" in (folder / "report.md").read_text()
+    assert (" m (tolerance 0.05 m, each point evolved to 0.025 m: aim 0.5)"
+            in (folder / "report.md").read_text())
+    assert run.result["info"]["aim_tolerance"] == pytest.approx(0.025)
 
 
 def test_load_run_of_a_recognition_has_no_simulator(tmp_path):
@@ -105,7 +108,7 @@ def test_cgda_export_writes_the_file_its_report_row_checked(clean_run, tmp_path,
     assert export["exported"] and export["rate_hz"] == 100
     assert export["max_feature_difference"] < 1e-4
     assert export["success"] == run.result["success"]
-    assert "| exported trajectory (ruckig" in (folder / "report.md").read_text()
+    assert "| exported trajectory (minimum jerk" in (folder / "report.md").read_text()
     out = tmp_path / "clean.csv"
     rc = cli.main(["export", str(folder), "--out", str(out), "--rate", "50",
                    "--no-cache"])
@@ -118,3 +121,7 @@ def test_cgda_export_writes_the_file_its_report_row_checked(clean_run, tmp_path,
     assert cli.main(["export", str(folder), "--rate", "0", "--no-cache"]) == \
         cli.EXIT_USAGE
     assert capsys.readouterr().err.startswith("cgda: error: --rate must be > 0")
+    out = tmp_path / "clean_ruckig.json"
+    assert cli.main(["export", str(folder), "--out", str(out), "--profile", "ruckig",
+                     "--no-cache"]) in (cli.EXIT_MET, cli.EXIT_NOT_MET)
+    assert cg.load_trajectory(out).info["profile"] == "ruckig"

@@ -154,6 +154,15 @@ def export_rows(export: dict | None, unit: str | None) -> list[str]:
             f"{lim['velocity']}, acceleration {lim['acceleration']}) |")]
 
 
+def _aimed(result: dict, unit: str | None) -> str:
+    """", each point evolved to X" where the strategy's ``aim`` was below 1."""
+    info = result.get("info") or {}
+    if "aim_tolerance" not in info:
+        return ""
+    return (f", each point evolved to {_with_unit(info['aim_tolerance'], unit)}: "
+            f"aim {info['aim']:g}")
+
+
 def _not_relocalized(table: dict | None) -> str:
     """The feature columns the closed loop could not re-localize, by reason."""
     if not table:
@@ -253,7 +262,8 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             f"| success | {result['success']} |",
             f"| points | {result['points']} |",
             f"| max point error | {_with_unit(result['max_point_error'], unit)} "
-            f"(tolerance {_with_unit(result['tolerance'], unit)}) |",
+            f"(tolerance {_with_unit(result['tolerance'], unit)}"
+            f"{_aimed(result, unit)}) |",
             f"| final fitness | {_with_unit(result['final_fitness'], unit)} |",
             f"| generations | {result['generations']} |",
             f"| evaluations | {result['evaluations']} |",
