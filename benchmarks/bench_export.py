@@ -1,6 +1,7 @@
-"""Exporting a result as a controller's trajectory (issue 22): the ruckig time
-parameterization of a 17-waypoint TEO paint trajectory (target: under 1 s), its JSON
-file, and the replay of that file on MuJoCo C.
+"""Exporting a result as a controller's trajectory (issue 22): the time
+parameterization of a 17-waypoint TEO paint trajectory (target: under 1 s) with each
+profile (the run's own minimum-jerk ramp, the default, and ruckig's), its JSON file,
+and the replay of that file on MuJoCo C.
 
 The waypoints are random postures within the joint limits, 10 degrees at most from
 the previous one (a paint-like trajectory); the replay's features are compared with
@@ -43,12 +44,13 @@ def waypoints(sim, n: int, seed: int) -> np.ndarray:
     return np.asarray(out, np.float32)
 
 
-def bench(name: str, repeats: int) -> dict:
+def bench(name: str, repeats: int, profile: str) -> dict:
     cfg = load_config(experiment_path(name))
     sim = build_simulator(cfg, 1.0)
     joints = waypoints(sim, 17, 0)
-    t_export = median_time(lambda: trajectory_of(sim, joints), repeats)
-    traj = trajectory_of(sim, joints)
+    t_export = median_time(lambda: trajectory_of(sim, joints, profile=profile),
+                           repeats)
+    traj = trajectory_of(sim, joints, profile=profile)
     with tempfile.TemporaryDirectory() as tmp:
         path = pathlib.Path(tmp) / "t.json"
         t0 = time.perf_counter()
@@ -60,10 +62,11 @@ def bench(name: str, repeats: int) -> dict:
     feats = replay_trajectory(sim, back)
     t_replay = time.perf_counter() - t0
     want = np.asarray(sim.execute(joints), np.float64)
-    return {"experiment": name, "mode": sim.mode, "waypoints": len(joints),
+    return {"experiment": name, "profile": profile, "mode": sim.mode,
+            "waypoints": len(joints),
             "samples": traj.n_samples, "duration_s": round(traj.duration, 2),
             "export_s": t_export, "json_write_s": t_write, "json_kB": size / 1e3,
-            "replay_s": t_replay,
+            "replay_s": t_replay, "peak_speed": float(np.abs(traj.qd).max()),
             "max_feature_difference": float(np.abs(feats - want).max()),
             "largest_feature": float(np.abs(want).max())}
 
@@ -74,7 +77,8 @@ def main() -> None:
     p.add_argument("--experiments", nargs="+",
                    default=["paint_iet", "paint_iet_dynamic"])
     args = p.parse_args()
-    rows = [bench(e, args.repeats) for e in args.experiments]
+    rows = [bench(e, args.repeats, prof) for e in args.experiments
+            for prof in ("min_jerk", "ruckig")]
     print_table(rows, list(rows[0]))
     write_json("export", {"machine": machine(), "rows": rows})
     print(json.dumps(machine()))
