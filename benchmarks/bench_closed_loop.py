@@ -23,7 +23,10 @@ plan replayed open loop against OET closed loop.
 ``--no-relocate`` / ``--no-correct`` / ``--no-calibrate``: the closed loop without
 the objects' re-localization / the target's correction / the joint offsets estimated
 from the measured tool; ``--step-tolerance``, ``--restarts``,
-``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).
+``--stagnation``: the closed loop's OET settings (`run_oet_closed_loop`).  OET's
+first step starts from the measured start posture when the config's
+``strategy.options.warm_start`` is true (as IET's points do); ``--cold-start``: from
+the middle of the joint ranges.
 
 ``--levels 0 0.5 1 1.5``: a sweep of mismatch levels (`scaled_table`: each scale
 factor raised to the level, each offset, noise and delay times it; the tool's
@@ -114,6 +117,10 @@ def main() -> None:
                         help="mismatch levels (1: the config's; see scaled_table)")
     parser.add_argument("--open-only", action="store_true",
                         help="the open loop only (no closed-loop OET)")
+    parser.add_argument("--cold-start", action="store_true",
+                        help="OET's first step from the middle of the joint ranges "
+                             "(default: from the measured start posture when the "
+                             "config's strategy.options.warm_start is true)")
     parser.add_argument("--no-calibrate", action="store_true",
                         help="closed loop without the joint offsets estimated "
                              "from the measured tool")
@@ -181,7 +188,8 @@ def one_seed(args, sim, goal, s, res, table: dict) -> dict:
         relocate_objects=not args.no_relocate, correct=not args.no_correct,
         calibrate=not args.no_calibrate,
         step_tolerance=args.step_tolerance, restarts=args.restarts,
-        stagnation=args.stagnation)
+        stagnation=args.stagnation,
+        warm_start=bool(s.options.get("warm_start")) and not args.cold_start)
     steps = closed.info["closed_loop"]
     cal = closed.info["calibration"]
     return row | {

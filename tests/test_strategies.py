@@ -341,6 +341,27 @@ def test_an_aim_below_the_tolerance_is_still_judged_at_it(sim, goal, run):
     assert tight.evaluations > loose.evaluations  # the tighter aim costs more
 
 
+def test_oet_warm_start_begins_where_the_arm_is():
+    """OET ``warm_start``: the first step's evolution starts at the start posture,
+    so a first goal point the arm already meets is met at once, without moving
+    away; from the middle of the joint ranges (0 here) it has to be searched for."""
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), JOINTS, "marker",
+                            start={"shoulder": 1.0, "elbow": 1.2})
+    start = np.asarray(robot.start_genes, np.float64)
+    assert np.abs(start).max() > 0.9  # away from the middle of the ranges
+    postures = [start, start + [0.1, -0.1, 0.0], start + [0.2, -0.15, -0.05]]
+    goal = _reachable_goal(robot, postures)
+    sim = Simulator(robot, MarkerScene(), substeps=4)
+    kw = {"population_size": 8, "tolerance": 0.02, "max_generations": 40, "seed": 0,
+          "algorithm_params": {"std_init": 0.1}}
+    warm = run_oet(sim, goal, warm_start=True, **kw)
+    cold = run_oet(sim, goal, **kw)
+    assert warm.success and np.abs(warm.joints[0] - start).max() < 0.1
+    first_warm = warm.info["step_generations"][0]
+    first_cold = cold.info["step_generations"][0]
+    assert 3 * first_warm < first_cold, (first_warm, first_cold)  # 2 against 15
+
+
 def test_goal_feature_count_mismatch_raises(sim, paint_sim, goal):
     with pytest.raises(ValueError, match="features"):
         run_fte(sim, goal[:, :2])

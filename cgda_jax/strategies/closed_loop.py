@@ -184,6 +184,8 @@ def run_oet_closed_loop(
     lookahead: int = 1,
     restarts: int = 0,
     stagnation: int | None = None,
+    aim: float = 1.0,
+    warm_start: bool = False,
     seed: int = 0,
     rate: float = 100.0,
     correct: bool = True,
@@ -229,8 +231,10 @@ def run_oet_closed_loop(
             the tool's measurement resolves, and a world without offsets stays
             OET's.
         algorithm, population_size, tolerance, max_generations, max_steps,
-            lookahead, restarts, stagnation, seed, algorithm_kwargs,
-            algorithm_params: as in `cgda_jax.strategies.oet.run_oet`.
+            lookahead, restarts, stagnation, aim, warm_start, seed,
+            algorithm_kwargs, algorithm_params: as in
+            `cgda_jax.strategies.oet.run_oet` (``warm_start``: the first step
+            starts from the posture the reality measured at its start).
         progress_fn: called after each step with a dict (step, k, planning_s,
             execution_s, error).
         chunk_size: unused (the loop steps per executed posture); accepted so the
@@ -272,7 +276,7 @@ def run_oet_closed_loop(
                 "algorithm_kwargs": algorithm_kwargs,
                 "algorithm_params": algorithm_params, "max_steps": max_steps,
                 "lookahead": lookahead, "restarts": restarts,
-                "stagnation": stagnation}
+                "stagnation": stagnation, "aim": aim, "warm_start": warm_start}
     first = measure(reality)  # (a failing reality stops the run before compiling)
     t0 = time.perf_counter()
     found = ObjectLocator.of(sim) if relocate_objects else None

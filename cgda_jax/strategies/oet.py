@@ -111,12 +111,16 @@ class OETPlan(PlanBase):
             executed.
         stagnation: a try also stops after this many generations without
             improvement (None: only at tolerance or `max_generations`).
+        warm_start: the first step's evolution starts at the posture the arm is
+            in (the start posture; in a closed loop the measured one) instead of
+            the middle of the joint ranges (later steps always start from the
+            previous posture).
     """
 
     name = "oet"
 
     def __init__(self, sim, goal, *, max_steps=None, lookahead=1, restarts=0,
-                 stagnation=None, **kwargs):
+                 stagnation=None, warm_start=False, **kwargs):
         max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
         if max_steps < 1:
             raise ValueError(f"max_steps must be >= 1; got {max_steps}")
@@ -128,6 +132,7 @@ class OETPlan(PlanBase):
         self.max_steps = max_steps
         self.lookahead = int(lookahead)
         self.restarts = int(restarts)
+        self.warm_start = bool(warm_start)
         self.max_generations_total = (self.max_steps * self.max_generations
                                       * (1 + self.restarts))
 
@@ -138,6 +143,8 @@ class OETPlan(PlanBase):
         return self.point_fitness(sim_state, self.goal[self._target(k)] - bias)
 
     def _start(self, key, sim_state, k, steps, mean, bias):
+        if mean is None and self.warm_start:  # from where the arm is
+            mean = from_joints(sim_state.genes, self.lower, self.upper)
         return self.start(jax.random.fold_in(key, steps),
                           self._fitness(sim_state, k, bias), mean=mean)
 
@@ -351,6 +358,7 @@ def run_oet(
     restarts: int = 0,
     stagnation: int | None = None,
     aim: float = 1.0,
+    warm_start: bool = False,
     seed: int = 0,
     chunk_size: int = 10,
     algorithm_kwargs: dict | None = None,
@@ -375,6 +383,10 @@ def run_oet(
             OET.
         stagnation: a try stops after this many generations without
             improvement (None: only at tolerance or `max_generations`).
+        warm_start: start the first step's evolution at the start posture
+            instead of the middle of the joint ranges (later steps start from the
+            previous posture either way); for goals reached by small continuous
+            moves from where the arm is (pushing an object).
         algorithm, population_size, seed, chunk_size, algorithm_kwargs,
             algorithm_params, progress_fn, devices: as in `run_ie`.
         aim: the share of the tolerance each point's evolution aims for, in
@@ -395,7 +407,8 @@ def run_oet(
         max_generations=max_generations, chunk_size=chunk_size,
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         max_steps=max_steps, lookahead=lookahead, restarts=restarts,
-        stagnation=stagnation, aim=aim, progress_fn=progress_fn,
+        stagnation=stagnation, aim=aim, warm_start=warm_start,
+        progress_fn=progress_fn,
         devices=devices,
     )
     return result

@@ -28,7 +28,7 @@ STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
                       "warm_start": False, "restart_samples": iet.RESTART_SAMPLES,
                       "stagnation": iet.STAGNATION, "aim": 1.0}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
-                      "stagnation": None, "aim": 1.0}),
+                      "stagnation": None, "aim": 1.0, "warm_start": False}),
 }
 
 
