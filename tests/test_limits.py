@@ -21,6 +21,7 @@ from cgda_jax.sim.timing import (
     min_jerk_d2,
     move_peaks,
     move_samples,
+    shortest_duration,
     violation,
 )
 
@@ -254,6 +255,40 @@ def test_min_duration_makes_the_binding_limit_exact():
     assert batch.shape == (5,)
     g = jax.grad(lambda d: min_duration(d, lim))(jnp.zeros(3))
     assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_shortest_duration_with_jerk_against_a_sampled_profile():
+    """NumPy float64 path with a jerk limit (the export's minimum-jerk mover): the
+    move of that duration, sampled densely and differentiated numerically (not the
+    closed-form peaks), keeps every limit and reaches one of them; 1 % faster
+    breaks one."""
+    v, a, j = np.array([2.0, 1.0, np.inf]), np.array([10.0, np.inf, 3.0]), \
+        np.array([40.0, 5.0, np.inf])
+    n = 20001
+
+    def peaks(dq, T):
+        t = np.linspace(0.0, T, n)
+        tau = t / T
+        q = np.outer(10 * tau**3 - 15 * tau**4 + 6 * tau**5, dq)
+        d = [q]
+        for _ in range(3):
+            d.append(np.gradient(d[-1], t, axis=0))
+        return [np.abs(x[5:-5]).max(axis=0) for x in d[1:]]  # speed, acc, jerk
+
+    for dq in ([1.0, 0.2, 0.1], [0.1, 0.1, 2.0], [0.0, 0.5, 0.0], [0.3, -0.4, 1.0]):
+        dq = np.asarray(dq)
+        T = float(shortest_duration(np.abs(dq), v, a, j))
+        ratios = np.concatenate([p / lim for p, lim in zip(peaks(dq, T), (v, a, j))])
+        assert np.all(ratios <= 1 + 2e-3) and ratios.max() > 1 - 2e-3, ratios
+        faster = np.concatenate([p / lim for p, lim in
+                                 zip(peaks(dq, 0.99 * T), (v, a, j))])
+        assert faster.max() > 1.005
+    assert float(shortest_duration(np.zeros(3), v, a, j)) == 0.0
+    # without the jerk limit: min_duration's value (float32 JAX path)
+    lim = _limits(v, a)
+    dq = np.array([0.3, -0.4, 1.0])
+    np.testing.assert_allclose(shortest_duration(np.abs(dq), v, a),
+                               float(min_duration(jnp.asarray(dq), lim)), rtol=1e-6)
 
 
 def test_approach_duration_is_the_worst_corner_of_the_box():

@@ -55,17 +55,11 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.reality.profiles import (
-    MOVERS,
-    PEAK_JERK,
-    PROFILES,
-    periods,
-    ruckig_version,
-)
+from cgda_jax.reality.profiles import MOVERS, PROFILES, periods, ruckig_version
+from cgda_jax.sim.timing import PEAK_JERK
 
-__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "simulator_timing", "time_parameterize",
-           "trajectory_of"]
-
+__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "simulator_timing",
+           "time_parameterize", "trajectory_of"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

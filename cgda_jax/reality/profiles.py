@@ -10,13 +10,16 @@ import math
 
 import numpy as np
 
-from cgda_jax.sim.timing import PEAK_ACCELERATION, PEAK_SPEED
+from cgda_jax.sim.timing import (
+    PEAK_ACCELERATION,
+    PEAK_JERK,
+    PEAK_SPEED,
+    shortest_duration,
+)
 
-__all__ = ["MOVERS", "PEAK_JERK", "PROFILES", "min_jerk_move", "periods",
+__all__ = ["MOVERS", "PROFILES", "min_jerk_move", "periods",
            "ruckig_move", "ruckig_version"]
 
-#: |s'''| of the minimum-jerk profile is largest at tau = 0 and 1: 60.
-PEAK_JERK = 60.0
 #: the move profiles `time_parameterize` offers, and what each is.
 PROFILES = {
     "min_jerk": "the simulator's minimum-jerk ramp along straight joint-space "
@@ -86,17 +89,10 @@ def min_jerk_move(dq, moving, t_run, move_k, rate, lims):
     ``t_run`` (what the simulator commands), or over the least longer time whose
     peaks (1.875 |dq| / T, 5.7735 |dq| / T^2, 60 |dq| / T^3) keep every limit:
     (control periods, (move_k, 3) s, s', s'' at the samples, made longer?)."""
+    del moving  # (a joint that does not move needs no time: shortest_duration)
     dt = 1.0 / rate
-    a = np.abs(dq[moving])
-    need = [t_run]
-    for kind, peak, power in (("velocity", PEAK_SPEED, 1.0),
-                              ("acceleration", PEAK_ACCELERATION, 2.0),
-                              ("jerk", PEAK_JERK, 3.0)):
-        lim = lims[kind][moving]
-        fin = np.isfinite(lim)
-        if fin.any():
-            need.append(float(np.max(peak * a[fin] / lim[fin]) ** (1.0 / power)))
-    duration = max(need)
+    duration = max(t_run, float(shortest_duration(
+        np.abs(dq), lims["velocity"], lims["acceleration"], lims["jerk"])))
     longer = duration > t_run * (1 + 1e-9)
     if longer:
         move_k = max(move_k, periods(duration, rate))

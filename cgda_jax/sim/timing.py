@@ -41,6 +41,7 @@ from cgda_jax.sim.limits import JointLimits
 
 __all__ = [
     "PEAK_ACCELERATION",
+    "PEAK_JERK",
     "PEAK_SPEED",
     "MoveSamples",
     "approach_duration",
@@ -50,6 +51,7 @@ __all__ = [
     "min_jerk_d2",
     "move_peaks",
     "move_samples",
+    "shortest_duration",
     "violation",
 ]
 
@@ -57,6 +59,8 @@ __all__ = [
 PEAK_SPEED = 1.875
 #: max over tau of |s''(tau)| = |60 tau (1 - tau) (1 - 2 tau)|: 10 / sqrt(3).
 PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
+#: max over tau of |s'''(tau)| = |60 - 360 tau + 360 tau^2|: 60, at tau = 0 and 1.
+PEAK_JERK = 60.0
 
 
 # -- the minimum-jerk move -------------------------------------------------------------
@@ -193,16 +197,22 @@ def move_samples(q0: Array, q1: Array, duration, n: int) -> MoveSamples:
     return MoveSamples(t=tau * t_end, q=q, qd=qd, qdd=qdd)
 
 
-def _duration(abs_dq, velocity, acceleration, xp):
-    """Shortest min-jerk duration of |dq| (..., DoF) within the limits, max over the
-    last axis; inf limits and zero moves contribute 0.  ``xp``: numpy or jax.numpy."""
-    zero_v = (abs_dq == 0) | xp.isinf(velocity)
-    zero_a = (abs_dq == 0) | xp.isinf(acceleration)
-    t_v = xp.where(zero_v, 0.0, PEAK_SPEED * abs_dq / xp.where(zero_v, 1.0, velocity))
-    ratio = xp.where(zero_a, 1.0, PEAK_ACCELERATION * abs_dq
-                     / xp.where(zero_a, 1.0, acceleration))
-    t_a = xp.where(zero_a, 0.0, xp.sqrt(ratio))
-    return xp.max(xp.maximum(t_v, t_a), axis=-1)
+def shortest_duration(abs_dq, velocity, acceleration, jerk=None, xp=np):
+    """Shortest minimum-jerk duration of ``|dq|`` (..., DoF) within the velocity,
+    acceleration and (optional) jerk limits (DoF,): ``max_j max(1.875 |dq_j| / v_j,
+    sqrt(5.7735 |dq_j| / a_j), cbrt(60 |dq_j| / j_j))``, max over the last axis; inf
+    limits and zero moves contribute 0.  ``xp``: numpy (float64 in, float64 out) or
+    jax.numpy (jittable)."""
+    def term(peak, limit, root):
+        off = (abs_dq == 0) | xp.isinf(limit)
+        ratio = xp.where(off, 1.0, peak * abs_dq / xp.where(off, 1.0, limit))
+        return xp.where(off, 0.0, root(ratio))
+
+    t = xp.maximum(term(PEAK_SPEED, velocity, lambda x: x),
+                   term(PEAK_ACCELERATION, acceleration, xp.sqrt))
+    if jerk is not None:
+        t = xp.maximum(t, term(PEAK_JERK, jerk, xp.cbrt))
+    return xp.max(t, axis=-1)
 
 
 def min_duration(dq: Array, limits: JointLimits) -> Array:
@@ -223,8 +233,8 @@ def min_duration(dq: Array, limits: JointLimits) -> Array:
         unlimited).
     """
     a = jnp.abs(jnp.asarray(dq, jnp.float32))
-    return _duration(a, jnp.asarray(limits.velocity, jnp.float32),
-                     jnp.asarray(limits.acceleration, jnp.float32), jnp)
+    return shortest_duration(a, jnp.asarray(limits.velocity, jnp.float32),
+                             jnp.asarray(limits.acceleration, jnp.float32), xp=jnp)
 
 
 def approach_duration(lower, upper, start, limits: JointLimits, floor: float = 0.0
@@ -268,7 +278,7 @@ def approach_duration(lower, upper, start, limits: JointLimits, floor: float = 0
         raise ValueError(f"approach_duration: joints {joints} have an unbounded box "
                          "and a finite limit; no duration is long enough")
     worst = np.where(np.isinf(worst), 0.0, worst)
-    return max(floor, float(_duration(worst, v, a, np)))
+    return max(floor, float(shortest_duration(worst, v, a, xp=np)))
 
 
 def violation(peak_speed: Array, peak_acc: Array, limits: JointLimits,
