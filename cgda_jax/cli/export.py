@@ -19,8 +19,8 @@ rate (default 100 Hz), from the start posture through every waypoint along the
 straight joint-space moves the simulator made, each move on the run's own
 minimum-jerk ramp over its move time (made longer only where the robot's velocity,
 acceleration or --jerk limits need it), or with --profile ruckig jerk-limited by
-ruckig within those limits, each waypoint held as long as the run held it. Units: rad (m for a
-slide), per s, per s^2; the JSON's "joint_trajectory" is a ROS
+ruckig within those limits, each waypoint held as long as the run held it. Units:
+rad (m for a slide), per s, per s^2; the JSON's "joint_trajectory" is a ROS
 trajectory_msgs/JointTrajectory field for field. Unless --no-check the file is
 read back and replayed on MuJoCo C (the run's model, scene and timing) and its
 features judged against the goal. Exit status: 0 written (and the replay met the

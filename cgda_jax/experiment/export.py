@@ -5,7 +5,8 @@
     >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
 
 The trajectory itself is `cgda_jax.reality.export`'s (straight joint-space moves
-with the run's timing, on its minimum-jerk ramp or ruckig's profile); its files are `cgda_jax.reality.files`'.
+with the run's timing, on its minimum-jerk ramp or ruckig's profile); its files are
+`cgda_jax.reality.files`'.
 """
 
 from __future__ import annotations
