@@ -8,7 +8,8 @@ from cgda_jax.strategies.base import (
     to_joints as to_joints,
 )
 from cgda_jax.strategies.fte import run_fte as run_fte
-from cgda_jax.strategies.ie import point_keys as point_keys, run_ie as run_ie
+from cgda_jax.strategies.ie import run_ie as run_ie
+from cgda_jax.strategies.ie_state import point_keys as point_keys
 from cgda_jax.strategies.iet import run_iet as run_iet
 from cgda_jax.strategies.oet import run_oet as run_oet
 from cgda_jax.strategies.result import (

@@ -44,7 +44,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from cgda_jax.strategies.ie import IEPlan, IEState
+from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.ie_state import IEState
 
 __all__ = ["drive_ie_points", "drive_repacked", "ladder"]
 

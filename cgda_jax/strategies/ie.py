@@ -25,14 +25,15 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import struct
 
 from cgda_jax.strategies.base import (
     Evolution,
     PlanBase,
+    from_joints,
     points_independent,
     ragged_rows,
 )
+from cgda_jax.strategies.ie_state import IEState, point_keys
 from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
@@ -45,38 +46,6 @@ STAGNATION = 40
 LOCAL_STD = 0.15
 #: Postures sampled (one batched kinematics call per run) to seed the restarts.
 RESTART_SAMPLES = 4096
-
-
-def point_keys(key: jax.Array, n_points: int) -> jax.Array:
-    """The per-point keys (N,) IE derives from a run's key: ``fold_in(key, i)``."""
-    return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(n_points))
-
-
-@struct.dataclass
-class IEState:
-    """Carry of an IE run (every field stacked over the N points).
-
-    Attributes:
-        evo: the current try of each point.
-        keys: the point keys; try t > 0 uses ``fold_in(key, t)``.
-        samples: (N, K, D) the K sampled postures nearest each goal point (nearest
-            first; K = 0 without restart samples), restart means.
-        tries: tries started per point (1 + restarts used).
-        best_u, best_fitness: the best over every try (inf: nothing valid yet).
-        done: the point is finished (tolerance met, or out of tries).
-        generations, evaluations, invalid: spent by the finished tries.
-    """
-
-    evo: Evolution
-    keys: jax.Array
-    samples: jax.Array
-    tries: jax.Array
-    best_u: jax.Array
-    best_fitness: jax.Array
-    done: jax.Array
-    generations: jax.Array
-    evaluations: jax.Array
-    invalid: jax.Array
 
 
 class IEPlan(PlanBase):
@@ -97,13 +66,21 @@ class IEPlan(PlanBase):
             whose nearest to each goal point seed its restarts; 0: none.
         stagnation: a try also stops after this many generations without
             improvement (None: only at `max_generations`).
+        warm_start: every point's first try is a local search (initial width
+            `LOCAL_STD`) around the start posture (where the arm is before the
+            approach) instead of a full-width search around the middle of the
+            joint ranges; restarts are as without it.  All points then start in
+            the same branch of the arm's inverse kinematics, so in dynamic mode
+            each point's posture is a short move from its neighbour's, within
+            the speed limits (a 7-joint arm's clean circle: 13-19 generations
+            against 74-120 without).
     """
 
     name = "ie"
 
     def __init__(self, sim, goal, *, keys=None, refine="none", refine_steps=100,
                  reach_check=False, restarts=0, stagnation=None,
-                 restart_samples=RESTART_SAMPLES, **kwargs):
+                 restart_samples=RESTART_SAMPLES, warm_start=False, **kwargs):
         if keys is not None and keys.shape[0] != goal.shape[0]:
             raise ValueError(
                 f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
@@ -124,6 +101,8 @@ class IEPlan(PlanBase):
         super().__init__(sim, goal, int(sim.n_dof), info=info, stagnation=stagnation,
                          **kwargs)
         self.keys = keys
+        self.warm_start = bool(warm_start)
+        self.info["warm_start"] = self.warm_start
         self.refine, self.refine_steps = refine, int(refine_steps)
         if int(restarts) < 0:
             raise ValueError(f"restarts must be >= 0; got {restarts}")
@@ -173,8 +152,9 @@ class IEPlan(PlanBase):
         return self.stop(evo) | self.stalled(evo)
 
     def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None):
-        """Try ``t`` of a point. Try 0 starts from the mid-range mean with the point
-        key; restart ``t > 0`` uses key ``fold_in(key, t)``. With restart samples,
+        """Try ``t`` of a point. Try 0 starts from the mid-range mean (with
+        `warm_start`: a local search at the start posture) with the point key;
+        restart ``t > 0`` uses key ``fold_in(key, t)``. With restart samples,
         odd restarts start from the sampled postures nearest the goal point in turn
         (restart t from the (t-1)//2-th nearest: each near the goal, in whichever
         basin, whatever the previous tries converged to) and even restarts
@@ -200,9 +180,14 @@ class IEPlan(PlanBase):
         if k:
             mean = jnp.where(use_sample, samples[jnp.clip((t - 1) // 2, 0, k - 1)],
                              mean)
-        mean = jnp.where(restart, mean, 0.0)
+        first = 0.0
+        if self.warm_start:  # try 0 from where the arm starts
+            first = from_joints(self.sim.init_state().genes, self.lower, self.upper)
+        mean = jnp.where(restart, mean, first)
         # a sampled or neighbouring posture is near a solution: search locally there
         local = use_sample | use_neighbour
+        if self.warm_start:  # try 0 searches locally around the start posture
+            local = local | ~restart
         return self.start(jnp.where(restart, k_evo, key),
                           self.point_fitness(state, goal_point), mean=mean,
                           std_scale=jnp.where(local, LOCAL_STD, 1.0))
@@ -360,6 +345,7 @@ def run_ie(
     stagnation: int | None = STAGNATION,
     aim: float = 1.0,
     restart_samples: int = RESTART_SAMPLES,
+    warm_start: bool = False,
     progress_fn: Callable[[dict], None] | None = None,
     devices: int | str | None = None,
 ) -> ExecutionResult:
@@ -405,6 +391,9 @@ def run_ie(
             limits are evaluated once per run (one batched kinematics call, inside
             the compiled init) and the nearest to each goal point is a restart mean:
             a point stuck in a local minimum restarts in the goal's basin. 0: off.
+        warm_start: every point's first try searches locally around the start
+            posture instead of over the whole joint ranges from their middle
+            (restarts as without it); see `IEPlan`.
         progress_fn: called with a dict after each chunk.
         devices: None (default: one device, the unsharded program), "all" or a
             device count: each generation's batched simulator call (N points x
@@ -432,6 +421,7 @@ def run_ie(
         algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
         keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
         restarts=restarts, stagnation=stagnation, restart_samples=restart_samples,
+        warm_start=warm_start,
         aim=aim, progress_fn=progress_fn, devices=devices,
     )
     return result
