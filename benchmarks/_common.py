@@ -13,7 +13,7 @@ import pathlib
 import platform
 import statistics
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
@@ -101,9 +101,10 @@ def write_json(name: str, payload: dict[str, Any]) -> pathlib.Path:
     return path
 
 
-def experiment_trials(name: str, n_seeds: int):
-    """``experiments/NAME.toml``'s goal and simulator as ``cgda run`` builds them,
-    and seeds 0..n_seeds-1 of its strategy as ONE batched `run_trials` call.
+def experiment_trials(name: str, n_seeds: int, overrides: Sequence[str] = ()):
+    """``experiments/NAME.toml``'s goal and simulator as ``cgda run`` builds them
+    (with ``KEY=VALUE`` `overrides`, as ``cgda run --set``), and seeds
+    0..n_seeds-1 of its strategy as ONE batched `run_trials` call.
 
     Returns:
         (cfg, sim, goal, results, total_s): the config, the simulator, the goal,
@@ -111,7 +112,7 @@ def experiment_trials(name: str, n_seeds: int):
     """
     from cgda_jax import experiment as ex, run_trials
 
-    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml")
+    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml", overrides)
     goal, demos, _ = ex.build_goal(cfg)
     sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
     s = cfg.strategy
