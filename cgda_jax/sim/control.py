@@ -31,7 +31,10 @@ simulated joint with an actuator) is driven by `plan_control`:
 The PD's numbers, per joint, from the first source that has them:
 
 - ``kp``: `Control.kp`; a converted position servo's own ``kp``; else the force
-  limit over `KP_SATURATION` (the limit reached at 0.1 rad of error); else an error;
+  limit over `KP_SATURATION` (the limit reached at 0.1 rad of error), lowered where
+  that is too stiff for the time step (`stable_kp`: with critical damping,
+  ``(kp dt + kd) dt / I`` at most `STABLE_SHARE`, ``kp dt^2 / I`` under the implicit
+  integrators, ``I`` the joint's inertia at the start posture); else an error;
 - ``kd``: `Control.kd`; a converted position servo's ``kv``; else
   ``2 damping_ratio sqrt(kp I)``, with ``I`` the joint's diagonal of the mass matrix
   at the start posture (armature included): critically damped at the default 1;
@@ -60,8 +63,13 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from cgda_jax.logs import warn_once
 from cgda_jax.sim.drives import build_drives, gravity_sets
+from cgda_jax.sim.pd_gains import (
+    check_stability,
+    implicit_damping,
+    joint_inertia,
+    stable_kp,
+)
 
 __all__ = ["CONTROL_MODES", "KP_SATURATION", "Control", "ControlPlan", "Drive",
            "actuator_kind", "check_transmissions", "plan_control"]
@@ -231,16 +239,6 @@ def _force_range(m: mujoco.MjModel, jid: int, a: int | None, kind: str):
     return (lo, hi), "mjcf " + "+".join(src) if src else "none"
 
 
-def _inertia(m: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
-    """(nv,) the mass matrix's diagonal at ``qpos`` (armature included)."""
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos
-    mujoco.mj_forward(m, d)
-    full = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, full)
-    return np.diag(full).copy()
-
-
 @dataclasses.dataclass(frozen=True)
 class ControlPlan:
     """The drives of the held joints and what they change in the simulated model.
@@ -275,7 +273,8 @@ class ControlPlan:
 
 def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
                  control: Control | Mapping | None = None,
-                 source: str = "the model") -> ControlPlan:
+                 source: str = "the model", timestep: float | None = None,
+                 ) -> ControlPlan:
     """The drive of every ``held`` joint of ``m`` (see the module doc).
 
     Args:
@@ -285,6 +284,8 @@ def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
             other simulated joint with an actuator).
         control: a `Control`, a ``[robot.control]`` table, or None (the defaults).
         source: the model's name in messages.
+        timestep: the simulation's step (None: the model's own), for the default
+            gain's and the stability warning's bound.
 
     Raises:
         ValueError: a held joint that cannot be driven (no actuator in "auto" mode,
@@ -300,7 +301,8 @@ def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
             on_joint.setdefault(int(m.actuator_trnid[a, 0]), []).append(a)
     jids = {n: mujoco.mj_name2id(m, jt, n) for n in held}
     missing, several, drives, delete = [], [], [], []
-    inertia = None
+    inertia = joint_inertia(m, qpos)
+    dt = float(m.opt.timestep if timestep is None else timestep)
     for name in held:
         jid = jids[name]
         acts = on_joint.get(jid, [])
@@ -336,12 +338,15 @@ def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
                     f"({'no actuator' if a is None else f'{kind} actuator'} and no "
                     "force limit); set robot.control.kp (or force_limit)")
             kp, src["kp"] = half / KP_SATURATION, f"force limit / {KP_SATURATION}"
+            cap = stable_kp(float(inertia[m.jnt_dofadr[jid]]), dt,
+                            control.damping_ratio, implicit_damping(m))
+            if kp > cap:
+                kp = cap
+                src["kp"] += f", lowered for the {dt:g} s step"
         if kd is None and kind == "position" and kp == float(m.actuator_gainprm[a, 0]):
             kd = -float(m.actuator_biasprm[a, 2]) + 0.0  # no -0.0
             src["kd"] = "mjcf position kv"
         if kd is None:
-            if inertia is None:
-                inertia = _inertia(m, qpos)
             i = float(inertia[m.jnt_dofadr[jid]])
             kd = 2.0 * control.damping_ratio * math.sqrt(kp * i)
             src["kd"] = f"{control.damping_ratio:g} x critical (inertia {i:.3g})"
@@ -360,7 +365,7 @@ def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],
             "dynamic mode drives one per joint; set robot.control.mode = \"pd\" to "
             "replace them by one joint-space PD")
     control.check_names([d.joint for d in drives if d.kind == "pd"])
-    _check_stability(m, qpos, drives, source)
+    check_stability(m, inertia, dt, drives, source)
     bodies, joints, unloaded = gravity_sets(m, drives, jids)
     return ControlPlan(tuple(drives), control, bodies, joints, unloaded,
                        tuple(sorted(delete)))
@@ -376,24 +381,3 @@ def check_transmissions(m: mujoco.MjModel, source: str) -> None:
             f"control: actuators {other} of {source} drive a tendon, site or body, "
             "not a joint; dynamic mode commands joint positions and cannot hold them "
             "(remove them from the model, or use kinematic mode)")
-
-
-def _check_stability(m, qpos, drives, source) -> None:
-    """Warn when a PD's gains are too stiff for the time step (explicit damping
-    under Euler / RK4)."""
-    pds = [d for d in drives if d.kind == "pd"]
-    if not pds:
-        return
-    inertia = _inertia(m, qpos)
-    dt = float(m.opt.timestep)
-    implicit = int(m.opt.integrator) in (int(mujoco.mjtIntegrator.mjINT_IMPLICIT),
-                                         int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST))
-    for d in pds:
-        i = float(inertia[m.jnt_dofadr[mujoco.mj_name2id(
-            m, mujoco.mjtObj.mjOBJ_JOINT, d.joint)]])
-        stiff = d.kp * dt * dt / i + (0.0 if implicit else d.kd * dt / i)
-        if stiff > 1.0:
-            warn_once(f"control: the PD of joint {d.joint!r} of {source} (kp "
-                      f"{d.kp:g}, kd {d.kd:g}, inertia {i:.3g}) is stiff for the "
-                      f"{dt:g} s time step ((kp dt + kd) dt / I = {stiff:.2g} > 1): "
-                      "the simulation may diverge; lower kp / kd or robot.timestep")

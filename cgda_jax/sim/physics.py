@@ -209,7 +209,8 @@ class Physics:
                                  "driven by a motor; name it so that dynamic mode "
                                  "can drive it with a PD")
             held = [n for n in held if n]
-        self.control = plan_control(full, start, held, control, robot.source)
+        self.control = plan_control(full, start, held, control, robot.source,
+                                    timestep)
         spec = robot.spec()
         self.model = reduced_model(spec, robot.marker_site, weld=self.welded,
                                    timestep=timestep, features=features,
