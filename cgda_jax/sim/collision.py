@@ -18,9 +18,13 @@ genes (some evolved joint lies on the tree path between their bodies), with MuJo
 filters: not two geoms of one weld body, not a parent/child pair of weld bodies
 (``filterparent``; the world is never the parent here) unless the model disables
 that filter.  Left out: ``exclude``d geom/obstacle names, invisible geoms
-(``rgba`` alpha 0), and plane-plane pairs.  Meshes, height fields, ellipsoids and
-SDF geoms are not supported: they are skipped (listed in `Collider.skipped`, with a
-warning), so exclude them or replace them by primitives.
+(``rgba`` alpha 0), and plane-plane pairs.  A mesh or an ellipsoid is checked as
+its bounding box (MuJoCo's ``geom_aabb``, in the geom's own frame; `geoms.BOXED`):
+the box holds the geom, so a distance is never larger than the geom's own and a move
+the check accepts keeps at least that clearance (a concave or rounded part may be
+refused where it would pass; an exact box mesh is checked exactly).  Height fields
+and SDF geoms are not supported: they are skipped (listed in `Collider.skipped`, with
+a warning), so exclude them or replace them by primitives.
 
 Accuracy (`cgda_jax.sim.distance_fns` has the methods): separated pairs are exact to
 float32 (< 1e-5 m) for every type pair except those of a cylinder against a box or
@@ -60,7 +64,15 @@ from jax import Array
 
 from cgda_jax.sim.chain import body_chain_ops
 from cgda_jax.sim.distance_fns import KINDS, error_bound, pair_distance, swap_needed
-from cgda_jax.sim.geoms import GEOM_KINDS, Obstacle, geom_radius, geom_reach, quat_mat
+from cgda_jax.sim.geoms import (
+    GEOM_KINDS,
+    Obstacle,
+    geom_name,
+    geom_radius,
+    geom_reach,
+    geom_shape,
+    quat_mat,
+)
 
 __all__ = ["GEOM_KINDS", "Collider", "Obstacle", "geom_radius", "geom_reach"]
 
@@ -123,8 +135,7 @@ class Collider:
         joint_ids = [int(j) for j in robot.joint_ids]
         qpos0 = np.asarray(robot.qpos0, dtype=np.float64)
         obstacles = tuple(obstacles)
-        names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom#{g}"
-                 for g in range(m.ngeom)]
+        names = [geom_name(m, g) for g in range(m.ngeom)]
         obs_names = [o.name for o in obstacles]
         if len(set(obs_names)) != len(obs_names) or set(obs_names) & set(names):
             raise ValueError(f"obstacle names {obs_names} repeat or clash with geoms")
@@ -148,28 +159,31 @@ class Collider:
         data = mujoco.MjData(m)
         data.qpos[:] = qpos0
         mujoco.mj_kinematics(m, data)
-        usable, self.skipped = [], []
+        usable, self.skipped, shape = [], [], {}
         for g in range(m.ngeom):
             if names[g] in exclude or m.geom_rgba[g, 3] == 0:
                 continue
-            if int(m.geom_type[g]) not in GEOM_KINDS:
+            shape[g] = geom_shape(m, g)
+            if shape[g] is None:
                 self.skipped.append(names[g])
                 continue
             usable.append(g)
         if self.skipped:
             warnings.warn(f"Collider: geoms {self.skipped} have unsupported types "
-                          f"(supported: {KINDS}); they are left out", stacklevel=2)
+                          f"(supported: {KINDS}, and meshes and ellipsoids as their "
+                          "bounding boxes); they are left out", stacklevel=2)
 
         # the geom table: moving geoms (frames from genes), then constant ones
         mov = [g for g in usable if moving[int(m.geom_bodyid[g])]]
         const = [g for g in usable if not moving[int(m.geom_bodyid[g])]]
         kept_obs = [o for o in obstacles if o.name not in exclude]
         table_names = [names[g] for g in mov + const] + [o.name for o in kept_obs]
-        table_types = ([GEOM_KINDS[int(m.geom_type[g])] for g in mov + const]
+        table_types = ([shape[g][0] for g in mov + const]
                        + [o.type for o in kept_obs])
-        sizes = [np.asarray(m.geom_size[g], float) for g in mov + const]
+        sizes = [shape[g][1] for g in mov + const]
         c_R = [data.geom_xmat[g].reshape(3, 3).copy() for g in const]
-        c_p = [data.geom_xpos[g].copy() for g in const]
+        c_p = [data.geom_xpos[g] + R @ shape[g][2] for g, R in zip(const, c_R,
+                                                                   strict=True)]
         for o in kept_obs:
             R, p, size = o.frame()
             c_R.append(R)
@@ -255,7 +269,9 @@ class Collider:
                            + tuple(table_names[n_mov:]))
         self._mov_body = np.asarray([slot[int(m.geom_bodyid[mov[a]])] for a in used],
                                     np.int32)
-        self._mov_pos = np.asarray([m.geom_pos[mov[a]] for a in used], np.float32)
+        self._mov_pos = np.asarray(
+            [m.geom_pos[mov[a]] + quat_mat(m.geom_quat[mov[a]]) @ shape[mov[a]][2]
+             for a in used], np.float32).reshape(-1, 3)
         self._mov_rot = np.asarray(
             [quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
         self._const_R = np.asarray(c_R, np.float32).reshape(-1, 3, 3)

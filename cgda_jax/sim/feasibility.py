@@ -256,10 +256,12 @@ class Feasibility:
 def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:
     """Whether MuJoCo's collision filter lets the geoms named ``a`` and ``b``
     collide (obstacles, not in the model, never do)."""
-    ga = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, a)
-    gb = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, b)
-    if ga < 0 or gb < 0:
+    from cgda_jax.sim.geoms import geom_ids
+
+    ids = geom_ids(m)
+    if a not in ids or b not in ids:
         return False
+    ga, gb = ids[a], ids[b]
     return bool((m.geom_contype[ga] & m.geom_conaffinity[gb])
                 or (m.geom_contype[gb] & m.geom_conaffinity[ga]))
 
@@ -294,14 +296,14 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     Returns:
         (kept pair names, overlapping pair names).
     """
-    from cgda_jax.sim.geoms import GEOM_KINDS, geom_radius
+    from cgda_jax.sim.geoms import geom_bound, geom_ids, geom_shape
 
     if collider.n_pairs == 0:
         return [], []
     m = robot.mj_model
     d0 = np.asarray(jax.jit(collider.distances)(jnp.asarray(robot.start_genes)))
     overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
-    gid = {mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g): g for g in range(m.ngeom)}
+    gid = geom_ids(m)
     obs = {o.name: o for o in obstacles}
     lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
     n = max(2, round(GRID_POSTURES ** (1.0 / robot.n_dof)))
@@ -324,16 +326,17 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
             continue
         slack = float(collider.pair_reach[k] @ spacing) / 2.0
         ga = gid[a]
-        ra = geom_radius(m.geom_type[ga], m.geom_size[ga])
+        ra = geom_bound(m, ga)
         moving_b = b in gid and np.any(np.ptp(centres[:, gid[b]], axis=0) > 1e-9)
         if moving_b:
             gb = gid[b]
-            rb = geom_radius(m.geom_type[gb], m.geom_size[gb])
+            rb = geom_bound(m, gb)
             lb = np.linalg.norm(centres[:, ga] - centres[:, gb], axis=-1) - ra - rb
         elif b in gid:
             gb = gid[b]
-            lb = _sdf(GEOM_KINDS[int(m.geom_type[gb])], m.geom_size[gb],
-                      data.geom_xmat[gb].reshape(3, 3), data.geom_xpos[gb],
+            kind, size, centre = geom_shape(m, gb)
+            R = data.geom_xmat[gb].reshape(3, 3)
+            lb = _sdf(kind, size, R, data.geom_xpos[gb] + R @ centre,
                       centres[:, ga]) - ra
         else:
             R, p, size = obs[b].frame()

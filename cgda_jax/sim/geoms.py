@@ -13,11 +13,42 @@ import numpy as np
 from cgda_jax.sim.chain import body_chain_ops
 from cgda_jax.sim.distance_fns import KINDS
 
-__all__ = ["GEOM_KINDS", "Obstacle", "geom_radius", "geom_reach", "quat_mat"]
+__all__ = ["BOXED", "GEOM_KINDS", "Obstacle", "geom_bound", "geom_ids", "geom_name",
+           "geom_radius", "geom_reach", "geom_shape", "quat_mat"]
 
 #: MuJoCo geom type id -> the supported kind name (`distance_fns.KINDS`).
 GEOM_KINDS = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
 _SIZE_LEN = {"sphere": 1, "capsule": 2, "box": 3, "cylinder": 2, "plane": 0}
+#: Geom types the collision check replaces by their bounding box (MuJoCo's
+#: ``geom_aabb``, in the geom's own frame): it holds the geom, so a distance to it is
+#: never larger than to the geom itself and the check stays on the safe side.
+BOXED = {int(mujoco.mjtGeom.mjGEOM_MESH): "mesh",
+         int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid"}
+
+
+def geom_name(m: mujoco.MjModel, g: int) -> str:
+    """Geom ``g``'s name, or ``"geom#<id>"`` for an unnamed one (as the collision
+    check and the reports name it)."""
+    return mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom#{g}"
+
+
+def geom_ids(m: mujoco.MjModel) -> dict[str, int]:
+    """`geom_name` -> geom id, for every geom of ``m``."""
+    return {geom_name(m, g): g for g in range(m.ngeom)}
+
+
+def geom_shape(m: mujoco.MjModel, g: int) -> tuple[str, np.ndarray, np.ndarray] | None:
+    """Geom ``g`` as the collision check sees it: ``(kind, size (3,), centre)``,
+    ``centre`` the shape's offset in the geom's frame; a primitive as it is, a mesh
+    or an ellipsoid as its bounding box (`BOXED`); None for the others (height
+    fields, SDFs)."""
+    t = int(m.geom_type[g])
+    if t in GEOM_KINDS:
+        return GEOM_KINDS[t], np.asarray(m.geom_size[g], float), np.zeros(3)
+    if t in BOXED:
+        aabb = np.asarray(m.geom_aabb[g], float)
+        return "box", aabb[3:].copy(), aabb[:3].copy()
+    return None
 
 
 @dataclass(frozen=True)
@@ -78,6 +109,14 @@ def geom_radius(kind: int, size: np.ndarray) -> float:
     return 0.0
 
 
+def geom_bound(m: mujoco.MjModel, g: int) -> float:
+    """Radius (m) of a ball about geom ``g``'s frame origin that holds it: MuJoCo's
+    ``geom_rbound`` for a mesh or ellipsoid, else `geom_radius`."""
+    if int(m.geom_type[g]) in BOXED:
+        return float(m.geom_rbound[g])
+    return geom_radius(m.geom_type[g], m.geom_size[g])
+
+
 def geom_reach(m: mujoco.MjModel, qpos0: np.ndarray, joint_ids: Sequence[int],
                geom: int) -> np.ndarray:
     """(DoF,) how far (m) any point of ``geom`` moves per unit change of each gene,
@@ -86,8 +125,7 @@ def geom_reach(m: mujoco.MjModel, qpos0: np.ndarray, joint_ids: Sequence[int],
     the point's distance from the axis); for a slide, 1 (and its travel adds to
     the hinges above it)."""
     ops = body_chain_ops(m, qpos0, joint_ids, int(m.geom_bodyid[geom]))
-    bound = float(np.linalg.norm(m.geom_pos[geom])) + geom_radius(
-        m.geom_type[geom], m.geom_size[geom])
+    bound = float(np.linalg.norm(m.geom_pos[geom])) + geom_bound(m, geom)
     lo = m.jnt_range[np.asarray(joint_ids)]
     travel = np.maximum(np.abs(lo[:, 0]), np.abs(lo[:, 1]))
     out = np.zeros(len(joint_ids))

@@ -139,6 +139,8 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
     waypoint's end the error from its target and the force (N, DoF)."""
     import mujoco
 
+    from cgda_jax.sim.geoms import geom_name
+
     fine = sim.finer(factor) if factor > 1 else sim
     phys = fine.physics
     m = phys.model
@@ -178,8 +180,7 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
         prev = target
     contact = None
     if deepest[1] >= 0:
-        pair = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom#{g}"
-                for g in deepest[1:]]
+        pair = [geom_name(m, g) for g in deepest[1:]]
         contact = {"deepest_m": max(0.0, -deepest[0]), "pair": pair}
     return {"speed": np.asarray(speeds), "force": np.asarray(forces),
             "tracking": np.abs(np.asarray(ends)), "end_force": np.asarray(end_forces),
