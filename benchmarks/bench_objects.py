@@ -7,7 +7,8 @@ strategy.seed=S`` computes, without plots and render) or as ONE batched `run_tri
 call (``--batched``: every trial runs until the slowest one stops).  Every result is
 replayed with MuJoCo C at timestep / 4 (`experiment.compute.replay_check`, the check each
 ``cgda run`` of a dynamic experiment reports).  Target (issue 10): each experiment
-succeeds on at least 8 of 10 seeds.
+succeeds on at least 8 of 10 seeds.  ``--only iiwa14_move_push_box`` runs the push on
+the built-in KUKA iiwa 14 (issue 24) instead.
 
     python benchmarks/bench_objects.py [--seeds 10] [--only rotate_valve] [--batched]
 """
@@ -28,8 +29,11 @@ from cgda_jax.experiment.rules import strategy_function
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 EXPERIMENTS = ("move_push_box", "rotate_valve")
+#: Run with ``--only`` (not by default).
+OTHERS = ("iiwa14_move_push_box",)
 #: Units of the reported errors: metres -> mm, radians -> degrees.
-SCALE = {"move_push_box": (1000.0, "mm"), "rotate_valve": (np.degrees(1.0), "deg")}
+SCALE = {"move_push_box": (1000.0, "mm"), "rotate_valve": (np.degrees(1.0), "deg"),
+         "iiwa14_move_push_box": (1000.0, "mm")}
 
 
 def _row(name: str, res, replay: dict, seconds: float) -> dict:
@@ -87,7 +91,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--only", choices=EXPERIMENTS, default=None)
+    parser.add_argument("--only", choices=EXPERIMENTS + OTHERS, default=None)
     parser.add_argument("--batched", action="store_true",
                         help="all seeds in one run_trials call")
     args = parser.parse_args()
