@@ -14,22 +14,24 @@ from cgda_jax.strategies.oet import OETPlan
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
+#: Settings every strategy takes (`cgda_jax.strategies.base.PlanBase`).
+SHARED = {"aim": 1.0}
 #: Strategy name -> (plan class, defaults of its extra settings).
 STRATEGIES: dict[str, tuple[type, dict[str, Any]]] = {
     "fte": (FTEPlan, {"stagnation": 10, "distance": None,
                       "restarts": fte.RESTARTS, "min_improvement": fte.MIN_IMPROVEMENT,
                       "init": fte.INIT, "init_samples": fte.INIT_SAMPLES,
                       "init_std": fte.INIT_STD, "refine": "none", "refine_steps": 100,
-                      "refine_gamma": fte.REFINE_GAMMA, "aim": 1.0}),
+                      "refine_gamma": fte.REFINE_GAMMA, **SHARED}),
     "ie": (IEPlan, {"restarts": ie.RESTARTS, "stagnation": ie.STAGNATION,
                     "refine": "none", "reach_check": False,
-                    "restart_samples": ie.RESTART_SAMPLES, "aim": 1.0,
-                    "warm_start": False}),
+                    "restart_samples": ie.RESTART_SAMPLES, "warm_start": False,
+                    **SHARED}),
     "iet": (IETPlan, {"restarts": iet.RESTARTS, "backtracks": iet.BACKTRACKS,
                       "warm_start": False, "restart_samples": iet.RESTART_SAMPLES,
-                      "stagnation": iet.STAGNATION, "aim": 1.0}),
+                      "stagnation": iet.STAGNATION, **SHARED}),
     "oet": (OETPlan, {"max_steps": None, "lookahead": 1, "restarts": 0,
-                      "stagnation": None, "aim": 1.0, "warm_start": False}),
+                      "stagnation": None, "warm_start": False, **SHARED}),
 }
 
 
@@ -82,10 +84,10 @@ def run_trials(
             chunk); see `cgda_jax.strategies.batching.driver`.
         **strategy_kwargs: the strategy's own settings (FTE: stagnation, distance,
             restarts, min_improvement, init, init_samples, init_std, refine,
-            refine_steps, refine_gamma; IE: restarts,
-            stagnation, refine, reach_check, restart_samples; IET: restarts, backtracks,
-            warm_start, restart_samples;
-            OET: max_steps, lookahead, restarts, stagnation).
+            refine_steps, refine_gamma; IE: restarts, stagnation, refine,
+            reach_check, restart_samples, warm_start; IET: restarts, backtracks,
+            warm_start, restart_samples, stagnation; OET: max_steps, lookahead,
+            restarts, stagnation, warm_start; every one: aim).
 
     Returns:
         R `ExecutionResult`s; their wall/compile times are those of the whole batch;
