@@ -246,3 +246,13 @@ def test_robot_control_in_a_config(arms, tmp_path):
         load_config(p, ["robot.control.gain=3"])
     with pytest.raises(ConfigError, match="key 'robot.control'.*damping_ratio"):
         build_simulator(load_config(p, ["robot.control.damping_ratio=0"]))
+
+
+def test_the_report_says_whether_a_pd_carries_gravity(arms):
+    servo = mujoco.MjModel.from_xml_path(str(arms["servo"]))
+    lines = "\n".join(control_lines(plan_control(servo, servo.qpos0, JOINTS).as_dict()))
+    assert "no joint-space PD (every held joint is a position servo" in lines
+    assert "gravity compensation in the PD" not in lines
+    motor = mujoco.MjModel.from_xml_path(str(arms["motor"]))
+    lines = "\n".join(control_lines(plan_control(motor, motor.qpos0, JOINTS).as_dict()))
+    assert "gravity compensation in the PD on" in lines

@@ -112,9 +112,12 @@ def _force(lo, hi) -> str:
 def control_lines(control: dict) -> list[str]:
     """The report's control section: how dynamic mode drove each held joint
     (`cgda_jax.sim.control.ControlPlan.as_dict`)."""
+    pds = any(d["drive"] != "position" for d in control["joints"])
+    gravity = (f"gravity compensation in the PD {'on' if control['gravity'] else 'off'}"
+               if pds else "no joint-space PD (every held joint is a position servo "
+               "of the model, carrying gravity itself)")
     lines = ["## Control", "",
-             f"`robot.control.mode = \"{control['mode']}\"`, gravity compensation in "
-             f"the PD {'on' if control['gravity'] else 'off'}.", "",
+             f"`robot.control.mode = \"{control['mode']}\"`, {gravity}.", "",
              "| joint | drive | actuator | kp | kd | force limit [N m] | gravity "
              "compensated | gains from |", "|---" * 8 + "|"]
     for d in control["joints"]:
