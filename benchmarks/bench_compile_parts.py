@@ -9,7 +9,7 @@ repeat; then, to split the generation chunk into its parts, the same chunk with
 trivial fitness, no kinematics). Reports the median of ``--repeats`` for each, and
 the number of XLA fusions (roughly, kernels LLVM compiles) in each program.
 
-    python benchmarks/bench_compile_parts.py [--repeats 3]
+    python benchmarks/bench_compile_parts.py [--repeats 3] [--set strategy.feasibility=false]
 """
 
 from __future__ import annotations
@@ -90,9 +90,11 @@ def programs(sim, goal, s) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                        help="override a config value, as cgda run --set")
     args = parser.parse_args()
     jax.config.update("jax_enable_compilation_cache", False)
-    cfg = load_config("experiments/clean_ie.toml")
+    cfg = load_config("experiments/clean_ie.toml", args.set)
     goal, demos, _ = build_goal(cfg)
     sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
     s = cfg.strategy
@@ -109,6 +111,7 @@ def main() -> None:
         })
     print_table(rows, ["program", "lower_s", "compile_s", "fusions"])
     write_json("bench_compile_parts", {"config": "experiments/clean_ie.toml",
+                                       "overrides": args.set,
                                        "repeats": args.repeats, "rows": rows})
 
 
