@@ -112,3 +112,29 @@ def test_a_users_meshed_motor_arm_runs_from_a_config(user_folder, mode, monkeypa
         assert "joint-space PD" in report or "| pd |" in report.lower(), report
         assert result["replay"]["success"]
     np.testing.assert_array_less(np.abs(np.asarray(result["point_errors"])), 0.02)
+
+
+def test_a_joint_held_by_a_contact_is_reported_with_the_contact(user_folder):
+    """The same arm with its turret resting on the pedestal (a modelling slip):
+    friction holds the base joint, and the tracking note names the contact."""
+    from cgda_jax import MarkerScene, Robot, Simulator
+    from cgda_jax.sim.motion import motion_report
+
+    xml = (ARM.replace('<body name="turret" pos="0 0 0.12">',
+                       '<body name="turret" pos="0 0 0.11">')
+           .replace('<geom type="mesh" mesh="base"', '<geom name="pedestal" type="mesh" '
+                    'mesh="base"')
+           .replace('<geom type="mesh" mesh="turret"', '<geom name="turret" type="mesh" '
+                    'mesh="turret"'))
+    path = user_folder / "models" / "resting.xml"
+    path.write_text(xml)
+    robot = Robot.from_mjcf(path, ["yaw", "shoulder", "elbow"],
+                            {"body": "fore", "pos": [0.0, 0.0, 0.2]},
+                            start={"shoulder": 0.5, "elbow": 1.0})
+    sim = Simulator(robot, MarkerScene(), mode="dynamic", physics="mujoco",
+                    waypoint_s=1.0)
+    joints = np.array([[1.0, 0.5, 1.0], [-0.5, 0.6, 1.1]], np.float32)
+    note = motion_report(sim, joints)["tracking_note"]
+    assert note and "joint 'yaw'" in note, note
+    assert "touched" in note and ("turret - pedestal" in note
+                                  or "pedestal - turret" in note), note

@@ -188,7 +188,8 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
 
 
 def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
-                  threshold_deg: float = TRACKING_WARNING_DEG) -> str | None:
+                  threshold_deg: float = TRACKING_WARNING_DEG,
+                  contact: dict[str, Any] | None = None) -> str | None:
     """One sentence naming the evolved joint that ends its waypoints farthest from
     the commanded posture, when that is more than ``threshold_deg`` (radians /
     metres: ``threshold_deg`` in degrees, or its value in mm for a slide), and why:
@@ -199,6 +200,8 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
         sim: the dynamic `cgda_jax.sim.execute.Simulator`.
         tracking: (N, DoF) |error| at each waypoint's end.
         end_force: (N, DoF) the joint's actuator force there.
+        contact: the replay's deepest contact of the arm (``{"pair", "deepest_m"}``),
+            named in the note as what may hold the joint; None: no contact.
     """
     import mujoco
 
@@ -235,10 +238,15 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
                "(still moving, or a contact); a larger robot.control.kp or a longer "
                "robot.waypoint_s lets it settle")
     worse = int(np.sum(err[:, j] > threshold_deg))
+    touched = ""
+    if contact:
+        a, b = contact["pair"]
+        touched = (f"; the arm touched something in the replay ({a} - {b}, deepest "
+                   f"{1e3 * contact['deepest_m']:.1f} mm), which may be what holds it")
     return (f"the arm cannot reach its commanded postures: joint {name!r} ends "
             f"waypoint {i + 1} {err[i, j]:.1f} {unit} from its target ({worse} of "
-            f"{len(err)} waypoints beyond {threshold_deg:g} {unit}); {why}. The "
-            "evolved waypoints are commands, not the postures reached")
+            f"{len(err)} waypoints beyond {threshold_deg:g} {unit}); {why}{touched}. "
+            "The evolved waypoints are commands, not the postures reached")
 
 
 def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -330,7 +338,8 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         out["tracking_error_deg"] = dict(zip(names, np.rad2deg(
             rep["tracking"].max(axis=0)).tolist()))  # at the waypoints' ends
         out["tracking_deg_per_waypoint"] = np.rad2deg(rep["tracking"]).tolist()
-        out["tracking_note"] = tracking_note(sim, rep["tracking"], rep["end_force"])
+        out["tracking_note"] = tracking_note(sim, rep["tracking"], rep["end_force"],
+                                             contact=rep["contact"])
         out["control"] = sim.physics.control.as_dict()
         for j, n in enumerate(names):
             if mv[j] > vel[j] * tol:
