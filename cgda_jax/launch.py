@@ -39,6 +39,10 @@ from cgda_jax.job import (
 __all__ = ["JobEnd", "free_port", "launch", "main", "start_job", "without_option"]
 
 
+#: Exit statuses of a process that caught SIGINT / SIGTERM and ended (128 + signal).
+_SIGNAL_EXITS = (128 + int(signal.SIGINT), 128 + int(signal.SIGTERM))
+
+
 def free_port(host: str = "127.0.0.1") -> int:
     """A TCP port free on `host` right now (the OS picks it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
@@ -284,10 +288,12 @@ def start_job(n_processes: int, argv: Sequence[str], *,
                       if c is not None and c not in ok]
             if failed:
                 i, c = failed[0]
-                # killed by a signal, the process itself said nothing more: what
-                # comes on its pipes now is from what it started (a helper's
+                # killed by a signal, or ended by one it caught (status 128 +
+                # SIGINT / SIGTERM), the process itself has nothing more to say:
+                # what comes on its pipes now is from what it started (a helper's
                 # complaint that its parent vanished), noise like the others'
-                end_all(keep=None if c < 0 else i)
+                signalled = c < 0 or c in _SIGNAL_EXITS
+                end_all(keep=None if signalled else i)
                 return JobEnd(_status(c) or 1, "failed", i, c, message=(
                     f"process {i} exited with status {_status(c)}; stopped the "
                     "others"))

@@ -397,3 +397,49 @@ def test_lines_printed_as_a_job_ends_are_held_and_dropped(hold_s, tmp_path, tag)
     noise = "[p1] NOISE as process 0 ends\n"
     assert out.getvalue() == "[p0] hello\n" + ("" if hold_s else noise)
     none_left(tag)
+
+
+HELPER_PARENT = """
+import os, signal, subprocess, sys, time
+helper = '''
+import os, signal, sys, time
+signal.signal(signal.SIGTERM, signal.SIG_IGN)  # outlives the group's SIGTERM
+parent = int(sys.argv[1])
+while os.path.exists(f"/proc/{parent}"):
+    time.sleep(0.02)
+print("helper: my parent vanished", file=sys.stderr, flush=True)
+'''
+if os.environ["CGDA_PROCESS_ID"] == "1":
+    signal.signal(signal.SIGTERM, lambda *a: sys.exit(143))  # caught, as cgda does
+    subprocess.Popen([sys.executable, "-c", helper, str(os.getpid())])
+    print("process 1 ready", file=sys.stderr, flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not pathlib.Path("/proc").is_dir(), reason="needs /proc")
+def test_a_helper_complaining_after_a_caught_signal_is_dropped(tmp_path, tag):
+    """Process 1 catches SIGTERM and exits 143; a helper it started then complains
+    on the pipe it inherited (as in a flaky CI run: a BrokenPipeError traceback
+    relayed as "[p1] ..."). That is noise like the others' lines, not process 1's
+    own last words: dropped."""
+    import threading
+
+    from cgda_jax.launch import start_job
+
+    out, err = io.StringIO(), io.StringIO()
+
+    def stop_process_1():
+        os.kill(worker(tag, 1), signal.SIGTERM)
+
+    timer = threading.Timer(1.5, stop_process_1)
+    timer.start()
+    try:
+        end = start_job(2, [sys.executable, "-c", HELPER_PARENT],
+                        env={"CGDA_TEST_TAG": tag}, stdout=out, stderr=err,
+                        mute_on_end=True, keep=lambda line: line.startswith("cgda: "))
+    finally:
+        timer.cancel()
+    assert (end.status, end.reason, end.process) == (143, "failed", 1), end
+    assert "helper" not in err.getvalue(), err.getvalue()
+    none_left(tag)
