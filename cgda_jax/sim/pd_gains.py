@@ -19,7 +19,7 @@ import numpy as np
 from cgda_jax.logs import warn_once
 
 __all__ = ["STABLE_SHARE", "check_stability", "implicit_damping", "joint_inertia",
-           "stable_kp"]
+           "stable_kp", "stiffness"]
 
 #: A default PD gain is at most the one whose ``(kp dt + kd) dt / I`` (explicit
 #: damping) or ``kp dt^2 / I`` (implicit) is this share of 1, the bound
@@ -43,11 +43,18 @@ def implicit_damping(m: mujoco.MjModel) -> bool:
                                      int(mujoco.mjtIntegrator.mjINT_IMPLICITFAST))
 
 
+def stiffness(kp: float, kd: float, inertia: float, dt: float,
+              implicit: bool) -> float:
+    """``(kp dt + kd) dt / I`` (explicit damping) or ``kp dt^2 / I`` (implicit
+    integrators): about 1 or more, and the step is too coarse for the PD."""
+    return kp * dt * dt / inertia + (0.0 if implicit else kd * dt / inertia)
+
+
 def stable_kp(inertia: float, dt: float, damping_ratio: float,
               implicit: bool, share: float = STABLE_SHARE) -> float:
     """The largest ``kp`` whose PD, with ``kd = 2 damping_ratio sqrt(kp I)``, has
-    ``(kp dt + kd) dt / I = share`` (explicit damping) or ``kp dt^2 / I = share``
-    (implicit integrators): with ``x = dt sqrt(kp / I)``, ``x^2 + 2 zeta x = share``."""
+    `stiffness` ``share``: with ``x = dt sqrt(kp / I)``, ``x^2 + 2 zeta x = share``
+    (``zeta`` 0 under the implicit integrators)."""
     zeta = 0.0 if implicit else float(damping_ratio)
     x = math.sqrt(zeta * zeta + share) - zeta
     return x * x * float(inertia) / (dt * dt)
@@ -61,7 +68,7 @@ def check_stability(m, inertia, dt, drives, source) -> None:
     for d in pds:
         i = float(inertia[m.jnt_dofadr[mujoco.mj_name2id(
             m, mujoco.mjtObj.mjOBJ_JOINT, d.joint)]])
-        stiff = d.kp * dt * dt / i + (0.0 if implicit else d.kd * dt / i)
+        stiff = stiffness(d.kp, d.kd, i, dt, implicit)
         if stiff > 1.0:
             warn_once(f"control: the PD of joint {d.joint!r} of {source} (kp "
                       f"{d.kp:g}, kd {d.kd:g}, inertia {i:.3g}) is stiff for the "
