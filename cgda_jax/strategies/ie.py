@@ -180,14 +180,13 @@ class IEPlan(PlanBase):
         if k:
             mean = jnp.where(use_sample, samples[jnp.clip((t - 1) // 2, 0, k - 1)],
                              mean)
-        first = 0.0
-        if self.warm_start:  # try 0 from where the arm starts
-            first = from_joints(self.sim.init_state().genes, self.lower, self.upper)
-        mean = jnp.where(restart, mean, first)
         # a sampled or neighbouring posture is near a solution: search locally there
         local = use_sample | use_neighbour
-        if self.warm_start:  # try 0 searches locally around the start posture
+        first = 0.0
+        if self.warm_start:  # try 0: a local search from where the arm starts
+            first = from_joints(self.sim.init_state().genes, self.lower, self.upper)
             local = local | ~restart
+        mean = jnp.where(restart, mean, first)
         return self.start(jnp.where(restart, k_evo, key),
                           self.point_fitness(state, goal_point), mean=mean,
                           std_scale=jnp.where(local, LOCAL_STD, 1.0))
