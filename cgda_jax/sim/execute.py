@@ -55,20 +55,20 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
+from cgda_jax.sim.executions import Executions
 from cgda_jax.sim.feasibility import scene_obstacles
 from cgda_jax.sim.robot import Robot
 from cgda_jax.sim.sim_state import (
     MODES,
     SimState,
     check_settings,
-    check_waypoints,
     scene_along,
 )
 
 __all__ = ["MODES", "SimState", "Simulator", "scene_obstacles"]
 
 
-class Simulator:
+class Simulator(Executions):
     """Execute joint waypoints on a robot and return the scene's features.
 
     Args:
@@ -266,23 +266,32 @@ class Simulator:
                                   first=jnp.bool_(True))
         return state
 
-    def _judge(self, state: SimState, new: SimState) -> SimState:
+    def _judge(self, state: SimState, new: SimState, judge: bool = True) -> SimState:
         """``new`` with the violation of the move from ``state`` to it (unchanged
-        without feasibility)."""
+        without feasibility; ``judge=False``: the violations carried unchanged, the
+        move no longer the first)."""
         if self.feasibility is None:
             return new
+        if not judge:
+            return new.replace(first=jnp.bool_(False))
         duration = jnp.where(state.first, self.approach_s, self.move_s)
         v = self.feasibility.move(state.genes, new.genes - state.genes, duration,
                                   state.first)
         return new.replace(violation=state.violation + v, move_violation=v,
                            first=jnp.bool_(False))
 
-    def step(self, state: SimState, waypoint: Array) -> tuple[SimState, Array]:
+    def step(self, state: SimState, waypoint: Array, *,
+             judge: bool = True) -> tuple[SimState, Array]:
         """Move to one waypoint.
 
         Args:
             state: the current `SimState`.
             waypoint: (DoF,) target joint values (clipped into the limits).
+            judge: with feasibility, judge the move (``move_violation``, added to
+                ``violation``); False skips the judgement (the violations are
+                carried unchanged), for a caller that judges the same move
+                elsewhere or does not use it: the collision check then is not
+                part of this call's program.
 
         Returns:
             (new state, features (F,) at the waypoint).
@@ -290,10 +299,11 @@ class Simulator:
         self.robot.check_genes(waypoint, "waypoint")
         target = self.robot.clip(jnp.asarray(waypoint, jnp.float32))
         if self.mode == "dynamic":
-            return self._step_dynamic(state, target)
-        return self._step_kinematic(state, target)
+            return self._step_dynamic(state, target, judge)
+        return self._step_kinematic(state, target, judge)
 
-    def _step_kinematic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+    def _step_kinematic(self, state: SimState, target: Array,
+                        judge: bool = True) -> tuple[SimState, Array]:
         alphas = jnp.asarray(self._alphas)[:, None]
         path = state.genes + alphas * (target - state.genes)  # (K, DoF)
         markers = jax.vmap(self.robot.marker_position)(path)  # (K, 3)
@@ -304,7 +314,7 @@ class Simulator:
         else:
             features = self.scene.features(scene_state, markers[-1])
         new = state.replace(genes=target, scene=scene_state, marker=markers[-1])
-        return self._judge(state, new), features
+        return self._judge(state, new, judge), features
 
     def _from(self, state: SimState) -> Array:
         """The marker where the next move starts (from ``genes`` when not carried)."""
@@ -337,7 +347,8 @@ class Simulator:
             features = self.scene.features(scene_state, path[-1])
         return data, scene_state, path[-1], features
 
-    def _step_dynamic(self, state: SimState, target: Array) -> tuple[SimState, Array]:
+    def _step_dynamic(self, state: SimState, target: Array,
+                      judge: bool = True) -> tuple[SimState, Array]:
         if self.approach_steps != self.physics_steps and state.first is not None:
             data, scene_state, marker, features = jax.lax.cond(
                 state.first,
@@ -350,78 +361,4 @@ class Simulator:
                             marker=marker)
         # judged on the commanded reference (the physics path's joints are not
         # read back; the motion report replays them on MuJoCo C)
-        return self._judge(state, new), features
-
-    def rollout(
-        self, waypoints: Array, state: SimState | None = None
-    ) -> tuple[Array, SimState]:
-        """Execute waypoints in order (``lax.scan`` of `step`).
-
-        Args:
-            waypoints: (N, DoF) joint values.
-            state: start state; default `init_state()`.
-
-        Returns:
-            (features (N, F), final state).
-        """
-        check_waypoints(waypoints, self.robot)
-        return self._rollout(waypoints, state)
-
-    def _rollout_checked(
-        self, waypoints: Array, state: SimState | None
-    ) -> tuple[Array, SimState]:
-        """`rollout` of checked waypoints (jitted per simulator in ``__init__``)."""
-        if state is None:
-            state = self._start(self.robot.start_genes)
-        state, features = jax.lax.scan(
-            self.step, state, jnp.asarray(waypoints, jnp.float32)
-        )
-        return features, state
-
-    def violation(self, waypoints: Array, state: SimState | None = None) -> Array:
-        """Summed violation (scalar) of executing (N, DoF) waypoints from ``state``
-        (0 = feasible; 0 without feasibility)."""
-        final = self.rollout(waypoints, state)[1]
-        return jnp.float32(0.0) if final.violation is None else final.violation
-
-    def execute(self, waypoints: Array, state: SimState | None = None) -> Array:
-        """Features (N, F) of executing (N, DoF) waypoints from ``state`` (default:
-        `init_state()`)."""
-        return self.rollout(waypoints, state)[0]
-
-    def _execute_traced(self, waypoints: Array) -> Array:
-        self.n_traces += 1
-        return self.execute(waypoints)
-
-    def map_population(self, fn, xs):
-        """``vmap(fn)(xs)``, in dynamic MJX mode as ``lax.map`` over slices of at
-        most ``batch_size`` candidates (see the class doc: large LAPACK batches
-        deadlock XLA's CPU thread pool).  Otherwise a plain ``vmap`` (the MuJoCo C
-        backend gets the whole batch in one call).
-
-        Args:
-            fn: a function of one candidate (pytree of arrays).
-            xs: the candidates, stacked on axis 0 (P, ...).
-        """
-        if self.mode != "dynamic" or self.batch_size is None:
-            return jax.vmap(fn)(xs)
-        n = jax.tree_util.tree_leaves(xs)[0].shape[0]
-        if n <= self.batch_size:
-            return jax.vmap(fn)(xs)
-        return jax.lax.map(fn, xs, batch_size=self.batch_size)
-
-    def _execute_batched(self, population: Array) -> Array:
-        return self.map_population(self._execute_traced, population)
-
-    def execute_population(self, population: Array) -> Array:
-        """Execute a population of trajectories at once (jitted ``vmap`` of `execute`;
-        dynamic MJX mode: in slices of ``batch_size``, see `map_population`).
-
-        Args:
-            population: (P, N, DoF) waypoints, each starting from `init_state()`.
-
-        Returns:
-            (P, N, F) features.
-        """
-        check_waypoints(population, self.robot, batched=True)
-        return self._execute_population(jnp.asarray(population, jnp.float32))
+        return self._judge(state, new, judge), features

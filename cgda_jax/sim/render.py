@@ -96,17 +96,19 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
         data.qpos[phys.gene_qadr] = genes
         mujoco.mj_kinematics(model, data)
         yield data.qpos.copy(), data.site_xpos[phys.site_id][None].copy(), 0
-        every = max(1, sim.physics_steps // frames_per_waypoint)
+        approach, profile = sim.reference_profiles()  # the first move: the approach
         prev = ctrl(genes)
         for j, wp in enumerate(waypoints, start=1):
             target = ctrl(np.clip(wp, lo, hi))
             trail = []
-            for k in range(1, sim.physics_steps + 1):
-                data.ctrl[:] = prev + float(sim._profile[k - 1]) * (target - prev)
+            shares = approach if j == 1 else profile
+            every = max(1, len(shares) // frames_per_waypoint)
+            for k in range(1, len(shares) + 1):
+                data.ctrl[:] = prev + float(shares[k - 1]) * (target - prev)
                 mujoco.mj_step(model, data)
                 mujoco.mj_kinematics(model, data)
                 trail.append(data.site_xpos[phys.site_id].copy())
-                if k % every == 0 or k == sim.physics_steps:
+                if k % every == 0 or k == len(shares):
                     yield data.qpos.copy(), np.array(trail), j
                     trail = []
             prev = target

@@ -1,19 +1,14 @@
-"""Shared machinery of the execution strategies: gene bounds, goal checks, the plan base.
+"""Shared machinery of the execution strategies: the plan base.
 
 Every strategy (FTE, IE, IET, OET) runs one or more evolutions of the same kind: an
 `evosax` algorithm (`cgda_jax.strategies.algorithms`) asks for a population of gene
 vectors, the whole population is executed in ONE batched simulator call, its fitness
 against the goal is computed and told back (`cgda_jax.strategies.evolution`). This
-module holds what the plans share: the gene bounds, the goal checks and `PlanBase`.
-The names of those two modules are re-exported here.
-
-Gene bounds. Algorithms search an unbounded, normalized space ``u`` (D,); joint angles
-are ``q = mid + half * sin(pi / 2 * u)`` with ``mid, half`` the centre and half-width of
-the joint limits. ``u`` in [-1, 1] covers the whole range once; beyond it the sine folds
-back, a smooth reflection at the limits (no flat, gradient-free regions as with
-clipping, no infeasible postures). ``u = 0`` is the middle of every joint range, the
-start mean of distribution-based algorithms, and a step size of about 0.3 moves a joint
-by a few tenths of its range.
+module holds what the plans share: `PlanBase`; the gene bounds
+(`cgda_jax.strategies.genes`), the checks before a run
+(`cgda_jax.strategies.settings`) and the names of those two modules and of
+`cgda_jax.strategies.algorithms` and `cgda_jax.strategies.evolution` are
+re-exported here.
 
 Divergence: see `cgda_jax.strategies.evolution`.
 
@@ -23,7 +18,6 @@ References:
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Callable
 from typing import Any
 
@@ -49,93 +43,15 @@ from cgda_jax.strategies.evolution import (
     freeze as freeze,
     screen as screen,
 )
+from cgda_jax.strategies.genes import from_joints as from_joints, to_joints as to_joints
 from cgda_jax.strategies.result import ExecutionResult
+from cgda_jax.strategies.settings import (
+    check_config as check_config,
+    check_stagnation as check_stagnation,
+    points_independent as points_independent,
+)
 
-# --------------------------------------------------------------------------- gene bounds
 exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
-
-
-def to_joints(u: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
-    """Maps normalized genes (..., DoF) to joint angles inside [lower, upper]."""
-    mid = 0.5 * (upper + lower)
-    half = 0.5 * (upper - lower)
-    return mid + half * jnp.sin(0.5 * jnp.pi * u)
-
-
-def from_joints(q: jax.Array, lower: jax.Array, upper: jax.Array) -> jax.Array:
-    """Inverse of `to_joints` on [-1, 1] (angles are clipped into the limits first)."""
-    mid = 0.5 * (upper + lower)
-    half = jnp.maximum(0.5 * (upper - lower), 1e-12)
-    s = jnp.clip((q - mid) / half, -1.0, 1.0)
-    return jnp.arcsin(s) * (2.0 / jnp.pi)
-
-
-def points_independent(sim: Any) -> bool:
-    """Whether a step's features depend only on its waypoint, not on where it starts:
-    kinematic mode (``sim.mode``, default kinematic) and a scene state with no arrays
-    (the marker; a paint wall remembers what was painted)."""
-    if getattr(sim, "mode", "kinematic") != "kinematic":
-        return False
-    scene = getattr(sim, "scene", None)
-    return scene is None or not jax.tree.leaves(scene.init_state())
-
-
-# --------------------------------------------------------------------------- validation
-def check_config(
-    sim: Any,
-    goal: Any,
-    *,
-    tolerance: float | None = None,
-    max_generations: int | None = None,
-    min_points: int = 1,
-) -> jax.Array:
-    """Checks a goal (N, F) against a simulator and common settings; returns it f32.
-
-    The checks run in NumPy on the host (eager JAX ops would each compile once).
-    """
-    from cgda_jax.checks import check_float32
-
-    g64 = np.asarray(goal, dtype=np.float64)
-    if np.all(np.isfinite(g64)):  # NaN/inf: the per-point message below
-        check_float32(g64, "goal")
-    g = g64.astype(np.float32)
-    if g.ndim == 1 and sim.n_features == 1:
-        g = g[:, None]
-    if g.ndim != 2:
-        raise ValueError(f"goal must have shape (N, F); got shape {tuple(g.shape)}")
-    if g.shape[1] != sim.n_features:
-        names = getattr(sim, "feature_names", None)
-        raise ValueError(
-            f"goal has {g.shape[1]} features per point but the simulator's scene has "
-            f"{sim.n_features}" + (f" ({', '.join(names)})" if names else "")
-        )
-    if g.shape[0] < min_points:
-        raise ValueError(f"goal needs at least {min_points} point(s); got {g.shape[0]}")
-
-    if not np.all(np.isfinite(g)):
-        bad = int(np.argmax(~np.all(np.isfinite(g), axis=1)))
-        raise ValueError(f"goal has a non-finite value at point {bad}")
-    if tolerance is not None and not (np.isfinite(tolerance) and tolerance > 0):
-        raise ValueError(f"tolerance must be a finite number > 0; got {tolerance}")
-    if max_generations is not None and int(max_generations) < 1:
-        raise ValueError(f"max_generations must be >= 1; got {max_generations}")
-    return jax.device_put(g)  # a transfer (jnp.asarray compiles a copy program)
-
-
-# --------------------------------------------------------------------------- plans
-def check_stagnation(stagnation: Any) -> int | None:
-    """A strategy's ``stagnation``: None (off) or a whole number >= 1, as an int.
-
-    Raises ValueError naming the value otherwise (a bool, 0, 2.5, "10").
-    """
-    if stagnation is None:
-        return None
-    ok = (not isinstance(stagnation, (bool, str)) and isinstance(stagnation, numbers.Real)
-          and float(stagnation) == int(stagnation) and int(stagnation) >= 1)
-    if not ok:
-        raise ValueError(f"stagnation must be a whole number >= 1 or None; got "
-                         f"{stagnation!r}")
-    return int(stagnation)
 
 
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
@@ -216,7 +132,9 @@ class PlanBase:
         }
 
     # ---- evolutions and fitness
-    def _sharded(self, fitness_u: FitnessFn) -> FitnessFn:
+    def sharded(self, fitness_u: Callable) -> Callable:
+        """``fitness_u`` (a function of the population (P, D)) with its batch split
+        over the plan's devices (as is without ``sharding``)."""
         if self.sharding is None:
             return fitness_u
         # only the simulator call is split: candidates in and fitness out stay
@@ -235,7 +153,7 @@ class PlanBase:
         std_scale: jax.Array | float | None = None,
     ) -> Evolution:
         """`evolution_init` with this plan's algorithm and gene count."""
-        return evolution_init(self.algo, self.params, key, self._sharded(fitness_u),
+        return evolution_init(self.algo, self.params, key, self.sharded(fitness_u),
                               self.n_genes, mean=mean, std_scale=std_scale)
 
     def evolve(
@@ -245,7 +163,7 @@ class PlanBase:
         stop: Callable[[Evolution], jax.Array] | None = None,
     ) -> tuple[Evolution, dict[str, jax.Array]]:
         """`evolution_step` with this plan's algorithm (default stop: `self.stop`)."""
-        return evolution_step(self.algo, self.params, evo, self._sharded(fitness_u),
+        return evolution_step(self.algo, self.params, evo, self.sharded(fitness_u),
                               self.stop if stop is None else stop)
 
     def joints(self, u: jax.Array) -> jax.Array:
@@ -259,8 +177,10 @@ class PlanBase:
         return jnp.where(jnp.expand_dims(evo.found, -1), q, jnp.nan)
 
     def point_features(self, state: Any, pop_u: jax.Array) -> jax.Array:
-        """Features (P, F) after one step from `state` to each posture of `pop_u` (P, DoF)."""
-        return self.point_outcome(state, pop_u)[0]
+        """Features (P, F) after one step from `state` to each posture of `pop_u`
+        (P, DoF); the moves are not judged (`advance`)."""
+        q = self.joints(pop_u)
+        return self.map_population(lambda w: self.advance(state, w)[1], q)
 
     @property
     def feasibility(self) -> Any:
@@ -301,6 +221,15 @@ class PlanBase:
 
         return self.map_population(one, q)
 
+    def advance(self, state: Any, waypoint: jax.Array) -> tuple[Any, jax.Array]:
+        """``sim.step(state, waypoint)`` without judging the move (with
+        feasibility: ``judge=False``), for a move whose violation the caller
+        does not use or gets elsewhere: its program then carries no copy of the
+        collision check."""
+        if self.feasibility is None:
+            return self.sim.step(state, waypoint)
+        return self.sim.step(state, waypoint, judge=False)
+
     def map_population(self, fn: Callable, xs: Any) -> Any:
         """``vmap(fn)(xs)`` over the population, through the simulator's
         ``map_population`` when it has one (dynamic MJX mode slices large populations
@@ -321,12 +250,20 @@ class PlanBase:
 
         def fitness_u(pop):
             feats, violation = self.point_outcome(state, pop)
-            err = self.least_motion(state, pop,
-                                    jnp.linalg.norm(feats - goal_point, axis=-1))
-            f = err if prefix_sq is None else jnp.sqrt(prefix_sq + err**2)
-            return self.penalize(f, violation)
+            return self.outcome_fitness(state, pop, feats, violation, goal_point,
+                                        prefix_sq)
 
         return fitness_u
+
+    def outcome_fitness(self, state: Any, pop_u: jax.Array, feats: jax.Array,
+                        violation: Any, goal_point: jax.Array,
+                        prefix_sq: jax.Array | None = None) -> jax.Array:
+        """`point_fitness` (P,) of the postures ``pop_u`` (P, DoF) from their
+        `point_outcome` ``(feats, violation)``."""
+        err = self.least_motion(state, pop_u,
+                                jnp.linalg.norm(feats - goal_point, axis=-1))
+        f = err if prefix_sq is None else jnp.sqrt(prefix_sq + err**2)
+        return self.penalize(f, violation)
 
     def stop(self, evo: Evolution) -> jax.Array:
         """Per-point stop: error below the aim (``aim * tolerance``) or
@@ -355,6 +292,12 @@ class PlanBase:
         if getattr(final, "violation", None) is not None:
             out["violation"] = final.violation
         return out
+
+    def executed_features(self, joints: jax.Array) -> jax.Array:
+        """The ``features`` (N, F) of `execution`, its moves not judged
+        (`advance`)."""
+        return jax.lax.scan(lambda st, w: self.advance(st, w), self.sim.init_state(),
+                            joints)[1]
 
     def result(
         self,

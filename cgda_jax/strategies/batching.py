@@ -227,7 +227,7 @@ def _pool_step(plan: IEPlan, p: _Pool, block: int | None
 
     def evolve(e, g, st):
         return jax.vmap(
-            lambda e, g, st: plan.evolve(e, plan.point_fitness(st, g), plan._stop)
+            lambda e, g, st: plan.evolve(e, plan.point_fitness(st, g), plan.point_stop)
         )(e, g, st)
 
     n_blocks = 1 if not block or size <= block else -(-size // block)

@@ -20,8 +20,8 @@ import jax.numpy as jnp
 from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
 from flax import struct
 
-__all__ = ["INVALID_PENALTY", "Evolution", "FitnessFn", "evolution_init",
-           "evolution_step", "freeze", "screen"]
+__all__ = ["INVALID_PENALTY", "Evolution", "FitnessFn", "evolution_ask",
+           "evolution_init", "evolution_step", "evolution_tell", "freeze", "screen"]
 
 #: Fitness told to the algorithm for an invalid (non-finite) candidate. A constant,
 #: not a figure relative to the generation: population-based algorithms (DE, GA, PSO)
@@ -140,6 +140,50 @@ def freeze(done: jax.Array, old: Any, new: Any) -> Any:
     return jax.tree.map(lambda o, n: jnp.where(done, o, n), old, new)
 
 
+def evolution_ask(algo: Any, params: Any, evo: Evolution) -> tuple[jax.Array, Any]:
+    """The candidates of `evo`'s next generation: ``(pop (P, D), algorithm state
+    after asking)``; `evolution_tell` takes both with their fitness.  Reads only
+    the algorithm state, the key and the generation of `evo`."""
+    k_ask, _ = jax.random.split(jax.random.fold_in(evo.key, evo.generation))
+    return algo.ask(k_ask, evo.algo, params)
+
+
+def evolution_tell(
+    algo: Any,
+    params: Any,
+    evo: Evolution,
+    pop: jax.Array,
+    algo_state: Any,
+    fitness: jax.Array,
+    stop: Callable[[Evolution], jax.Array],
+) -> tuple[Evolution, dict[str, jax.Array]]:
+    """Tells `evolution_ask`'s candidates ``pop`` (P, D) their raw ``fitness`` (P,)
+    and does the bookkeeping of `evolution_step` (which is ask, one evaluation,
+    tell); a done `evo` is returned unchanged."""
+    _, k_tell = jax.random.split(jax.random.fold_in(evo.key, evo.generation))
+    told, ranked, invalid = screen(fitness)
+    algo_state, _ = algo.tell(k_tell, pop, told, algo_state, params)
+    i = jnp.argmin(ranked)
+    better = ranked[i] < evo.best_fitness
+    new = evo.replace(
+        algo=algo_state,
+        best_u=jnp.where(better, pop[i], evo.best_u),
+        best_fitness=jnp.where(better, ranked[i], evo.best_fitness),
+        stall=jnp.where(better, 0, evo.stall + 1),
+        generation=evo.generation + 1,
+        evaluations=evo.evaluations + pop.shape[0],
+        invalid=evo.invalid + invalid,
+    )
+    new = new.replace(done=stop(new))
+    out = freeze(evo.done, evo, new)
+    metrics = {
+        "best_fitness": out.best_fitness,
+        "generation_best": jnp.where(evo.done, jnp.inf, ranked[i]),
+        "invalid": jnp.where(evo.done, 0, invalid),
+    }
+    return out, metrics
+
+
 def evolution_step(
     algo: Any,
     params: Any,
@@ -164,27 +208,5 @@ def evolution_step(
         when none was valid) and ``invalid`` (invalid candidates of this generation;
         0 when frozen). Invalid candidates are told `INVALID_PENALTY` (see `screen`).
     """
-    k = jax.random.fold_in(evo.key, evo.generation)
-    k_ask, k_tell = jax.random.split(k)
-    pop, algo_state = algo.ask(k_ask, evo.algo, params)
-    told, ranked, invalid = screen(fitness_u(pop))
-    algo_state, _ = algo.tell(k_tell, pop, told, algo_state, params)
-    i = jnp.argmin(ranked)
-    better = ranked[i] < evo.best_fitness
-    new = evo.replace(
-        algo=algo_state,
-        best_u=jnp.where(better, pop[i], evo.best_u),
-        best_fitness=jnp.where(better, ranked[i], evo.best_fitness),
-        stall=jnp.where(better, 0, evo.stall + 1),
-        generation=evo.generation + 1,
-        evaluations=evo.evaluations + pop.shape[0],
-        invalid=evo.invalid + invalid,
-    )
-    new = new.replace(done=stop(new))
-    out = freeze(evo.done, evo, new)
-    metrics = {
-        "best_fitness": out.best_fitness,
-        "generation_best": jnp.where(evo.done, jnp.inf, ranked[i]),
-        "invalid": jnp.where(evo.done, 0, invalid),
-    }
-    return out, metrics
+    pop, algo_state = evolution_ask(algo, params, evo)
+    return evolution_tell(algo, params, evo, pop, algo_state, fitness_u(pop), stop)
