@@ -216,7 +216,7 @@ class FTEPlan(PlanBase):
 
     def _errors(self, u_flat):
         """(N,) pointwise errors of executing `u_flat` (inf where not finite)."""
-        feats = self.execution(self._trajectory(u_flat))["features"]
+        feats = self.executed_features(self._trajectory(u_flat))
         e = jnp.linalg.norm(feats - self.goal, axis=-1)
         return jnp.where(jnp.isfinite(e), e, jnp.inf)
 
@@ -224,7 +224,7 @@ class FTEPlan(PlanBase):
     def _start(self, key, mean, params):
         """A try from `mean`; a mean other than the middle is evaluated too (one
         more evaluation) and is the try's first best when valid."""
-        fitness = self._sharded(self._fitness)
+        fitness = self.sharded(self._fitness)
         evo = evolution_init(self.algo, params, key, fitness, self.n_genes, mean=mean)
         if mean is None:
             return evo

@@ -30,6 +30,9 @@ class IEState:
         best_u, best_fitness: the best over every try (inf: nothing valid yet).
         done: the point is finished (tolerance met, or out of tries).
         generations, evaluations, invalid: spent by the finished tries.
+        judged_u, judged_violation: with feasibility (sequential context): the
+            bests the last generation judged in context and their moves'
+            violations (`cgda_jax.strategies.ie_context`); None otherwise.
     """
 
     evo: Evolution
@@ -42,3 +45,5 @@ class IEState:
     generations: jax.Array
     evaluations: jax.Array
     invalid: jax.Array
+    judged_u: jax.Array | None = None
+    judged_violation: jax.Array | None = None

@@ -181,7 +181,8 @@ class IETPlan(PlanBase):
             point_invalid=s.point_invalid.at[i].add(s.evo.invalid),
         )
         q = self.joints(best_u)
-        sim_state, feats = self.sim.step(tree_at(s.sim_states, i), q)
+        # the move was judged in the evaluation that found it (best_f)
+        sim_state, feats = self.advance(tree_at(s.sim_states, i), q)
         own_sq = jnp.sum((feats - self.goal[i]) ** 2)
         met = own_sq < self.aim_tolerance**2
         found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try

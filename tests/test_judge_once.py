@@ -1,0 +1,170 @@
+"""A move judged once per program (issue 21's compile cost): `Simulator.step`
+with ``judge=False``, IE's sequential context judged in the candidates' batched
+evaluation, IET's commit and FTE's point errors without a second judgement.
+
+The values are checked against the judged rollout (`Simulator.rollout`, the
+reference: every move judged in order), and the traces of `Feasibility.move`
+count the copies of the collision check a program carries."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from cgda_jax import MarkerScene, Robot, Simulator, model_path
+from cgda_jax.sim.feasibility import Feasibility
+from cgda_jax.strategies.fte import FTEPlan
+from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.ie_context import contexts, judged_generation, rejudge
+from cgda_jax.strategies.iet import IETPlan
+
+WALL = {"name": "wall", "type": "box", "pos": (0.3, 0.0, 0.125),
+        "size": (0.12, 0.01, 0.125)}
+GOAL = np.array([[0.30, -0.22, 0.25], [0.25, 0.0, 0.50], [0.30, 0.22, 0.25]],
+                np.float32)
+
+
+@pytest.fixture(scope="module")
+def sim():
+    tiny = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                           "marker")
+    return Simulator(tiny, MarkerScene(), substeps=4,
+                     feasibility=Feasibility(tiny, obstacles=[WALL]))
+
+
+def _random_postures(sim, n, seed):
+    lo, hi = np.asarray(sim.lower), np.asarray(sim.upper)
+    return jnp.asarray(np.random.default_rng(seed).uniform(lo, hi, (n, sim.n_dof)),
+                       jnp.float32)
+
+
+def test_an_unjudged_step_moves_the_same_and_carries_the_violations(sim):
+    start = sim.init_state()
+    q = _random_postures(sim, 2, 0)
+    judged, f1 = sim.step(start, q[0])
+    free, f2 = sim.step(start, q[0], judge=False)
+    np.testing.assert_array_equal(np.asarray(f1), np.asarray(f2))
+    np.testing.assert_array_equal(np.asarray(judged.genes), np.asarray(free.genes))
+    assert not bool(free.first) and bool(start.first)  # the approach is done
+    assert float(free.violation) == float(start.violation)  # not judged: carried
+    assert float(free.move_violation) == float(start.move_violation)
+    # the next move of an unjudged state is judged as after a judged one
+    a, _ = sim.step(judged, q[1])
+    b, _ = sim.step(free, q[1])
+    assert float(a.move_violation) == float(b.move_violation)
+
+
+def _move_traces(monkeypatch):
+    calls = []
+    move = Feasibility.move
+
+    def counted(self, *args, **kwargs):
+        calls.append(1)
+        return move(self, *args, **kwargs)
+
+    monkeypatch.setattr(Feasibility, "move", counted)
+    return calls
+
+
+@pytest.mark.parametrize("plan_cls", [IEPlan, IETPlan])
+def test_a_generation_program_carries_one_collision_check(sim, plan_cls, monkeypatch):
+    """Tracing one generation calls `Feasibility.move` at one place (before: IE's
+    context rollout and IET's commit judged their moves again, each a copy of the
+    check in the compiled program: 2 calls)."""
+    plan = plan_cls(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                    tolerance=0.03,
+                    max_generations=20, restarts=0)
+    carry = plan.init(jax.random.key(0))
+    calls = _move_traces(monkeypatch)
+    jax.jit(plan.step).lower(carry)
+    assert len(calls) == 1
+
+
+def test_unjudged_features_equal_the_judged_execution(sim):
+    """FTE's point errors come from `executed_features` (moves not judged); the
+    reference is the judged execution's features."""
+    plan = FTEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                   tolerance=0.03, max_generations=20, restarts=0)
+    for seed in range(3):
+        q = _random_postures(sim, 3, seed)
+        ref = plan.execution(q)
+        assert float(ref["violation"]) >= 0.0
+        np.testing.assert_array_equal(np.asarray(jax.jit(plan.executed_features)(q)),
+                                      np.asarray(ref["features"]))
+
+
+def test_the_bests_judged_with_the_candidates_equal_the_judged_rollout(sim):
+    """IE's re-scored errors come from the candidates' batched evaluation; the
+    reference is the rollout that judges every move in order."""
+    plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                  tolerance=0.03,
+                  max_generations=20, restarts=0)
+    s = plan.init(jax.random.key(1))
+    seen = []
+    for seed in range(6):  # some of these moves cross the wall, some are too fast
+        best_u = jax.random.uniform(jax.random.key(seed), (3, 3), minval=-1.0,
+                                    maxval=1.0)
+        states, none = contexts(plan, best_u)
+        assert none is None
+        errors, viol, (pops, _, fitness) = jax.jit(
+            lambda b, st: judged_generation(plan, s.evo, b, st))(best_u, states)
+        assert pops.shape == (3, 8, 3) and fitness.shape == (3, 8)
+        q = plan.joints(best_u)
+        feats, _ = sim.rollout(q)
+        ref_v = []
+        state = sim.init_state()
+        for w in q:
+            state, _ = sim.step(state, w)
+            ref_v.append(float(state.move_violation))
+        ref = plan.penalize(jnp.linalg.norm(feats - jnp.asarray(GOAL), axis=-1),
+                            jnp.asarray(ref_v))
+        np.testing.assert_allclose(np.asarray(errors), np.asarray(ref), rtol=1e-5)
+        np.testing.assert_allclose(np.asarray(viol), ref_v, rtol=1e-5)
+        seen += ref_v
+    assert min(seen) == 0.0 and max(seen) > 0.0  # feasible and infeasible moves
+
+
+def test_ie_reports_the_judged_rollouts_violation_without_judging_in_finish(
+        sim, monkeypatch):
+    """The result's violation is the stored one of the last generation; the
+    reference is the judged rollout of the reported joints.  The finish program
+    then judges nothing (before: one copy of the check)."""
+    import cgda_jax as cg
+
+    res = cg.run_ie(sim, GOAL, population_size=24, max_generations=150, seed=0,
+                    tolerance=0.03)
+    ref = float(sim.violation(jnp.asarray(res.joints)))
+    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
+    assert res.success and res.info["feasible"]
+    plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                  tolerance=0.03, max_generations=20, restarts=0)
+    carry = plan.init(jax.random.key(0))
+    jax.clear_caches()
+    calls = _move_traces(monkeypatch)
+    jax.jit(plan.finish).lower(carry)
+    assert len(calls) == 0
+
+
+def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
+    """A run cut by its budget before the last bests were judged in context: the
+    result's violation is computed again (`rejudge`), equal to the judged
+    rollout's, also where it is not 0."""
+    plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                  tolerance=0.03, max_generations=20, restarts=0)
+    s = plan.init(jax.random.key(0))
+    assert not bool(plan.done(s))  # nothing judged yet: never done
+    refs = []
+    for seed in range(3):
+        u = jax.random.uniform(jax.random.key(seed), (3, 3), minval=-1.0, maxval=1.0)
+        stale = s.replace(best_u=u, best_fitness=jnp.zeros(3), done=jnp.ones(3, bool))
+        assert not bool(plan.done(stale))  # every point done, but not judged
+        final = jax.device_get(jax.jit(plan.finish)(stale))
+        assert not bool(final["judged"])
+        again = rejudge(plan, final)
+        assert "judged" not in again
+        ref = plan.execution(plan.joints(u))["violation"]
+        assert float(again["violation"]) == pytest.approx(float(ref), rel=1e-5)
+        refs.append(float(ref))
+        judged = stale.replace(judged_u=u, judged_violation=jnp.zeros(3))
+        assert bool(plan.done(judged))
+    assert max(refs) > 0.0  # the stored (stale) violation would have been NaN
