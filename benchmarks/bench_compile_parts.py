@@ -1,15 +1,16 @@
 """Where the compile time of a clean-IE cold start goes (issue 14, target < 2 s).
 
 Traces, lowers and compiles the programs `cgda_jax.strategies.runner.compile_plan`
-builds for experiments/clean_ie.toml (one trial), each timed apart, with JAX's
-persistent compilation cache off and its in-memory caches cleared before every
-repeat; then, to split the generation chunk into its parts, the same chunk with
+builds for an IE experiment (default experiments/clean_ie.toml; one trial), each
+timed apart, with JAX's persistent compilation cache off and its in-memory caches
+cleared before every repeat; then, to split the generation chunk into its parts, the same chunk with
 ``restarts=0`` (no restart branch traced) and evosax's CMA-ES evolution step alone
 (`cgda_jax.strategies.evolution.evolution_step` vmapped over the 9 points with a
 trivial fitness, no kinematics). Reports the median of ``--repeats`` for each, and
 the number of XLA fusions (roughly, kernels LLVM compiles) in each program.
 
-    python benchmarks/bench_compile_parts.py [--repeats 3] [--set strategy.feasibility=false]
+    python benchmarks/bench_compile_parts.py [--repeats 3] [--experiment clean_ie]
+        [--set strategy.feasibility=false]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import jax
 import jax.numpy as jnp
 from _common import print_table, write_json
 
+from cgda_jax.builtin import resolve_config
 from cgda_jax.experiment import load_config
 from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
 from cgda_jax.strategies.base import check_config, make_algorithm
@@ -92,9 +94,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                         help="override a config value, as cgda run --set")
+    parser.add_argument("--experiment", default="clean_ie",
+                        help="a built-in IE experiment (default clean_ie)")
     args = parser.parse_args()
     jax.config.update("jax_enable_compilation_cache", False)
-    cfg = load_config("experiments/clean_ie.toml", args.set)
+    cfg = load_config(resolve_config(args.experiment), args.set)
+    if cfg.strategy.name != "ie":
+        parser.error(f"{args.experiment} runs {cfg.strategy.name}, not IE")
     goal, demos, _ = build_goal(cfg)
     sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
     s = cfg.strategy
@@ -110,7 +116,7 @@ def main() -> None:
             "fusions": runs[-1]["fusions"],
         })
     print_table(rows, ["program", "lower_s", "compile_s", "fusions"])
-    write_json("bench_compile_parts", {"config": "experiments/clean_ie.toml",
+    write_json("bench_compile_parts", {"experiment": args.experiment,
                                        "overrides": args.set,
                                        "repeats": args.repeats, "rows": rows})
 
