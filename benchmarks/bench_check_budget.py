@@ -5,9 +5,9 @@ experiment.  This measures, per experiment (as `cgda run` builds it):
 
 - the unconstrained run (``strategy.feasibility = false``, the experiment's own
   strategy settings, compiled first, median of ``--repeats``) and the candidates
-  it evaluates, lock-step included (generations x points x population for IE:
-  every point's population is evaluated each generation), so its cost per
-  evaluated candidate;
+  it evaluates, lock-step included (the compiled loop's whole chunks of
+  generations x population, x points for IE: every point's population is
+  evaluated each generation), so its cost per evaluated candidate;
 - the feasibility check's parts on the same experiment's `Feasibility` (its kept
   collision pairs), over a batch of random postures within the joint limits:
   the collision geoms' forward kinematics per posture, and the pairs' signed
@@ -59,11 +59,11 @@ def unconstrained(name: str, repeats: int) -> dict:
     res = runs[-1]
     run_s = float(np.median([r.info["wall_time_s"] for r in runs]))
     gens = int(res.info["generations"])
-    pop = int(cfg.strategy.population_size)
-    # IE evaluates every point's population each generation (done ones masked);
-    # IET one point's; the reported evaluations count what was used
-    evaluated = (gens * len(goal) * pop if cfg.strategy.name == "ie"
-                 else int(res.info["evaluations"]))
+    pop, chunk = int(cfg.strategy.population_size), int(cfg.strategy.chunk_size)
+    # the compiled loop runs whole chunks; each generation IE evaluates every
+    # point's population (done ones masked), IET one point's
+    steps = -(-gens // chunk) * chunk
+    evaluated = steps * pop * (len(goal) if cfg.strategy.name == "ie" else 1)
     return {"run_s": run_s, "generations": gens, "evaluated": evaluated,
             "per_eval_us": 1e6 * run_s / evaluated}
 

@@ -30,19 +30,16 @@ from cgda_jax.strategies.base import (
     points_independent,
     ragged_rows,
 )
-from cgda_jax.strategies.ie import STAGNATION
+from cgda_jax.strategies.ie_plan import LOCAL_STD, RESTART_SAMPLES, STAGNATION
 from cgda_jax.strategies.iet_state import IETState, tree_at, tree_set
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import run
 
 #: Default restarts of a point that missed its tolerance, and backtracks per run.
+#: (Restart samples and their local search width: IE's, `ie_plan`.)
 RESTARTS = 6
 BACKTRACKS = 8
-#: Postures sampled once per run to seed restarts (independent points only), and
-#: the initial search width of a restart from one, relative to the algorithm's.
-RESTART_SAMPLES = 4096
-LOCAL_STD = 0.15
 
 
 class IETPlan(PlanBase):
