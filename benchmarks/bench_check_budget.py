@@ -57,8 +57,8 @@ def unconstrained(name: str, repeats: int) -> dict:
     cfg, goal, sim = _build(name, ["strategy.feasibility=false"])
     runs = [_run(cfg, sim, goal) for _ in range(repeats + 1)][1:]
     res = runs[-1]
-    run_s = float(np.median([r.info["wall_time_s"] for r in runs]))
-    gens = int(res.info["generations"])
+    run_s = float(np.median([r.wall_time_s for r in runs]))
+    gens = int(res.generations)
     pop, chunk = int(cfg.strategy.population_size), int(cfg.strategy.chunk_size)
     # the compiled loop runs whole chunks; each generation IE evaluates every
     # point's population (done ones masked), IET one point's
