@@ -15,7 +15,7 @@ from cgda_jax import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.sim.feasibility import Feasibility
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
-from cgda_jax.strategies.ie_context import contexts, judged_generation, rejudge
+from cgda_jax.strategies.ie_context import contexts, judged_generation
 from cgda_jax.strategies.iet import IETPlan
 
 WALL = {"name": "wall", "type": "box", "pos": (0.3, 0.0, 0.125),
@@ -147,7 +147,7 @@ def test_ie_reports_the_judged_rollouts_violation_without_judging_in_finish(
 
 def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
     """A run cut by its budget before the last bests were judged in context: the
-    result's violation is computed again (`rejudge`), equal to the judged
+    result's violation is computed again (`PlanBase.rejudge`), equal to the judged
     rollout's, also where it is not 0."""
     plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
                   tolerance=0.03, max_generations=20, restarts=0)
@@ -160,7 +160,7 @@ def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
         assert not bool(plan.done(stale))  # every point done, but not judged
         final = jax.device_get(jax.jit(plan.finish)(stale))
         assert not bool(final["judged"])
-        again = rejudge(plan, final)
+        again = plan.rejudge(final)
         assert "judged" not in again
         ref = plan.execution(plan.joints(u))["violation"]
         assert float(again["violation"]) == pytest.approx(float(ref), rel=1e-5)
@@ -168,3 +168,64 @@ def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
         judged = stale.replace(judged_u=u, judged_violation=jnp.zeros(3))
         assert bool(plan.done(judged))
     assert max(refs) > 0.0  # the stored (stale) violation would have been NaN
+
+
+@pytest.mark.parametrize("algorithm", ["CMA_ES", "DifferentialEvolution"])
+def test_iet_reports_the_judged_rollouts_violation_without_judging_in_finish(
+        sim, algorithm, monkeypatch):
+    """IET keeps each committed move's violation from the evaluation that found
+    it; the reference is the judged rollout of the reported joints.  With a
+    population-based algorithm a try's first best may come from its initial
+    population, whose violation is not kept: the result is then judged again
+    (`PlanBase.rejudge`), with the same answer."""
+    import cgda_jax as cg
+
+    res = cg.run_iet(sim, GOAL, algorithm=algorithm, population_size=24,
+                     max_generations=150, seed=0, tolerance=0.03)
+    ref = float(sim.violation(jnp.asarray(res.joints)))
+    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
+    assert res.success and res.info["feasible"]
+    plan = IETPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                   tolerance=0.03, max_generations=20, restarts=0)
+    carry = plan.init(jax.random.key(0))
+    jax.clear_caches()
+    calls = _move_traces(monkeypatch)
+    jax.jit(plan.finish).lower(carry)
+    assert len(calls) == 0
+
+
+def test_iet_kept_violations_equal_the_judged_moves():
+    """The violation IET keeps for its evolution's best after each generation, and
+    for its committed postures, against the judged move (the reference: one
+    judged `Simulator.step` from the point's state); a speed limit of 0.8 rad/s
+    makes bests infeasible on the way."""
+    from cgda_jax.sim.limits import read_limits
+    from cgda_jax.strategies.iet_state import tree_at
+
+    tiny = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                           "marker")
+    limits = read_limits(tiny.mj_model, tiny.joint_names, {"velocity": 0.8})
+    slow = Simulator(tiny, MarkerScene(), substeps=4,
+                     feasibility=Feasibility(tiny, limits, obstacles=[WALL]))
+    plan = IETPlan(slow, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=16,
+                   tolerance=0.03, max_generations=25, restarts=0, backtracks=0)
+    s = plan.init(jax.random.key(3))
+    step = jax.jit(plan.step)
+    seen = []
+    for _ in range(100):  # every point commits after at most 25 generations
+        if bool(plan.done(s)):
+            break
+        s, _ = step(s)
+        if bool(s.evo.found) and int(s.point) < len(GOAL):
+            new, _ = slow.step(tree_at(s.sim_states, s.point),
+                               plan.joints(s.evo.best_u))
+            ref = float(new.move_violation)
+            assert float(s.evo_violation) == pytest.approx(ref, rel=1e-5, abs=1e-6)
+            seen.append(ref)
+    assert min(seen) == 0.0 and max(seen) > 0.0  # infeasible bests on the way
+    assert bool(plan.done(s)) and int(s.point) == len(GOAL)
+    state, ref = slow.init_state(), []
+    for w in np.asarray(s.joints):
+        state, _ = slow.step(state, jnp.asarray(w))
+        ref.append(float(state.move_violation))
+    np.testing.assert_allclose(np.asarray(s.violations), ref, rtol=1e-5, atol=1e-6)

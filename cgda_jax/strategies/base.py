@@ -293,6 +293,17 @@ class PlanBase:
             out["violation"] = final.violation
         return out
 
+    def rejudge(self, final: dict) -> dict:
+        """A finished trial's host arrays with ``violation`` from the judged
+        rollout (`cgda_jax.sim.execute.Simulator.violation`) where its finish
+        says the stored one is not the result's (``judged`` False: a run cut
+        before its last moves were judged); ``judged`` dropped."""
+        final = dict(final)
+        if not bool(final.pop("judged", True)):
+            joints = jnp.asarray(final["joints"])
+            final["violation"] = np.asarray(self.sim.violation(joints))
+        return final
+
     def executed_features(self, joints: jax.Array) -> jax.Array:
         """The ``features`` (N, F) of `execution`, its moves not judged
         (`advance`)."""

@@ -18,7 +18,7 @@ state.  The violations of the bests' moves are kept (``IEState.judged_u``,
 current bests' (`fresh`): the result's execution then takes them
 (`judged_execution`) and the finish program carries no collision check either.
 A run its generation budget cuts before they are fresh is judged again on the
-host (`rejudge`).
+host (`cgda_jax.strategies.base.PlanBase.rejudge`).
 """
 
 from __future__ import annotations
@@ -27,12 +27,10 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from cgda_jax.strategies.evolution import evolution_ask
 
-__all__ = ["contexts", "fresh", "judged_execution", "judged_generation", "rejudge",
-           "rescore"]
+__all__ = ["contexts", "fresh", "judged_execution", "judged_generation", "rescore"]
 
 
 def contexts(plan, best_u: jax.Array) -> tuple[Any, jax.Array | None]:
@@ -89,32 +87,22 @@ def judged_execution(plan, s, joints: jax.Array) -> dict:
     rollout and the sum of the moves' violations the last generation stored
     (NaN where a point has no posture, as the judged rollout gives), and
     ``judged``: whether those are the current bests' (`fresh`; else
-    `rejudge` on the host)."""
+    `PlanBase.rejudge` on the host)."""
     found = jnp.all(jnp.isfinite(joints))
     return {"joints": joints, "features": plan.executed_features(joints),
             "violation": jnp.where(found, jnp.sum(s.judged_violation), jnp.nan),
             "judged": fresh(s)}
 
 
-def rejudge(plan, final: dict) -> dict:
-    """A finished trial's host arrays with ``violation`` from the judged rollout
-    (`cgda_jax.sim.execute.Simulator.violation`) where the stored one was not the
-    current bests' (a run cut by its generation budget); ``judged`` dropped."""
-    final = dict(final)
-    if not bool(final.pop("judged", True)):
-        final["violation"] = np.asarray(plan.sim.violation(jnp.asarray(final["joints"])))
-    return final
-
-
 def rescore(plan, s, errors: jax.Array):
     """The IE state ``s`` and its evolutions with each point's best re-scored to
     ``errors`` (N) (its error in the current context), the stop test redone."""
     evo = s.evo
-    fresh = jnp.where(jnp.isfinite(s.best_fitness), errors, s.best_fitness)
+    now = jnp.where(jnp.isfinite(s.best_fitness), errors, s.best_fitness)
     same = jnp.all(evo.best_u == s.best_u, axis=-1)
     evo = evo.replace(best_fitness=jnp.where(
-        same & jnp.isfinite(evo.best_fitness), fresh, evo.best_fitness))
+        same & jnp.isfinite(evo.best_fitness), now, evo.best_fitness))
     evo = evo.replace(done=jax.vmap(plan.point_stop)(evo))
-    s = s.replace(best_fitness=fresh, done=(fresh < plan.aim_tolerance)
+    s = s.replace(best_fitness=now, done=(now < plan.aim_tolerance)
                   | (evo.done & (s.tries > plan.restarts)))
     return s, evo

@@ -21,7 +21,6 @@ from cgda_jax.strategies.ie_context import (
     fresh,
     judged_execution,
     judged_generation,
-    rejudge,
     rescore,
 )
 from cgda_jax.strategies.ie_state import IEState, point_keys
@@ -306,7 +305,7 @@ class IEPlan(PlanBase):
         }
 
     def to_result(self, final, history, timing):
-        final = rejudge(self, final)
+        final = self.rejudge(final)
         gens = final["generation"]
         hist = history["best_fitness"].astype(np.float64)  # (G, N)
         rows = [hist[: int(g), i] for i, g in enumerate(gens)]

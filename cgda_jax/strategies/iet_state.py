@@ -42,6 +42,10 @@ class IETState:
             backtracks) found a valid candidate, so there is no posture to commit.
         samples: (N, K, D) the sampled postures nearest each goal point (K = 0
             without restart samples), restart means.
+        evo_violation, best_violation, violations: with feasibility, the move
+            violations of ``evo``'s best, of ``best_u`` and of the committed
+            postures (N,), from the evaluations that found them (NaN: not
+            known, e.g. an initial population's best); None otherwise.
     """
 
     evo: Evolution
@@ -64,6 +68,9 @@ class IETState:
     point_invalid: jax.Array
     stopped: jax.Array
     samples: jax.Array
+    evo_violation: jax.Array | None = None
+    best_violation: jax.Array | None = None
+    violations: jax.Array | None = None
 
 
 def tree_at(tree: Any, i: jax.Array) -> Any:
