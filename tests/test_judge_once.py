@@ -124,6 +124,21 @@ def test_the_bests_judged_with_the_candidates_equal_the_judged_rollout(sim):
     assert min(seen) == 0.0 and max(seen) > 0.0  # feasible and infeasible moves
 
 
+def _check_result_and_finish(sim, res, plan_cls, monkeypatch):
+    """A feasible success whose reported violation is the judged rollout's of its
+    joints, and a finish program of ``plan_cls`` that traces no judgement."""
+    ref = float(sim.violation(jnp.asarray(res.joints)))
+    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
+    assert res.success and res.info["feasible"]
+    plan = plan_cls(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                    tolerance=0.03, max_generations=20, restarts=0)
+    carry = plan.init(jax.random.key(0))
+    jax.clear_caches()
+    calls = _move_traces(monkeypatch)
+    jax.jit(plan.finish).lower(carry)
+    assert len(calls) == 0
+
+
 def test_ie_reports_the_judged_rollouts_violation_without_judging_in_finish(
         sim, monkeypatch):
     """The result's violation is the stored one of the last generation; the
@@ -133,16 +148,7 @@ def test_ie_reports_the_judged_rollouts_violation_without_judging_in_finish(
 
     res = cg.run_ie(sim, GOAL, population_size=24, max_generations=150, seed=0,
                     tolerance=0.03)
-    ref = float(sim.violation(jnp.asarray(res.joints)))
-    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
-    assert res.success and res.info["feasible"]
-    plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
-                  tolerance=0.03, max_generations=20, restarts=0)
-    carry = plan.init(jax.random.key(0))
-    jax.clear_caches()
-    calls = _move_traces(monkeypatch)
-    jax.jit(plan.finish).lower(carry)
-    assert len(calls) == 0
+    _check_result_and_finish(sim, res, IEPlan, monkeypatch)
 
 
 def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
@@ -182,16 +188,7 @@ def test_iet_reports_the_judged_rollouts_violation_without_judging_in_finish(
 
     res = cg.run_iet(sim, GOAL, algorithm=algorithm, population_size=24,
                      max_generations=150, seed=0, tolerance=0.03)
-    ref = float(sim.violation(jnp.asarray(res.joints)))
-    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
-    assert res.success and res.info["feasible"]
-    plan = IETPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
-                   tolerance=0.03, max_generations=20, restarts=0)
-    carry = plan.init(jax.random.key(0))
-    jax.clear_caches()
-    calls = _move_traces(monkeypatch)
-    jax.jit(plan.finish).lower(carry)
-    assert len(calls) == 0
+    _check_result_and_finish(sim, res, IETPlan, monkeypatch)
 
 
 def test_iet_kept_violations_equal_the_judged_moves():
