@@ -151,6 +151,19 @@ def test_ie_reports_the_judged_rollouts_violation_without_judging_in_finish(
     _check_result_and_finish(sim, res, IEPlan, monkeypatch)
 
 
+def test_ie_with_a_polish_judges_with_the_candidates_and_its_result_in_finish(sim):
+    """A polish (``refine``) changes the postures after the generations, so the
+    finish judges them itself; the generations still judge the bests with the
+    candidates (their carry holds the kept judgements from init on)."""
+    import cgda_jax as cg
+
+    res = cg.run_ie(sim, GOAL, population_size=24, max_generations=150, seed=0,
+                    tolerance=0.03, refine="adam", refine_steps=20)
+    ref = float(sim.violation(jnp.asarray(res.joints)))
+    assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
+    assert res.success and res.info["feasible"]
+
+
 def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
     """A run cut by its budget before the last bests were judged in context: the
     result's violation is computed again (`PlanBase.rejudge`), equal to the judged

@@ -159,7 +159,9 @@ def evolution_tell(
 ) -> tuple[Evolution, dict[str, jax.Array]]:
     """Tells `evolution_ask`'s candidates ``pop`` (P, D) their raw ``fitness`` (P,)
     and does the bookkeeping of `evolution_step` (which is ask, one evaluation,
-    tell); a done `evo` is returned unchanged."""
+    tell); a done `evo` is returned unchanged.  Its metrics add ``best_index``
+    (the generation's best candidate) and ``improved`` (it became the best; False
+    when frozen), for a caller keeping something of the best's evaluation."""
     _, k_tell = jax.random.split(jax.random.fold_in(evo.key, evo.generation))
     told, ranked, invalid = screen(fitness)
     algo_state, _ = algo.tell(k_tell, pop, told, algo_state, params)
@@ -180,6 +182,8 @@ def evolution_tell(
         "best_fitness": out.best_fitness,
         "generation_best": jnp.where(evo.done, jnp.inf, ranked[i]),
         "invalid": jnp.where(evo.done, 0, invalid),
+        "best_index": i,
+        "improved": better & ~evo.done,
     }
     return out, metrics
 

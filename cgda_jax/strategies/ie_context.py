@@ -59,9 +59,9 @@ def contexts(plan, best_u: jax.Array) -> tuple[Any, jax.Array | None]:
 def judged_generation(plan, evo, best_u: jax.Array, states):
     """One batched evaluation of every point's candidates (asked of ``evo``, N
     evolutions) with, first in each row, its best ``best_u`` (N, D) from its
-    context ``states``.  Returns the bests' errors (N; inf where not finite) and
-    ``(populations (N, P, D), algorithm states, fitness (N, P))`` for
-    `cgda_jax.strategies.evolution.evolution_tell`."""
+    context ``states``.  Returns the bests' errors (N; inf where not finite),
+    their moves' violations (N) and ``(populations (N, P, D), algorithm states,
+    fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`."""
     pops, algo_states = jax.vmap(lambda e: evolution_ask(plan.algo, plan.params, e))(evo)
     cands = jnp.concatenate([best_u[:, None], pops], axis=1)  # (N, P + 1, D)
     feats, violation = jax.vmap(

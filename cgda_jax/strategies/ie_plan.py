@@ -205,22 +205,28 @@ class IEPlan(PlanBase):
 
     @property
     def judges_in_step(self) -> bool:
-        """Feasibility with the sequential context and no polish: the result's
-        moves are judged in the generations (`ie_context.judged_execution`)."""
-        return (self.sequential and self.feasibility is not None
-                and self.refine == "none")
+        """Feasibility with the sequential context: the bests' moves are judged
+        with the candidates each generation (`ie_context.judged_generation`)."""
+        return self.sequential and self.feasibility is not None
+
+    @property
+    def finish_takes_judged(self) -> bool:
+        """`judges_in_step` and no polish: the result's execution takes the
+        kept judgements (`ie_context.judged_execution`); a polish judges its
+        postures in the finish."""
+        return self.judges_in_step and self.refine == "none"
 
     def done(self, s: IEState) -> jax.Array:
-        """Every point finished (and, `judges_in_step`, its move judged as
+        """Every point finished (and, `finish_takes_judged`, its move judged as
         executed: `ie_context.fresh`)."""
-        if not self.judges_in_step:
+        if not self.finish_takes_judged:
             return jnp.all(s.done)
         return jnp.all(s.done) & fresh(s)
 
     def step(self, s: IEState):
         states, errors = contexts(self, s.best_u)
         asked = None
-        if errors is None:  # feasibility: the bests' moves judged with the candidates
+        if self.judges_in_step:  # the bests' moves judged with the candidates
             errors, violation, asked = judged_generation(self, s.evo, s.best_u, states)
             s = s.replace(judged_u=s.best_u, judged_violation=violation)
         if self.sequential:  # re-score the bests where the others now leave them
@@ -281,7 +287,7 @@ class IEPlan(PlanBase):
     def finish(self, s):
         found = jnp.isfinite(s.best_fitness)
         joints = jnp.where(found[:, None], self.joints(s.best_u), jnp.nan)
-        if self.judges_in_step:
+        if self.finish_takes_judged:
             executed = judged_execution(self, s, joints)
         else:
             executed = self.execution(joints)

@@ -249,10 +249,9 @@ class IETPlan(PlanBase):
                                        self._goal(s.point), prefix_sq)
         evo, metrics = evolution_tell(self.algo, self.params, s.evo, pop, algo_state,
                                       fitness, self._stop(prefix_sq))
-        i = jnp.argmin(jnp.where(jnp.isfinite(fitness), fitness, jnp.inf))
-        improved = evo.best_fitness < s.evo.best_fitness  # (frozen: never)
-        return s.replace(evo=evo, evo_violation=jnp.where(
-            improved, violation[i], s.evo_violation)), metrics
+        kept = jnp.where(metrics["improved"], violation[metrics["best_index"]],
+                         s.evo_violation)
+        return s.replace(evo=evo, evo_violation=kept), metrics
 
     def done(self, s):
         return (s.point >= self.n_points) | s.stopped
