@@ -116,3 +116,24 @@ def test_holes_in_the_region_are_the_object():
     assert blob.area_px == 900
     assert (blob.u, blob.v) == pytest.approx((34.5, 24.5))
     assert blob.saturation == pytest.approx(216.0, abs=2) and blob.value_top == 200
+
+
+def test_light_that_falls_at_once(clips, tmp_path):
+    """From frame 3 on the light is 2.5 times weaker at once (the side faces fall
+    from value 61 to 24, under the floor learned before): the frame is measured
+    again with the range learned on it, so no frame loses them. Darker still (a
+    fifth: the side faces at 12, under VALUE_FLOOR) they are lost: the stated limit."""
+    truth = np.load(clips / "box_move.npz")
+    for scale, whole in ((0.4, True), (0.2, False)):
+        rgb = tmp_path / f"x{scale}"
+        rgb.mkdir()
+        for k, f in enumerate(sorted((clips / "box_move").glob("*.png"))):
+            img = cv2.imread(str(f)).astype(float) * (scale if k >= 3 else 1.0)
+            cv2.imwrite(str(rgb / f.name), np.round(img).astype(np.uint8))
+        track = track_video(rgb)
+        assert track.found.all()
+        pos, area = _errors(track, truth)
+        if whole:
+            assert pos.max() <= 2.0 and area.max() <= 0.10, (pos, area)
+        else:
+            assert area[3:].min() > 0.25, area

@@ -31,11 +31,14 @@ import numpy as np
 from cgda_jax.vision.camera import Intrinsics
 from cgda_jax.vision.cv import cv2
 
-__all__ = ["VALUE_SPAN", "Blob", "ColorRange", "auto_color", "find", "hsv_image", "in_range",
-           "measure", "measure_near"]
+__all__ = ["VALUE_FLOOR", "VALUE_SPAN", "Blob", "ColorRange", "auto_color", "find", "hsv_image",
+           "in_range", "measure", "measure_near"]
 
 #: the followed range's value floor as a fraction of the lit faces' value
 VALUE_SPAN = 0.2
+#: the darkest value (0-255) a followed range admits: below it an 8-bit camera's
+#: hue is noise, so darker faces are not counted as the object
+VALUE_FLOOR = 20.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,12 +82,12 @@ class ColorRange:
         """The colour model: a range led by hue around a measured colour. Hue +/-
         ``tol``; saturation at least half the measured mean ``sat`` (30 at the
         least); value at least `VALUE_SPAN` times ``top``, the value of the object's
-        lit faces (`Blob.value_top`; 20 at the least): a face in shade, at a third
-        of the lit faces' brightness or less, stays inside (under white light a
-        darker face keeps its hue and saturation, only its value falls)."""
+        lit faces (`Blob.value_top`; `VALUE_FLOOR` at the least): a face in shade,
+        at a third of the lit faces' brightness or less, stays inside (under white
+        light a darker face keeps its hue and saturation, only its value falls)."""
         return ColorRange(
             float((hue - tol) % 180), float((hue + tol) % 180),
-            max(30.0, 0.5 * sat), max(20.0, VALUE_SPAN * top),
+            max(30.0, 0.5 * sat), max(VALUE_FLOOR, VALUE_SPAN * top),
         )
 
     def __str__(self) -> str:

@@ -158,7 +158,8 @@ def render_shaded(
                 images.append(r.render())
             frames.append(np.ascontiguousarray(images[0][..., ::-1]))
             seg = images[1]
-            masks.append((seg[..., 0] == geom) & (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM))
+            is_geom = seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM
+            masks.append((seg[..., 0] == geom) & is_geom)
     finally:
         for r in renderers:
             r.close()

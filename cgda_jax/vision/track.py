@@ -43,7 +43,7 @@ import pathlib
 import numpy as np
 
 from cgda_jax.data import Demonstration
-from cgda_jax.vision.blob import Blob, ColorRange, auto_color, find
+from cgda_jax.vision.blob import VALUE_FLOOR, Blob, ColorRange, auto_color, find
 from cgda_jax.vision.camera import Intrinsics, load_intrinsics
 from cgda_jax.vision.frames import DEPTH_SUFFIXES, iter_frames, list_frames, read_depth
 
@@ -145,8 +145,9 @@ def _count_error(depth_dir, n_depth: int, n_video: int | None, video) -> ValueEr
 
 
 def _reacquire(bgr, box, recent, ratio, color, kw):
-    """Following a colour that jumped out of its window: the most saturated region
-    in the window around the last box (`auto_color` there), taken when its area is
+    """Following a colour that jumped out of its window, or light that fell below
+    the range's value floor at once: the most saturated region in the window around
+    the last box (`auto_color` there, down to `VALUE_FLOOR`), taken when its area is
     within ``ratio`` .. 1 / ``ratio`` of the recent median. (new range, blob) or None."""
     x, y, w, h = box
     grow = 40 + max(w, h) // 2
@@ -155,6 +156,7 @@ def _reacquire(bgr, box, recent, ratio, color, kw):
     x1, y1 = min(width, x + w + grow), min(height, y + h + grow)
     try:
         rng, _ = auto_color(bgr[y0:y1, x0:x1], min_area=kw["min_area"],
+                            val_floor=VALUE_FLOOR,
                             hue_tol=0.5 * ((color.hue_hi - color.hue_lo) % 180))
     except ValueError:
         return None
@@ -162,6 +164,27 @@ def _reacquire(bgr, box, recent, ratio, color, kw):
     if blob is None or (recent and not ratio * recent <= blob.area_px <= recent / ratio):
         return None
     return rng, blob
+
+
+def _learned(blob: Blob, color: ColorRange) -> ColorRange:
+    """The colour model learned from the object's pixels in this frame, with the
+    hue width of ``color``."""
+    return color.around(blob.hue, blob.saturation, blob.value_top,
+                        0.5 * ((color.hue_hi - color.hue_lo) % 180))
+
+
+def _relearn(bgr, blob, color, box, kw):
+    """Light that fell at once (the learned value or saturation floor below 0.8 of
+    the one searched with): the frame measured again with the learned range, so
+    faces that fell under the old floor are counted in this frame already.
+    (blob, range used)."""
+    new = _learned(blob, color)
+    if new.val_min >= 0.8 * color.val_min and new.sat_min >= 0.8 * color.sat_min:
+        return blob, color
+    again = find(bgr, new, box, **kw)
+    if again is None or again.area_px < blob.area_px:
+        return blob, color
+    return again, new
 
 
 def _fill_gaps(rows: np.ndarray, found: np.ndarray, names, max_gap: int, where: str):
@@ -282,6 +305,8 @@ def track_video(
             again = _reacquire(bgr, last_box, recent, min_area_ratio, color, kw)
             if again is not None:
                 color, blob = again
+        if blob is not None and follow:
+            blob, color = _relearn(bgr, blob, color, last_box, kw)
         if blob is not None and recent and blob.area_px < min_area_ratio * recent:
             blob = None  # partly occluded
         used.append(color)
@@ -292,8 +317,7 @@ def track_video(
             last_box = blob.bbox
             areas.append(blob.area_px)
             if follow:
-                color = color.around(blob.hue, blob.saturation, blob.value_top,
-                                     0.5 * ((color.hue_hi - color.hue_lo) % 180))
+                color = _learned(blob, color)
     names = features_for(depth is not None)
     found = np.asarray(found, bool)
     if depth_files is not None and len(depth_files) != len(found):
