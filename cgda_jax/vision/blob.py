@@ -31,8 +31,8 @@ import numpy as np
 from cgda_jax.vision.camera import Intrinsics
 from cgda_jax.vision.cv import cv2
 
-__all__ = ["VALUE_FLOOR", "VALUE_SPAN", "Blob", "ColorRange", "auto_color", "find", "hsv_image",
-           "in_range", "measure", "measure_near"]
+__all__ = ["VALUE_FLOOR", "VALUE_SPAN", "Blob", "ColorRange", "auto_color", "find",
+           "hsv_image", "in_range", "measure", "measure_near"]
 
 #: the followed range's value floor as a fraction of the lit faces' value
 VALUE_SPAN = 0.2
