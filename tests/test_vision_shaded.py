@@ -1,6 +1,6 @@
 """Tracking the whole object under shading and changing light (issue 44, part 1).
 
-Clips rendered with MuJoCo (`cgda_jax.vision.shaded`): a red box and a red cylinder
+Clips rendered with MuJoCo (`cgda_jax.vision.shaded`): a red box and a blue cylinder
 slide along an arc and turn by 60 degrees on a grey table, seen obliquely, so their
 side faces are drawn at a third of their top's brightness; the light swings from
 left to right ("move") or dims 2.7 times ("dim"). The ground truth is MuJoCo's
@@ -35,7 +35,9 @@ from cgda_jax.vision.shaded import render_shaded
 out = sys.argv[1]
 for solid in ("box", "cylinder"):
     for light in ("move", "dim"):
-        c = render_shaded(solid, light=light, n_frames=7, width=320, height=240)
+        rgba = (0.8, 0.1, 0.1) if solid == "box" else (0.1, 0.25, 0.8)
+        c = render_shaded(solid, light=light, n_frames=7, width=320, height=240,
+                          rgba=rgba)
         c.write(f"{out}/{solid}_{light}")
         np.savez(f"{out}/{solid}_{light}.npz", u=c.u_px, v=c.v_px, area=c.area_px)
 print("DONE")
