@@ -139,3 +139,14 @@ def test_light_that_falls_at_once(clips, tmp_path):
             assert pos.max() <= 2.0 and area.max() <= 0.10, (pos, area)
         else:
             assert area[3:].min() > 0.25, area
+
+
+def test_render_shaded_bad_arguments_name_them():
+    from cgda_jax.vision.shaded import render_shaded
+
+    with pytest.raises(ValueError, match="unknown solid 'cone'"):
+        render_shaded("cone")
+    with pytest.raises(ValueError, match="unknown light 'flash'"):
+        render_shaded("box", light="flash")
+    with pytest.raises(ValueError, match="n_frames must be at least 2"):
+        render_shaded("box", n_frames=1)
