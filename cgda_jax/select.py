@@ -75,7 +75,8 @@ def _check_normalization(normalization: str) -> str:
     norm = str(normalization).lower()
     if norm not in NORMALIZATIONS:
         raise ValueError(
-            f"unknown normalization {normalization!r}; expected one of {NORMALIZATIONS}")
+            f"unknown normalization {normalization!r}; expected one of "
+            f"{NORMALIZATIONS}")
     return norm
 
 

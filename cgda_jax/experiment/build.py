@@ -110,8 +110,8 @@ def selected_demos(cfg: ExperimentConfig, demos: dict) -> tuple[dict, dict | Non
         raise ConfigError(f"section 'selection', action {action!r}: {err}") from None
     if s.features:
         names = next(iter(out.values()))[0].feature_names
-        kept = [n for i, n in enumerate(names)
-                if any(r["features"]["selected"][i] for r in record["actions"].values())]
+        kept = [n for i, n in enumerate(names) if any(
+            r["features"]["selected"][i] for r in record["actions"].values())]
         record["features"] = kept
         out = {a: [d.select(kept) for d in v] for a, v in out.items()}
     return out, record

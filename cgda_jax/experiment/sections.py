@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-__all__ = ["ControlConfig", "DataConfig", "FeasibilityConfig", "OutputConfig", "RealityConfig", "RecognitionConfig", "RobotConfig", "SelectionConfig", "SceneConfig", "StrategyConfig", "WorldConfig"]
+__all__ = ["ControlConfig", "DataConfig", "FeasibilityConfig", "OutputConfig", "RealityConfig", "RecognitionConfig", "RobotConfig", "SceneConfig", "SelectionConfig", "StrategyConfig", "WorldConfig"]
 
 
 @dataclasses.dataclass
