@@ -286,8 +286,10 @@ def select_demonstrations(
 ) -> DemonstrationSelection:
     """Discard the demonstrations that are outliers by DTW to the others.
 
-    Args: as `select_features` (``alpha``: a demonstration with z-score above it
-        is discarded).
+    Args:
+        demos: D >= 2 demonstrations of one action (same features).
+        normalization: one of `NORMALIZATIONS` (case-insensitive).
+        alpha: a demonstration with z-score above it is discarded (authors: 0.5).
 
     Returns:
         DemonstrationSelection (distances, dissimilarity, z-scores, selected per
