@@ -323,3 +323,20 @@ def test_plot_zscores(tmp_path):
     assert (tmp_path / "z.png").stat().st_size > 2000
     with pytest.raises(ValueError, match="panel 'A' has 2 names"):
         plot_zscores({"A": (["x", "y"], [1.0])}, 0.5)
+
+
+def test_execution_goal_from_the_selected_demonstrations(xgnitive_dir, monkeypatch):
+    """``selection.demonstrations`` drops the outliers before the goal is
+    generalized (iron right arm X, Y, Z, standardized: the select_demonstrations
+    of those columns)."""
+    from cgda_jax.experiment import load_config
+    from cgda_jax.experiment.build import build_goal
+
+    monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(xgnitive_dir))
+    path = EXPERIMENT.parent / "iron_ie_xgnitive.toml"
+    on = ["selection.demonstrations=true", "selection.normalization=standardized"]
+    _, kept, _ = build_goal(load_config(path, on))
+    every = load_xgnitive(xgnitive_dir, "iron", "teo/rightArm", ["X", "Y", "Z"])
+    want = select_demonstrations(every, "standardized")
+    assert [d.name for d in kept] == [d.name for d in want.apply(every)]
+    assert 1 < len(kept) < len(every)

@@ -258,6 +258,8 @@ def compute_execution(
                     "feature_labels": labels, "error_unit": error_unit(labels),
                     "build": {"waypoint_s": waypoint_s},
                     "waypoint_s": float(sim.waypoint_s)})
+    if cfg.selection.demonstrations:  # which ones the [selection] kept
+        summary["selected_demonstrations"] = [d.name for d in demos]
     arrays = {k: np.asarray(v) for k, v in res.arrays().items()}
     if gen is not None:  # the generalization and demonstrations, in the goal's units
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)

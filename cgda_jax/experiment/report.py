@@ -340,6 +340,10 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
         elif render:
             lines += ["", f"Frames not rendered: {render['reason']} (set MUJOCO_GL=egl "
                       "or osmesa; `output.render = false` turns rendering off)."]
+    if result.get("selected_demonstrations"):
+        lines += ["", "Demonstrations kept by the selection (normalization "
+                  f"{cfg.selection.normalization}, alpha {cfg.selection.alpha:g}): "
+                  + ", ".join(result["selected_demonstrations"]) + "."]
     if result.get("feature_labels"):
         lines += ["", "Features: " + ", ".join(result["feature_labels"]) + "."]
     plots = sorted(plots if plots is not None else result.get("plots", []))
