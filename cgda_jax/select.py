@@ -54,6 +54,7 @@ import numpy as np
 
 from cgda_jax.data import Demonstration, validate_demonstrations
 from cgda_jax.distance import dtw_per_feature
+from cgda_jax.sizes import MAX_DTW_CELLS, SizeError, check_elements
 
 __all__ = [
     "NORMALIZATIONS",
@@ -167,6 +168,10 @@ def pairwise_dtw(series: Sequence[np.ndarray]) -> np.ndarray:
     Returns:
         (D, D, C) float64 costs (C dropped for 1-D series); entry (i, j, c) is the
         DTW of column c of series i and series j.
+
+    Raises:
+        cgda_jax.sizes.SizeError: more than `cgda_jax.sizes.MAX_DTW_CELLS` DTW
+            cells, or a scan carry beyond the memory (before allocating).
     """
     arrs = [np.asarray(s, np.float64) for s in series]
     flat = arrs[0].ndim == 1
@@ -175,6 +180,13 @@ def pairwise_dtw(series: Sequence[np.ndarray]) -> np.ndarray:
     centre = 0.5 * (stacked.max(axis=0) + stacked.min(axis=0))
     # padded to a multiple of _PAD_TO samples: nearby lengths share one program
     t_max = -(-max(a.shape[0] for a in arrs) // _PAD_TO) * _PAD_TO
+    d, c = len(arrs), stacked.shape[1]
+    what = f"{d} x {d} pairs x {c} columns x {t_max:,} padded samples"
+    if d * d * c * t_max * t_max > MAX_DTW_CELLS:
+        raise SizeError(f"pairwise_dtw: {what} is {d * d * c * t_max**2:.3g} DTW "
+                        f"cells, more than {MAX_DTW_CELLS:.0e} (about 20 min at 1e9 "
+                        "cells/s); decimate the demonstrations")
+    check_elements(4 * d * d * c * (t_max + 1), "pairwise_dtw", what)  # the carry
     padded = np.zeros((len(arrs), t_max, stacked.shape[1]))
     for k, a in enumerate(arrs):
         padded[k, : a.shape[0]] = a - centre

@@ -258,6 +258,10 @@ def test_selection_objects_and_bad_input():
         select_demonstrations(demos, alpha=float("nan"))
     with pytest.raises(ValueError, match="has 2 features but"):
         select_features([demos[0], _demo(np.zeros((3, 2)))])
+    from cgda_jax.sizes import SizeError
+
+    with pytest.raises(SizeError, match="more than 1e\\+12"):  # before allocating
+        pairwise_dtw([np.zeros((200_000, 3))] * 30)
     # identical demonstrations: every z-score NaN (0 / 0), everything kept
     same = select_demonstrations([demos[0]] * 3)
     assert np.isnan(same.zscores).all() and same.selected.all()
