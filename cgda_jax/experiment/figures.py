@@ -90,9 +90,15 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         a["point_errors"], r["tolerance"], unit=unit,
         title=f"{what}: error per point vs tolerance", path=path("point_errors.png"),
     )
+    per_point = r["strategy"] in ("ie", "iet")  # OET's rows are its steps
+    points = np.ndim(a["fitness_history"]) == 2
     plotting.plot_fitness(
-        a["fitness_history"], unit=unit,
-        title=f"{what}: best fitness per generation", path=path("fitness.png"),
+        a["fitness_history"], unit=unit, parallel=r["strategy"] == "ie",
+        tolerance=r["tolerance"] if points else None,
+        errors=a["point_errors"] if per_point and points else None,
+        least_motion=points and bool(run.config.strategy.feasibility),
+        title=f"{what}: best fitness per generation ({r['generations']} "
+              "generations)", path=path("fitness.png"),
     )
     demos, gen = run.demonstrations(), run.generalization()
     if demos or gen is not None:  # 3 features: in 3-D (paper Fig. 7)

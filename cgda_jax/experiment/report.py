@@ -233,6 +233,26 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     return rows
 
 
+def generations_text(result: dict, max_generations: int) -> str:
+    """The report's generations: the count the progress line ends on and the fitness
+    plot's axis spans, with what it counts (IE: the slowest point's, its points
+    evolving side by side; IET, OET: summed over the points in run order; restarts
+    and backtracks included) against ``max_generations`` (one try's budget)."""
+    g, info = int(result["generations"]), result.get("info") or {}
+    per = info.get("point_generations") or info.get("step_generations")
+    tries = info.get("point_tries") or info.get("step_tries") or [info.get("tries", 1)]
+    most = max([int(t) for t in tries if t is not None] + [1])
+    budget = (f"{most} tries of at most {max_generations}" if most > 1
+              else f"at most {max_generations} a try")
+    if result["strategy"] == "ie" and per:
+        return (f"{g} (the slowest point's: the points evolve side by side; "
+                f"{sum(per)} over all {len(per)} points; {budget})")
+    if per:
+        what = "steps" if result["strategy"] == "oet" else "points"
+        return f"{g} (summed over the {len(per)} {what} in run order; {budget})"
+    return f"{g} ({budget})"
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -268,7 +288,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             f"(tolerance {_with_unit(result['tolerance'], unit)}"
             f"{_aimed(result, unit)}) |",
             f"| final fitness | {_with_unit(result['final_fitness'], unit)} |",
-            f"| generations | {result['generations']} |",
+            f"| generations | {generations_text(result, cfg.strategy.max_generations)} |",
             f"| evaluations | {result['evaluations']} |",
             f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",
             f"| compile time | {result['compile_time_s']:.2f} s |",

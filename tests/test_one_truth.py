@@ -1,0 +1,107 @@
+"""One truth across a run's outputs: the generations of the report, the progress
+line and the fitness plot; the fitness plotted against the point errors."""
+
+import io
+import re
+
+import numpy as np
+import pytest
+
+from cgda_jax import plotting
+from cgda_jax.experiment import load_config, run_experiment
+from cgda_jax.progress import ProgressLine
+
+# IE with feasibility on the tiny arm's clean circle, small: some points need
+# restarts (5 generations a try)
+CLEAN = ["kind=execution", "data.source=clean_circle", "scene.kind=marker",
+         "strategy.name=ie", "strategy.population_size=8",
+         "strategy.max_generations=5", "strategy.tolerance=0.03",
+         "strategy.options.restarts=1", "robot.substeps=2", "output.render=false",
+         "robot.model=tiny_arm.xml", 'robot.joints=["yaw", "shoulder", "elbow"]',
+         "robot.fixed={}"]
+
+
+@pytest.fixture(scope="module")
+def clean_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs") / "clean"
+    stream = io.StringIO()
+    line = ProgressLine("clean", stream=stream, interval_s=0.0)
+    drawn = {}
+    real = plotting.plot_fitness
+
+    def keep(*args, **kwargs):
+        drawn["fig"] = fig = real(*args, **kwargs)
+        return fig
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(plotting, "plot_fitness", keep)
+    try:
+        result = run_experiment(load_config(None, CLEAN), folder, line)
+    finally:
+        mp.undo()
+    line.close()
+    return result, folder, stream.getvalue(), drawn["fig"]
+
+
+def test_generations_agree_in_report_progress_and_plot(clean_run):
+    result, folder, progress, fig = clean_run
+    g = result["generations"]
+    per_point = result["info"]["point_generations"]
+    assert g == max(per_point) and g > 0
+    # the progress line ends on the result's count (not the chunks driven)
+    last = progress.strip().splitlines()[-1]
+    assert re.match(rf"\[clean\] gen {g} \|", last), last
+    # the report's row gives it with what it counts
+    report = (folder / "report.md").read_text()
+    row = next(x for x in report.splitlines() if x.startswith("| generations |"))
+    assert row.startswith(f"| generations | {g} (the slowest point's")
+    assert f"{sum(per_point)} over all {len(per_point)} points" in row
+    # the fitness plot: the points side by side, its axis ends at the same count
+    ax = fig.axes[0]
+    xs = np.concatenate([ln.get_xdata() for ln in ax.lines if ln.get_marker() == "o"])
+    assert xs.min() == 1 and xs.max() == g
+    assert f"({g} generations)" in ax.get_title()
+
+
+def test_progress_says_done_and_met_apart(clean_run):
+    result, _, progress, _ = clean_run
+    last = progress.strip().splitlines()[-1]
+    n = result["points"]
+    met = sum(e < result["tolerance"] for e in result["point_errors"])
+    assert f"| done {n}/{n} | met {met}/{n} |" in last
+
+
+def test_fitness_plot_marks_the_point_errors_not_the_motion_rank(clean_run):
+    result, _, _, fig = clean_run
+    ax = fig.axes[0]
+    crosses = [ln for ln in ax.lines if ln.get_marker() == "x"]
+    assert len(crosses) == 1
+    np.testing.assert_allclose(np.sort(crosses[0].get_ydata()),
+                               np.sort(result["point_errors"]), rtol=1e-6)
+    texts = ax.get_legend().get_texts()
+    labels = [t.get_text() for t in texts]
+    assert f"tolerance {result['tolerance']:.4g} m" in labels
+    assert "below: ranked by joint motion, not an error" in labels
+    assert "executed point error (the result's)" in labels
+    # the band where the plotted fitness is a motion rank ends at the tolerance
+    band = [p for p in ax.patches if p.get_label() != "_nolegend_"] or ax.patches
+    top = max(p.get_extents().y1 for p in band)
+    tol_px = ax.transData.transform((0.0, result["tolerance"]))[1]
+    assert abs(top - tol_px) < 1.0
+
+
+def test_fitness_axis_is_linear_over_less_than_a_decade(tmp_path):
+    h = np.array([[3.0, 2.0, 1.2, np.nan], [2.5, 1.0, 0.6, 0.6]])
+    fig = plotting.plot_fitness(h, unit="%", tolerance=3.125, errors=[0.0, 0.0],
+                                least_motion=True, path=tmp_path / "p.png")
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "linear" and ax.get_ylim()[0] == 0.0
+    assert len([t for t in ax.get_yticks() if 0 <= t <= ax.get_ylim()[1]]) >= 4
+    fig = plotting.plot_fitness(h, unit="%", tolerance=3.125, parallel=True)
+    xs = np.concatenate([ln.get_xdata() for ln in fig.axes[0].lines
+                         if ln.get_marker() == "o"])
+    assert xs.max() == 4  # side by side: the longest evolution, not 3 + 4
+    fig = plotting.plot_fitness(h, unit="%")
+    xs = np.concatenate([ln.get_xdata() for ln in fig.axes[0].lines
+                         if ln.get_marker() == "o"])
+    assert xs.max() == 7  # in run order: 3 + 4
