@@ -105,3 +105,38 @@ def test_fitness_axis_is_linear_over_less_than_a_decade(tmp_path):
     xs = np.concatenate([ln.get_xdata() for ln in fig.axes[0].lines
                          if ln.get_marker() == "o"])
     assert xs.max() == 7  # in run order: 3 + 4
+
+
+def test_cgda_list_reads_the_stop_rule_from_the_config():
+    from cgda_jax.builtin import experiment_lines, experiments_dir
+    from cgda_jax.experiment import load_config
+
+    for line in experiment_lines():
+        name = line.split()[0]
+        cfg = load_config(str(experiments_dir() / f"{name}.toml"))
+        said = re.findall(r"(\d+) stagnant generations", line)
+        if said:
+            assert int(said[0]) == cfg.strategy.options["stagnation"], line
+    fte = next(x for x in experiment_lines() if x.startswith("clean_fte "))
+    assert "Stops after 50 stagnant generations (at most 500)." in fte
+
+
+def test_motion_table_shows_the_approach_apart():
+    """A failed run whose points share one posture: all its travel is the approach."""
+    from cgda_jax.experiment.report import motion_lines
+
+    none = {"r_elbow": None}
+    motion = {
+        "joints": ["r_elbow"], "feasible": True, "problems": [],
+        "limits": {"velocity": none, "acceleration": none, "effort": none},
+        "approach_s": 1.0, "move_s": 0.6, "duration_s": 6.4, "max_step_deg": 90.0,
+        "moves_over_max_step": 0, "peak_speed": {"r_elbow": 1.0},
+        "peak_acceleration": {"r_elbow": 2.0}, "travel_deg": {"r_elbow": 100.0},
+        "approach_deg": {"r_elbow": 100.0}, "largest_step_deg": {"r_elbow": 0.0},
+    }
+    lines = motion_lines(motion, None)
+    head = next(x for x in lines if x.startswith("| joint"))
+    assert ("| approach [deg] | largest move after it [deg] | travel, approach "
+            "included [deg] |") in head
+    assert next(x for x in lines if x.startswith("| r_elbow")).endswith(
+        "| 100 | 0 | 100 |")

@@ -79,7 +79,10 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     if dyn:
         head += ["measured speed", "peak effort [N m]", "limit",
                  "tracking at waypoint ends, max [deg]"]
-    head += ["travel [deg]", "largest move [deg]"]
+    # the approach apart: a run whose points all share one posture travels only
+    # there (its later moves are 0)
+    head += ["approach [deg]", "largest move after it [deg]",
+             "travel, approach included [deg]"]
     lines += ["", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
     for j in motion["joints"]:
         row = [j, f"{motion['peak_speed'][j]:.2f}", _limit(lim["velocity"][j]),
@@ -90,8 +93,10 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
             row += [f"{motion['measured_speed'][j]:.2f}",
                     "-" if eff is None else f"{eff:.1f}", _limit(lim["effort"][j]),
                     f"{motion['tracking_error_deg'][j]:.1f}"]
-        row += [f"{motion['travel_deg'][j]:.0f}",
-                f"{motion['largest_step_deg'][j]:.0f}"]
+        approach = (motion.get("approach_deg") or {}).get(j)
+        row += ["-" if approach is None else f"{approach:.0f}",
+                f"{motion['largest_step_deg'][j]:.0f}",
+                f"{motion['travel_deg'][j]:.0f}"]
         lines.append("| " + " | ".join(row) + " |")
     if motion.get("tracking_note"):
         lines += ["", f"**Tracking:** {motion['tracking_note']}."]
