@@ -140,3 +140,32 @@ def test_motion_table_shows_the_approach_apart():
             "included [deg] |") in head
     assert next(x for x in lines if x.startswith("| r_elbow")).endswith(
         "| 100 | 0 | 100 |")
+
+
+def test_a_robot_without_limits_is_warned_and_its_report_says_so(caplog):
+    import cgda_jax as cg
+    from cgda_jax.experiment.report import motion_lines
+    from cgda_jax.sim.feasibility import Feasibility
+
+    robot = cg.Robot.from_mjcf(cg.model_path("tiny_arm.xml"),
+                               ["yaw", "shoulder", "elbow"], "marker")
+    with caplog.at_level("WARNING", logger="cgda_jax"):
+        Feasibility(robot)
+    text = caplog.text
+    assert "no speed limit for yaw, shoulder, elbow" in text
+    assert "[robot.limits]" in text and '"feasible" then means' in text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="cgda_jax"):
+        f = Feasibility(robot, {"velocity": 3.0})
+    assert "no speed limit" not in caplog.text and f.limits.unlimited() is None
+    assert "no effort limit" in Feasibility(robot, {"velocity": 3.0}).limits.unlimited(
+        effort=True)
+    none = {"yaw": None}
+    motion = {"joints": ["yaw"], "feasible": True, "problems": [],
+              "limits": {"velocity": none, "acceleration": none, "effort": none},
+              "approach_s": 1.0, "move_s": 0.6, "duration_s": 6.4,
+              "max_step_deg": 90.0, "moves_over_max_step": 0,
+              "peak_speed": {"yaw": 5.35}, "peak_acceleration": {"yaw": 2.0},
+              "travel_deg": {"yaw": 10.0}, "largest_step_deg": {"yaw": 5.0}}
+    report = "\n".join(motion_lines(motion, None))
+    assert "**No speed limit** for yaw" in report and "`[robot.limits]`" in report

@@ -55,6 +55,12 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
         motion["problems"])
     lines = ["## Feasibility", "",
              f"Independent check of the reported joints: **{verdict}**."]
+    free = [j for j in motion["joints"] if lim["velocity"].get(j) is None]
+    if free:  # "-" in the limit column: say what the verdict then covers
+        lines += ["", f"**No speed limit** for {', '.join(free)} (neither the model "
+                  "nor `[robot.limits]` gives one): \"feasible\" here means free of "
+                  "collisions and of moves over the step cap, not within the robot's "
+                  "speeds. Set `[robot.limits]` (e.g. `velocity = 3.0`) to judge them."]
     if optimiser_feasible is not None:
         lines += ["", "The strategy's own check (every move at its collision "
                   f"samples): {'feasible' if optimiser_feasible else 'infeasible'}."]
