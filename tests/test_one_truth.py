@@ -64,11 +64,13 @@ def test_generations_agree_in_report_progress_and_plot(clean_run):
 
 
 def test_progress_says_done_and_met_apart(clean_run):
-    result, _, progress, _ = clean_run
+    result, folder, progress, _ = clean_run
     last = progress.strip().splitlines()[-1]
     n = result["points"]
     met = sum(e < result["tolerance"] for e in result["point_errors"])
     assert f"| done {n}/{n} | met {met}/{n} |" in last
+    report = (folder / "report.md").read_text()
+    assert ("**Not met.** " in report) == (not result["success"])
 
 
 def test_fitness_plot_marks_the_point_errors_not_the_motion_rank(clean_run):
@@ -169,3 +171,26 @@ def test_a_robot_without_limits_is_warned_and_its_report_says_so(caplog):
               "travel_deg": {"yaw": 10.0}, "largest_step_deg": {"yaw": 5.0}}
     report = "\n".join(motion_lines(motion, None))
     assert "**No speed limit** for yaw" in report and "`[robot.limits]`" in report
+
+
+def test_an_unreachable_goal_fails_with_a_hint():
+    from cgda_jax.experiment.report import not_met_hint
+
+    cfg = load_config(None, CLEAN)
+    far = {"kind": "execution", "success": False, "tolerance": 0.02,
+           "error_unit": "m", "point_errors": [0.61, 0.618, 0.6], "info": {}}
+    hint = not_met_hint(cfg, far)
+    assert hint.startswith("0 of 3 points within the tolerance; the farthest, point "
+                           "2, ends 0.618 m away")
+    assert "strategy.options.reach_check=true" in hint and "data.centre" in hint
+    checked = dict(far, info={"unreachable_points": [{"point": 0}, {"point": 1}]})
+    assert "the reach check found 2 point(s) out of the arm's reach" in not_met_hint(
+        cfg, checked)
+    close = dict(far, point_errors=[0.01, 0.025, 0.015])
+    assert "2 of 3 points" in not_met_hint(cfg, close)
+    assert not_met_hint(cfg, dict(far, success=True)) is None
+    # the progress line of such a run: every point done, none met
+    stream = io.StringIO()
+    ProgressLine("far", stream=stream)({"generations": 600, "points_done": 9,
+                                         "points_met": 0, "points": 9, "done": True})
+    assert "[far] gen 600 | done 9/9 | met 0/9 |" in stream.getvalue()

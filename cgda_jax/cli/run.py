@@ -67,6 +67,12 @@ def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
              + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
+    if cfg.kind == "execution":
+        from cgda_jax.experiment.report import not_met_hint
+
+        hint = not_met_hint(cfg, result)
+        if hint:
+            say(args, f"[{cfg.name}] hint: {hint}")
     return pending
 
 

@@ -264,6 +264,35 @@ def generations_text(result: dict, max_generations: int) -> str:
     return f"{g} ({budget})"
 
 
+def not_met_hint(cfg: ExperimentConfig, result: dict) -> str | None:
+    """For an execution that missed its tolerance: how many points met it, the
+    nearest approach, and what to try when the goal may be out of reach (the
+    reach check, the workspace); None for a run that met it."""
+    if result.get("kind") == "recognition" or result.get("success"):
+        return None
+    errors = np.asarray([np.inf if e is None else e for e in result["point_errors"]],
+                        float)
+    tol, unit = result["tolerance"], result.get("error_unit")
+    met = int(np.sum(errors < tol))
+    worst = int(np.argmax(errors))
+    text = (f"{met} of {len(errors)} points within the tolerance; the farthest, "
+            f"point {worst + 1}, ends {_with_unit(errors[worst], unit)} away")
+    off = (result.get("info") or {}).get("unreachable_points")
+    if off:
+        return text + (f"; the reach check found {len(off)} point(s) out of the "
+                       "arm's reach (`info.unreachable_points`: nearest approach "
+                       "each): move the goal into the workspace.")
+    if met == 0 or errors[worst] > 10 * tol:
+        reach = ("`--set strategy.options.reach_check=true` samples the arm's "
+                 "workspace first and names each unreachable point with its "
+                 "nearest approach; " if cfg.strategy.name == "ie" else "")
+        return text + (". The goal may be out of the arm's reach: "
+                       f"{reach}move the goal (`data.centre`) in front of the arm "
+                       "or choose other joints (`robot.joints`).")
+    return text + (": more generations, a larger population or "
+                   "`strategy.options.restarts` may close the gap.")
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -328,6 +357,9 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             ]
         lines += export_rows(result.get("export"), unit)
         lines += reality_rows(result.get("reality"), unit)
+        hint = not_met_hint(cfg, result)
+        if hint:
+            lines += ["", f"**Not met.** {hint}"]
         if phys and phys.get("control"):
             lines += [""] + control_lines(phys["control"])
         if result.get("motion"):
