@@ -194,3 +194,27 @@ def test_an_unreachable_goal_fails_with_a_hint():
     ProgressLine("far", stream=stream)({"generations": 600, "points_done": 9,
                                          "points_met": 0, "points": 9, "done": True})
     assert "[far] gen 600 | done 9/9 | met 0/9 |" in stream.getvalue()
+
+
+def test_exported_trajectory_carries_the_fixed_joints_and_the_start(tmp_path):
+    import cgda_jax as cg
+    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.files import load_trajectory, save_trajectory, to_json_dict
+
+    joints = ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
+    robot = cg.Robot.from_mjcf(cg.model_path("teo.xml"), joints, "marker",
+                               fixed={"r_forearm_rotation": np.deg2rad(45)})
+    sim = cg.Simulator(robot, cg.MarkerScene())
+    start = np.asarray(robot.start_genes, np.float64)
+    traj = trajectory_of(sim, start[None] + np.array([[0.2, -0.1, 0.3]]), rate=50.0)
+    doc = to_json_dict(traj)
+    info = doc["info"]
+    assert info["fixed_joints"] == pytest.approx({"r_forearm_rotation": np.pi / 4})
+    assert list(info["start_posture"]) == joints
+    np.testing.assert_allclose(list(info["start_posture"].values()), doc["start"])
+    np.testing.assert_allclose(doc["joint_trajectory"]["points"][0]["positions"],
+                               doc["start"])
+    words = info["before_first_point"]
+    assert "r_forearm_rotation = 0.7854" in words and "start_posture" in words
+    back = load_trajectory(save_trajectory(traj, tmp_path / "t.json"))
+    assert back.info["fixed_joints"] == info["fixed_joints"]
