@@ -218,3 +218,51 @@ def test_exported_trajectory_carries_the_fixed_joints_and_the_start(tmp_path):
     assert "r_forearm_rotation = 0.7854" in words and "start_posture" in words
     back = load_trajectory(save_trajectory(traj, tmp_path / "t.json"))
     assert back.info["fixed_joints"] == info["fixed_joints"]
+
+
+def test_default_camera_frames_the_goal_and_the_arm():
+    import math
+
+    import cgda_jax as cg
+    from cgda_jax.experiment import ConfigError
+    from cgda_jax.experiment.figures import _arm_points, _camera, check_camera
+
+    joints = ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
+    robot = cg.Robot.from_mjcf(cg.model_path("teo.xml"), joints, "marker",
+                               fixed={"r_forearm_rotation": np.deg2rad(45)})
+    sim = cg.Simulator(robot, cg.MarkerScene())
+    angles = np.linspace(0, 2 * np.pi, 9)
+    goal = np.stack([0.55 + 0 * angles, -0.45 + 0.15 * np.cos(angles),
+                     0.35 + 0.15 * np.sin(angles)], axis=1)
+    q = np.tile(np.asarray(robot.start_genes), (9, 1)) + 0.3
+    view = _camera(sim, goal, q)
+    az, el = math.radians(view["azimuth"]), math.radians(view["elevation"])
+    forward = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az),
+                        math.sin(el)])
+    eye = view["lookat"] - view["distance"] * forward
+    assert eye[0] > 0.55  # in front of the robot (it faces +x), not behind it
+    for p in np.vstack([goal, _arm_points(sim, q)]):
+        ray = (p - eye) / np.linalg.norm(p - eye)
+        assert math.degrees(math.acos(ray @ forward)) < 22.5  # MuJoCo's fovy / 2
+    # [output] camera wins over the default, and is checked
+    assert _camera(sim, goal, q, {"azimuth": 10.0})["azimuth"] == 10.0
+    with pytest.raises(ConfigError, match="output.camera.zoom"):
+        check_camera({"zoom": 2})
+    with pytest.raises(ConfigError, match="output.camera.lookat"):
+        check_camera({"lookat": [0, 1]})
+    with pytest.raises(ConfigError, match="output.camera.distance"):
+        check_camera({"distance": -1})
+
+
+def test_video_captions_say_which_point_was_reached(clean_run):
+    from cgda_jax.experiment.figures import _captions
+    from cgda_jax.experiment.load import load_run
+
+    result, folder, _, _ = clean_run
+    run = load_run(str(folder))
+    text = _captions(run, run.simulator())
+    err = result["point_errors"][2]
+    assert text(3, (), True) == (f"{run.name}: point 3 of {result['points']} reached, "
+                                 f"error {1e3 * err:.1f} mm")
+    assert text(3, (), False) == f"{run.name}: moving to point 3 of {result['points']}"
+    assert text(0, (), False) == f"{run.name}: start"
