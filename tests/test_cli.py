@@ -41,7 +41,14 @@ def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, request):
         monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(xgnitive))
     assert main(["run", str(path), "--dry-run", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "valid" in out and "[strategy]" in out and "results would go to" in out
+    assert "valid" in out and "results would go to" in out
+    # only the keys that apply: a recognition has no [strategy], an execution no
+    # [recognition]; a clean circle no paint keys
+    recognition = 'kind = "recognition"' in out
+    assert ("[strategy]" in out) != recognition
+    assert ("[recognition]" in out) == recognition
+    if 'source = "clean_circle"' in out:
+        assert not any(f"\n{k} = " in out for k in ("goal_points", "stream", "action"))
 
 
 @pytest.mark.parametrize(

@@ -131,7 +131,8 @@ def cmd_run(args) -> int:
     if args.dry_run:
         folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
         print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
-              f"{folder}\n" + dump_config(cfg), end="")
+              f"{folder}\n# the keys that apply to it (a run's config.toml holds them "
+              f"all)\n" + dump_config(cfg, applicable_only=True), end="")
         return EXIT_MET
     if args.trials is not None:
         return run_trials_command(
