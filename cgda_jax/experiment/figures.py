@@ -8,6 +8,7 @@ import logging
 import math
 import os
 import pathlib
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,8 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         run.arrays["cost_matrix"], [q.lower() for q in r["truth"]], r["actions"],
         label=f"{metric} cost [{unit or 'mixed units'}]",
         title=f"{run.name}: {metric} cost, test (rows) vs generalized\n"
-              f"{len(labels)} features: {', '.join(r['features'])}",
+              + textwrap.fill(f"{len(labels)} features: {', '.join(r['features'])}",
+                              width=70),
         path=written[0],
     )
     cols = None if cfg.data.features == "marker" else list(range(min(3, len(labels))))
