@@ -58,8 +58,8 @@ import numpy as np
 from cgda_jax.reality.profiles import MOVERS, PROFILES, periods, ruckig_version
 from cgda_jax.sim.timing import PEAK_JERK
 
-__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "simulator_timing",
-           "time_parameterize", "trajectory_of"]
+__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "robot_setup",
+           "simulator_timing", "time_parameterize", "trajectory_of"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
