@@ -266,3 +266,19 @@ def test_video_captions_say_which_point_was_reached(clean_run):
                                  f"error {1e3 * err:.1f} mm")
     assert text(3, (), False) == f"{run.name}: moving to point 3 of {result['points']}"
     assert text(0, (), False) == f"{run.name}: start"
+
+
+def test_generations_row_says_what_it_counts():
+    from cgda_jax.experiment.report import generations_text
+
+    ie = {"strategy": "ie", "generations": 999,
+          "info": {"point_generations": [999, 3, 5], "point_tries": [5, 1, 1]}}
+    assert generations_text(ie, 200) == (
+        "999 (the slowest point's: the points evolve side by side; 1007 over all 3 "
+        "points; 5 tries of at most 200)")
+    iet = {"strategy": "iet", "generations": 17,
+           "info": {"point_generations": [1] * 17}}
+    assert generations_text(iet, 200) == (
+        "17 (summed over the 17 points in run order; at most 200 a try)")
+    fte = {"strategy": "fte", "generations": 120, "info": {"tries": 2}}
+    assert generations_text(fte, 500) == "120 (2 tries, at most 500 in all)"

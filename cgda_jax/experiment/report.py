@@ -248,7 +248,8 @@ def generations_text(result: dict, max_generations: int) -> str:
     """The report's generations: the count the progress line ends on and the fitness
     plot's axis spans, with what it counts (IE: the slowest point's, its points
     evolving side by side; IET, OET: summed over the points in run order; restarts
-    and backtracks included) against ``max_generations`` (one try's budget)."""
+    and backtracks included) against ``max_generations`` (one try's budget; FTE:
+    the whole run's)."""
     g, info = int(result["generations"]), result.get("info") or {}
     per = info.get("point_generations") or info.get("step_generations")
     tries = info.get("point_tries") or info.get("step_tries") or [info.get("tries", 1)]
@@ -261,6 +262,9 @@ def generations_text(result: dict, max_generations: int) -> str:
     if per:
         what = "steps" if result["strategy"] == "oet" else "points"
         return f"{g} (summed over the {len(per)} {what} in run order; {budget})"
+    if result["strategy"] == "fte":  # one budget over all its tries
+        return (f"{g} ({most} tries, " if most > 1 else f"{g} (") + (
+            f"at most {max_generations} in all)")
     return f"{g} ({budget})"
 
 
