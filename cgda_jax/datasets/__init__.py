@@ -18,11 +18,13 @@ from cgda_jax.datasets.synthetic import (
     CLEAN_CENTRE_M as CLEAN_CENTRE_M,
     MARKER_FEATURES as MARKER_FEATURES,
     SPATIAL_FEATURES as SPATIAL_FEATURES,
+    SyntheticSequence as SyntheticSequence,
     clean_circle_demos as clean_circle_demos,
     paint_ramp as paint_ramp,
     select_features as select_features,
     synthetic_actions as synthetic_actions,
     synthetic_arm_actions as synthetic_arm_actions,
+    synthetic_sequence as synthetic_sequence,
 )
 
 __all__ = [
@@ -35,6 +37,7 @@ __all__ = [
     "OBJECT_ACTIONS",
     "OBJECT_FEATURES",
     "SPATIAL_FEATURES",
+    "SyntheticSequence",
     "VALVE_END",
     "VALVE_START",
     "clean_circle_demos",
@@ -45,4 +48,5 @@ __all__ = [
     "select_features",
     "synthetic_actions",
     "synthetic_arm_actions",
+    "synthetic_sequence",
 ]
