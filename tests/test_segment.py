@@ -203,3 +203,39 @@ def test_execute_sequence_starts_each_goal_where_the_last_ended():
         execute_sequence(sim, [first, first[:, :2]], run_ie)
     with pytest.raises(ValueError, match="2 strategies for 1 goals"):
         execute_sequence(sim, [first], [run_ie, run_ie])
+
+
+def test_cli_segment_writes_the_table_and_the_figure(tmp_path, capsys):
+    from cgda_jax.cli.app import main
+    from cgda_jax.data import save_csv
+
+    lib_dir = tmp_path / "lib"
+    demos = synthetic_actions(6, seed=0)
+    for action, reps in demos.items():
+        (lib_dir / action).mkdir(parents=True)
+        for d in reps:
+            save_csv(d, lib_dir / action / f"{d.name}.csv")
+    seq = synthetic_sequence(["MOVE", "CLEAN", "PAINT"], seed=7, pause_s=(0.5, 2.0))
+    save_csv(seq.recording, tmp_path / "task.csv")
+    out = tmp_path / "out"
+    argv = ["segment", str(tmp_path / "task.csv"), "--library", str(lib_dir),
+            "--durations", "1,15", "--step", "0.2", "--out", str(out)]
+    assert main(argv) == 0
+    rows = (out / "segments.csv").read_text().splitlines()
+    assert rows[0] == "action,start_s,end_s,cost"
+    assert [r.split(",")[0] for r in rows[1:]] == ["MOVE", "CLEAN", "PAINT"]
+    for row, (_, t0, t1) in zip(rows[1:], seq.truth):
+        start, end = (float(v) for v in row.split(",")[1:3])
+        assert abs(start - t0) < 0.4 * (t1 - t0) and abs(end - t1) < 0.4 * (t1 - t0)
+    assert (out / "segments.png").stat().st_size > 10_000
+    assert "MOVE" in capsys.readouterr().out
+    # bad input: exit status 2 and one line naming the problem
+    (tmp_path / "empty").mkdir()
+    assert main(argv[:3] + [str(tmp_path / "empty")] + argv[4:]) == 2
+    assert "has no action folders" in capsys.readouterr().err
+    save_csv(Demonstration(seq.recording.times, seq.recording.features[:, :2],
+                           ("X", "Y"), "xy"), tmp_path / "xy.csv")
+    assert main(["segment", str(tmp_path / "xy.csv")] + argv[2:]) == 2
+    assert "has features ('X', 'Y') but the library has" in capsys.readouterr().err
+    assert main(argv[:4] + ["--durations", "5"] + argv[6:]) == 2
+    assert "--durations must be MIN,MAX" in capsys.readouterr().err
