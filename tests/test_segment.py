@@ -69,7 +69,8 @@ def test_dynamic_programme_equals_brute_force(seed):
     ref_path, ref_total = _brute_force(costs, lengths)
     np.testing.assert_allclose(total, ref_total, rtol=1e-6)
     assert path == ref_path
-    assert all(not (a == b == n_lab - 1) for (_, _, a), (_, _, b) in zip(path, path[1:]))
+    labels = [a for _, _, a in path]
+    assert all(not (a == b == n_lab - 1) for a, b in zip(labels, labels[1:]))
 
 
 def test_costs_are_dtw_of_each_segment_relative_to_its_start():
@@ -127,7 +128,8 @@ def test_synthetic_sequences_are_segmented(library, pause_s):
         assert all(s.start < s.end for s in segs)
         assert all(a.end <= b.start for a, b in zip(segs, segs[1:]))
     assert right >= 0.95 * total
-    # measured (see README): median 8 %, worst 37 % of the action's duration
+    # short of the 10 % target (README, benchmarks/bench_sequence.py: median 10 %,
+    # worst 33 % over 80 actions); what the search reaches, kept
     assert np.median(errs) <= 0.15, errs
     assert max(errs) <= 0.4, errs
 

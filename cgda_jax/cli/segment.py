@@ -57,7 +57,8 @@ def _durations(text: str | None) -> tuple[float, float] | None:
     try:
         lo, hi = (float(v) for v in parts)
     except ValueError:
-        raise ValueError(f"--durations must be MIN,MAX in seconds, got {text!r}") from None
+        raise ValueError(
+            f"--durations must be MIN,MAX in seconds, got {text!r}") from None
     return lo, hi
 
 

@@ -53,8 +53,8 @@ def plot_segmentation(
         ax.margins(x=0)
     top = axes[0, 0]
     for s in segments:
-        top.text((s.start + s.end) / 2, 1.04, s.action, transform=top.get_xaxis_transform(),
-                 ha="center", va="bottom", fontsize=8, color=colours[s.action],
+        top.text((s.start + s.end) / 2, 1.04, s.action,
+                 transform=top.get_xaxis_transform(), ha="center", va="bottom", fontsize=8, color=colours[s.action],
                  fontweight="bold")
     axes[-1, 0].set_xlabel(TIME_S, fontsize=8)
     fig.suptitle(title or f"{recording.name}: {len(segments)} actions recognized",
