@@ -71,7 +71,7 @@ _GRID_STEPS = 200
 _STARTS_PER_CHUNK = 64
 #: `refine_boundaries`: a boundary moves at most this share of its action's
 #: (search) duration; the samples fitted reach this share into each action.
-_REACH = 0.35
+_REACH = 0.25
 _INTO = 0.3
 #: `refine_boundaries`: rounds of refitting (each centres its window on the last).
 _ROUNDS = 10
@@ -458,7 +458,7 @@ def refine_boundaries(recording: Demonstration,
     the last) is fitted by the object at rest between a minimum-jerk end of the
     action before and a minimum-jerk start of the action after (`segment`, step
     4), each feature in units of its noise; the end and start times (samples of the
-    recording, the end not after the start) within ``0.35`` of each action's
+    recording, the end not after the start) within ``0.25`` of each action's
     duration of the given boundaries are chosen jointly by least residual, the
     window recentred and refitted until it settles (at most 10 rounds).
 
