@@ -201,6 +201,13 @@ def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict
                 f"{folder}: result.json has {result['points']} points and "
                 f"{len(result['point_errors'])} point errors, arrays.npz a goal of "
                 f"{n} points: files of different runs")
+        for key in ("joints", "features"):
+            rows = arrays[key].shape[0] if arrays[key].ndim == 2 else -1
+            if rows != n:
+                raise FolderError(
+                    f"{folder}: arrays.npz's {key} has shape {arrays[key].shape}, "
+                    f"expected one row per goal point ({n}): damaged, or files of "
+                    "different runs")
     else:
         shape = arrays["cost_matrix"].shape
         rows = (len(result.get("queries", result["recognized"])),
