@@ -225,13 +225,18 @@ def time_parameterize(
             if moving.any():
                 move_k, s, longer = MOVERS[profile](dq, moving, t_run, move_k, rate,
                                                     lims)
-            if k + move_k + hold_k > MAX_PERIODS:
-                raise ValueError(f"{(k + move_k + hold_k) / rate:.3g} s at {rate:g} Hz "
-                                 f"is more than {MAX_PERIODS:,} control periods")
         except ValueError as err:
-            raise ValueError(f"move {i + 1} of the export: {err} (the robot's limits "
-                             "too low for it, its times too long, or the rate too "
-                             "high)") from None
+            raise ValueError(
+                f"move {i + 1} of the export: {err} (its move {t_run:.3g} s, hold "
+                f"{float(hold_s[i]):.3g} s; the robot's least limits: velocity "
+                f"{np.min(lims['velocity']):.3g}, acceleration "
+                f"{np.min(lims['acceleration']):.3g}, jerk {np.min(lims['jerk']):.3g} "
+                "per s)") from None
+        if k + move_k + hold_k > MAX_PERIODS:
+            raise ValueError(f"move {i + 1} of the export: the export so far lasts "
+                             f"{(k + move_k + hold_k) / rate:.3g} s, at {rate:g} Hz "
+                             f"more than {MAX_PERIODS:,} control periods (a lower "
+                             "rate fits)")
         if moving.any():
             if longer:
                 stretched.append({"move": i + 1, "run_s": t_run,
