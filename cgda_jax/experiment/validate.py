@@ -303,19 +303,25 @@ def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | Non
                     processes: int, local: bool) -> None:
     """What the run will hold at once (`cgda_jax.sizes.run_estimate`) within XLA's
     32-bit sizes and the memory of each process; `processes` against the cores."""
-    from cgda_jax.sizes import dynamic_width
+    from cgda_jax.sizes import dynamic_width, motion_width
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)
     backend = getattr(sim.backend, "name", None)
+    feas = getattr(sim, "feasibility", None)
     n = trials or 1
     share = -(-n // max(processes, 1))  # each process batches its own seeds
     est = run_estimate(
         trials=share, population=s.population_size, points=n_points,
         features=sim.n_features, dof=sim.n_dof, bodies=sim.robot.mj_model.nbody,
         strategy=s.name, samples=samples,
-        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0)
+        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0,
+        motion_width=0 if feas is None else motion_width(
+            feas.samples, 0 if feas.collider is None else feas.collider.n_pairs,
+            0 if feas.collider is None else sim.robot.mj_model.ngeom, sim.n_dof))
     name = ("--trials" if trials and trials > 1
+            else "keys 'strategy.population_size' and 'feasibility.samples'"
+            if est.part == "motion"
             else f"key 'strategy.options.{option}'" if est.part != "generation"
             else "key 'strategy.population_size'")
     try:
