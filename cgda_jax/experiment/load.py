@@ -86,6 +86,10 @@ class Run:
             "feature_labels")
         out, k = [], 0
         while f"{prefix}{k}_times" in self.arrays:
+            if f"{prefix}{k}_features" not in self.arrays:
+                raise FolderError(f"{self.folder / 'arrays.npz'}: array "
+                                  f"{prefix}{k}_features missing (beside "
+                                  f"{prefix}{k}_times): damaged or partial")
             feats = self.arrays[f"{prefix}{k}_features"]
             names = labels if labels and len(labels) == feats.shape[1] else [
                 f"f{i}" for i in range(feats.shape[1])]
