@@ -30,6 +30,8 @@ import math
 import re
 from typing import Any
 
+import numpy as np
+
 from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import (
     MAX_INTERVALS,
@@ -48,6 +50,8 @@ from cgda_jax.sizes import (
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
+#: Largest goal value (in its features' units): its square must fit float32 (3.4e38).
+MAX_GOAL_VALUE = 1e18
 #: Goal points (paint ramp length, generalized knots).
 MAX_GOAL_POINTS = 10_000
 #: Candidates per generation.
@@ -347,6 +351,12 @@ def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
         raise ConfigError(f"key 'data': {err}") from None
     n_points = int(goal.shape[0])
     _at_most(n_points, MAX_GOAL_POINTS, "data", " goal points")
+    top = float(np.max(np.abs(goal))) if goal.size else 0.0
+    if not top <= MAX_GOAL_VALUE:  # squared feature errors must fit float32
+        raise ConfigError(
+            f"key '{'data.scale' if cfg.data.scale != 1 else 'data'}': the goal "
+            f"reaches {top:.3g} (its demonstrations x data.scale = {cfg.data.scale:g}), "
+            f"beyond {MAX_GOAL_VALUE:.0e}: its squared errors would overflow float32")
     _at_most(s.population_size * n_points, MAX_CANDIDATE_POINTS,
              "strategy.population_size", f" x {n_points} goal points")
     sim = _build_simulator(cfg, demos, n_points)
