@@ -46,6 +46,14 @@ _LAZY.update({
     "cost_matrix": "cgda_jax.recognize",
     "recognize": "cgda_jax.recognize",
 })
+# --- selection of features and demonstrations (issue 44) ---------------------
+_LAZY.update({
+    "dtw_per_feature": "cgda_jax.distance",
+    "DemonstrationSelection": "cgda_jax.select",
+    "FeatureSelection": "cgda_jax.select",
+    "select_demonstrations": "cgda_jax.select",
+    "select_features": "cgda_jax.select",
+})
 
 
 # --- simulation (robot, scenes, execution, rendering) ------------------------
@@ -183,6 +191,11 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.recognize import (  # noqa: F401
         ActionLibrary, Recognition, cost_matrix, recognize,
     )
+    from cgda_jax.select import (  # noqa: F401
+        DemonstrationSelection, FeatureSelection, select_demonstrations,
+        select_features,
+    )
+    from cgda_jax.distance import dtw_per_feature  # noqa: F401
     from cgda_jax.sim.execute import Simulator  # noqa: F401
     from cgda_jax.sim.sim_state import SimState  # noqa: F401
     from cgda_jax.sim.features import FeatureSet, FeatureSpec  # noqa: F401
