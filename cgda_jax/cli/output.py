@@ -233,7 +233,7 @@ def user_error(args, err: Exception) -> bool:
 
 def check_out_file(path: pathlib.Path, flag: str = "--out",
                    folder: pathlib.Path | None = None, own: tuple = ()) -> None:
-    """A file a command will write (export, track), checked before any work: not a
+    """A file a command will write (``cgda export``), checked before any work: not a
     folder, in a folder that exists and can be written, and not a file of the
     results folder ``folder`` other than the names ``own`` (those the command
     itself writes there).
