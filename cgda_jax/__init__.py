@@ -45,6 +45,9 @@ _LAZY.update({
     "Recognition": "cgda_jax.recognize",
     "cost_matrix": "cgda_jax.recognize",
     "recognize": "cgda_jax.recognize",
+    "Segment": "cgda_jax.segment",
+    "execute_sequence": "cgda_jax.segment",
+    "segment": "cgda_jax.segment",
 })
 # --- selection of features and demonstrations (issue 44) ---------------------
 _LAZY.update({

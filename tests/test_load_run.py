@@ -203,7 +203,8 @@ def _damaged(folder, tmp_path, what):
     elif what == "rows":
         arrays["joints"] = np.concatenate([arrays["joints"], arrays["joints"][:1]])
     elif what == "velocity":
-        config = config.replace("[robot.limits]\n", "[robot.limits]\nvelocity = 1e-30\n")
+        config = config.replace("[robot.limits]\n",
+                                "[robot.limits]\nvelocity = 1e-30\n")
     elif what == "partial":
         del arrays["demo1_features"]
     elif what == "latin1":

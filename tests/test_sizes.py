@@ -202,7 +202,7 @@ def test_generalization_and_resampling_sizes_are_refused_by_name():
         resample(np.zeros((5, 3), np.float32), 10**9)
 
 
-# ------------------------------------------------- what the checks let through (issue 43)
+# ------------------------------------------ what the checks let through (issue 43)
 @pytest.mark.parametrize("setting, words", [
     ("strategy.population_size=1000000",
      ["keys 'strategy.population_size' and 'feasibility.samples'",

@@ -112,7 +112,8 @@ def join_job(args) -> bool:
     job_from_env()  # a half-described job is an error here, not a silent single run
     join_timeout()
     joined = distributed.initialize(
-        waiting=None if launched_worker() else lambda text: say(args, f"[job] {text}"),
+        waiting=None if launched_worker() else (
+            lambda text: say(args, f"[job] {text}")),
         on_timeout=lambda line: print(f"cgda: error: {line}", file=sys.stderr))
     if joined:
         # until the processes' last gather, one that fails alone leaves at once

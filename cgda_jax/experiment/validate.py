@@ -123,6 +123,9 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
         return
     check_seed(s.seed, "strategy.seed")
     check_seed(cfg.reality.seed, "reality.seed")
+    from cgda_jax.experiment.figures import check_camera
+
+    check_camera(cfg.output.camera)  # names a bad [output] camera key
     if trials is not None and s.seed + trials - 1 > MAX_SEED:
         raise ConfigError(
             f"key 'strategy.seed' with --trials {trials}: the seeds {s.seed} .. "
