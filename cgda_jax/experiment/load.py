@@ -211,6 +211,16 @@ def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict
                 f"{rows[0]} queries x {rows[1]} actions: files of different runs")
 
 
+def _why_no_config(path: pathlib.Path) -> str:
+    """`ExecutionResult.save`'s reason for writing no config.toml, as a hint."""
+    try:
+        why = read_json(path).get("not_described")
+    except FolderError:
+        return ""
+    return (f" (saved from Python with a simulator that a config cannot describe: "
+            f"{why})") if isinstance(why, str) else ""
+
+
 def load_run(folder: str | os.PathLike) -> Run:
     """Read a results folder written by ``cgda run`` / `run_experiment`.
 
@@ -233,12 +243,21 @@ def load_run(folder: str | os.PathLike) -> Run:
                 if (folder / MARKER).is_file() and any(
                     (p / MARKER).is_file() for p in folder.iterdir() if p.is_dir())
                 else "")
+        if missing == ["config.toml"]:
+            hint = _why_no_config(folder / MARKER) or hint
         raise FolderError(f"{folder} is not a results folder: {', '.join(missing)} "
                           f"missing{hint}")
     result = _read_result(folder / MARKER)
     config = load_config(folder / "config.toml")
     arrays = read_npz(folder / "arrays.npz", REQUIRED_ARRAYS[result["kind"]])
     _check_together(folder, config, result, arrays)
+    if result["kind"] == "execution" and "feature_labels" not in result:
+        from cgda_jax.experiment.build import error_unit, feature_labels
+
+        # saved from Python (`ExecutionResult.save`): labels from the names
+        labels = feature_labels(config, result.get("feature_names") or [
+            f"f{i}" for i in range(arrays["goal"].shape[-1])])
+        result |= {"feature_labels": labels, "error_unit": error_unit(labels)}
     return Run(folder, config, result, arrays)
 
 

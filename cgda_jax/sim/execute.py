@@ -110,6 +110,7 @@ class Simulator(Executions):
     Attributes:
         n_dof, n_features, feature_names, lower, upper: the robot's and the scene's
             (lower and upper: the (DoF,) joint limits).
+        dynamic_args: ``move_fraction``, ``reduce`` and ``control`` as given.
     """
 
     def __init__(
@@ -149,7 +150,7 @@ class Simulator(Executions):
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
-        self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce,
+        self.dynamic_args = {"move_fraction": move_fraction, "reduce": reduce,
                               "control": control}
         # object scenes read the simulated world (`ObjectScene`), others the marker
         self._world_specs = tuple(getattr(scene, "world_features", ()))
@@ -221,7 +222,7 @@ class Simulator(Executions):
         return Simulator(
             self.robot, self.scene, mode="dynamic", physics=physics,
             timestep=self.physics.timestep / factor,
-            physics_steps=self.physics_steps * factor, **self._dynamic_args,
+            physics_steps=self.physics_steps * factor, **self.dynamic_args,
             feasibility=self.feasibility,
         )
 

@@ -167,6 +167,11 @@ class Feasibility:
                              f"penetration ({penetration:g} m), got {margin}")
         self.margin = float(margin)
         self.certify = bool(certify)
+        # as given (`cgda_jax.sim.description` writes them into a config)
+        self.obstacles = list(obstacles)
+        self.collisions, self.self_collision = bool(collisions), bool(self_collision)
+        self.exclude = tuple(exclude)
+        self.physics_contacts = bool(physics_contacts)
         self.collider = None
         self.overlapping: list[tuple[str, str]] = []
         self.physical: list[tuple[str, str]] = []

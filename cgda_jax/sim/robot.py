@@ -97,9 +97,14 @@ class Robot:
         kinematics: "chain" or "mjx" (see `KINEMATICS`).
         object_bodies: the bodies of the world's objects (`from_world`; their
             contacts are the task's, `cgda_jax.sim.mjx_prep`).
+        model_path: the MJCF file it was built from (None: a compiled model);
+            world_objects, contact_geoms: `from_world`'s objects and contact geoms.
     """
 
     object_bodies: tuple[str, ...] = ()
+    model_path: str | None = None
+    world_objects: tuple[dict, ...] = ()
+    contact_geoms: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -244,7 +249,7 @@ class Robot:
                 mj_model = factory().compile()
         except ValueError as err:
             raise ValueError(f"cannot load MJCF {path}: {err}") from err
-        return cls(
+        robot = cls(
             mj_model,
             joints,
             marker_site,
@@ -255,6 +260,8 @@ class Robot:
             spec_factory=factory,
             start=start,
         )
+        robot.model_path = str(path.resolve())
+        return robot
 
     @classmethod
     def from_world(
@@ -302,6 +309,9 @@ class Robot:
         own = compose_world(path, [], contact_geoms).compile().nbody  # then objects
         robot.object_bodies = tuple(mj_model.body(b).name
                                     for b in range(own, mj_model.nbody))
+        robot.model_path = str(path.resolve())
+        robot.world_objects = tuple(objects)
+        robot.contact_geoms = contact_geoms
         return robot
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
@@ -383,7 +393,8 @@ class Robot:
             spec_factory=self._spec_factory,
             start=self.start,
         )
-        other.object_bodies = self.object_bodies
+        for name in ("object_bodies", "model_path", "world_objects", "contact_geoms"):
+            setattr(other, name, getattr(self, name))
         return other
 
     @property

@@ -28,6 +28,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sharding import shard_population
+from cgda_jax.sim.description import setup_of
 from cgda_jax.strategies.algorithms import (
     ALGORITHMS as ALGORITHMS,
     algorithm_name as algorithm_name,
@@ -363,4 +364,5 @@ class PlanBase:
             final_fitness=float(final_fitness),
             info={**self.info, "trials_in_batch": timing["trials_in_batch"], **info},
             invalid_evaluations=int(invalid_evaluations),
+            setup=setup_of(self.sim),
         )
