@@ -17,7 +17,7 @@ import pytest
 import cgda_jax as cg
 from cgda_jax.experiment.build import build_simulator
 from cgda_jax.experiment.config import load_config
-from cgda_jax.folders import FolderError
+from cgda_jax.results_folder.rules import FolderError
 from cgda_jax.sim.description import NotDescribable, describe
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -268,8 +268,8 @@ def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
 def _launch(cfg, args, open_folder, chosen) -> int:
     """Take the folder, start the P workers, move their folder into place once all
     ended well; a failure, a worker's death or an interrupt discards it."""
-    from cgda_jax.files import read_json
-    from cgda_jax.folders import MARKER
+    from cgda_jax.results_folder.reading import read_json
+    from cgda_jax.results_folder.rules import MARKER
     from cgda_jax.launch import start_job, without_option
 
     p = args.processes

@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from cgda_jax.experiment.config import ExperimentConfig, load_config
-from cgda_jax.experiment.results import MARKER, FolderError, expand
-from cgda_jax.files import check_fields, read_json, read_npz
+from cgda_jax.results_folder.rules import MARKER, FolderError, expand
+from cgda_jax.results_folder.reading import check_fields, read_json, read_npz
 
 __all__ = ["Run", "load_run"]
 
@@ -137,7 +137,7 @@ class Run:
         return ExecutionResult.load(self.folder)
 
 
-#: result.json of a run, by kind: key -> type (`cgda_jax.files`); keys it does not
+#: result.json of a run, by kind: key -> type (`cgda_jax.results_folder.reading`); keys it does not
 #: name are accepted. Non-finite numbers are written null.
 RUN_FIELDS = {
     "kind": "str", "name": "str", "success": "bool", "feature_labels": "list[str]",

@@ -4,7 +4,7 @@ a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.pn
 back with `cgda_jax.load_run`. The numbers are computed by
 `cgda_jax.experiment.compute` (every execution run also replays its result on a
 finer simulator); the folder itself (temporary folder, lock, move into place)
-belongs to `cgda_jax.experiment.results`.
+belongs to `cgda_jax.results_folder`.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from cgda_jax.experiment.config import ExperimentConfig, dump_config
 from cgda_jax.experiment.figures import draw_figures, render_run
 from cgda_jax.experiment.load import run_in_memory
 from cgda_jax.experiment.report import report_markdown, write_json
-from cgda_jax.experiment.results import RunFolder, expand
+from cgda_jax.results_folder.rules import expand
+from cgda_jax.results_folder.writing import RunFolder
 from cgda_jax.experiment.validate import check_experiment
 
 
@@ -109,7 +110,7 @@ def write_run(
 ) -> dict:
     """Run ``cfg`` (already checked) and write its results into the existing, empty
     ``folder``; return the result dict. `run_experiment` and ``cgda`` call it inside
-    a `~cgda_jax.experiment.results.RunFolder`."""
+    a `~cgda_jax.results_folder.writing.RunFolder`."""
     return start_run(cfg, folder, progress_fn).finish()
 
 
@@ -128,7 +129,7 @@ def run_experiment(
     """Check and run ``cfg``; write its results folder; return the result dict.
 
     The folder is written aside and moved into place when complete
-    (`~cgda_jax.experiment.results.RunFolder`): a failed or interrupted run leaves
+    (`~cgda_jax.results_folder.writing.RunFolder`): a failed or interrupted run leaves
     it as it was.
 
     Args:

@@ -121,7 +121,7 @@ class ExecutionResult:
         ``cgda export`` and `cgda_jax.load_run` open it. A simulator that a config
         cannot describe (`setup`'s ``not_described``) gives no config.toml, and
         those readers say why. By the rules of ``cgda run``'s results folders
-        (`cgda_jax.run_folder.RunFolder`): written aside and moved into place
+        (`cgda_jax.results_folder.writing.RunFolder`): written aside and moved into place
         whole, so the folder holds this result or what it held before; a missing
         or empty folder is taken, an existing results folder (one holding a
         result.json) is refused unless ``overwrite``, which replaces it whole
@@ -139,7 +139,7 @@ class ExecutionResult:
         """
         import tomli_w
 
-        from cgda_jax.run_folder import RunFolder
+        from cgda_jax.results_folder.writing import RunFolder
 
         with RunFolder(directory, overwrite=overwrite) as rf:
             name = name or rf.path.name
@@ -174,12 +174,12 @@ class ExecutionResult:
         """Reads a result written by `save` (or an execution run's folder).
 
         Raises:
-            FolderError: a file missing (`~cgda_jax.files.FileMissing`, also a
+            FolderError: a file missing (`~cgda_jax.results_folder.reading.FileMissing`, also a
                 `FileNotFoundError`), damaged or not of its schema (result.json:
                 `RESULT_FIELDS`; arrays.npz: every array of `save`, of consistent
                 shapes); the message names the file.
         """
-        from cgda_jax.files import read_json, read_npz
+        from cgda_jax.results_folder.reading import read_json, read_npz
 
         d = pathlib.Path(directory).expanduser()
         meta = read_json(d / "result.json", RESULT_FIELDS, RESULT_REQUIRED)
@@ -203,7 +203,7 @@ class ExecutionResult:
         )
 
 
-#: result.json of a saved `ExecutionResult`: key -> type (`cgda_jax.files`).
+#: result.json of a saved `ExecutionResult`: key -> type (`cgda_jax.results_folder.reading`).
 RESULT_FIELDS = {
     "strategy": "str", "points": "int", "success": "bool",
     "tolerance": "number|null", "max_point_error": "number|null",
@@ -225,7 +225,7 @@ def _number(value: float | None) -> float:
 def _check_shapes(arrays: dict[str, np.ndarray], where: pathlib.Path) -> None:
     """The ranks of `ExecutionResult`'s arrays, and the goal's points against the
     point errors and the features' width."""
-    from cgda_jax.folders import FolderError
+    from cgda_jax.results_folder.rules import FolderError
 
     ranks = {"joints": (2,), "features": (2,), "goal": (2,), "point_errors": (1,),
              "fitness_history": (1, 2)}

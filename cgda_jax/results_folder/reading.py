@@ -1,7 +1,7 @@
 """Saved files read back, every failure naming the file: `read_json` (a JSON object,
 checked against a schema with `check_fields`) and `read_npz` (every array, those
 required named when missing). A damaged, truncated or hand-edited file is a
-`~cgda_jax.folders.FolderError` that says which file and what is wrong with it,
+`~cgda_jax.results_folder.rules.FolderError` that says which file and what is wrong with it,
 never a ``BadZipFile`` or ``AttributeError`` from deep inside.
 
 A schema maps keys to type names: ``str``, ``int``, ``bool``, ``number`` (int or
@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.folders import FolderError
+from cgda_jax.results_folder.rules import FolderError
 
 __all__ = ["FileMissing", "check_fields", "read_json", "read_npz"]
 
