@@ -25,7 +25,7 @@ from cgda_jax.experiment.rules import check_interval_count, validate_world
 
 def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     """The goal (N, F) of an execution run, its demonstrations and generalization."""
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
 
     d = cfg.data
     if d.source in OBJECT_SOURCES:

@@ -33,8 +33,8 @@ Computed = tuple[dict, dict[str, np.ndarray], Any]
 def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
     """Generalize, then recognize the held-out repetitions (paper Tables 2-4);
     ``arrays.npz`` is written into ``out``."""
-    from cgda_jax.generalize import generalize, sample_actions
-    from cgda_jax.recognize import ActionLibrary, cost_matrix
+    from cgda_jax.generalization import generalize, sample_actions
+    from cgda_jax.recognition import ActionLibrary, cost_matrix
 
     d, r = cfg.data, cfg.recognition
     t0 = time.perf_counter()

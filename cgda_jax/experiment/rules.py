@@ -231,7 +231,7 @@ def validate_world(cfg: ExperimentConfig):
 def check_interval_count(demos: Sequence, interval_s: float, method: str = "paper",
                          key: str = "data.interval_s") -> None:
     """The generalization of ``demos`` at ``interval_s`` has at most `MAX_INTERVALS`
-    intervals (checked before `cgda_jax.generalize` allocates them)."""
+    intervals (checked before `cgda_jax.generalization.generalize` allocates them)."""
     if not demos or not math.isfinite(interval_s) or not interval_s > 0:
         return  # generalize names these itself
     durations = np.asarray([float(d.duration) for d in demos])

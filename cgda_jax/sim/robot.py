@@ -45,8 +45,6 @@ from cgda_jax.sim.posture import FIXED_RANGE_TOL, start_posture
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
 
-exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
-
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 
@@ -119,6 +117,7 @@ class Robot:
         spec_factory: Callable[[], mujoco.MjSpec] | None = None,
         start: Mapping[str, float] | None = None,
     ):
+        exact_matmuls()  # its programs: full float32 products on GPUs too
         joints = tuple(joints)
         if not joints:
             raise ValueError(f"no joints to evolve given for {source}")

@@ -52,8 +52,6 @@ from cgda_jax.strategies.settings import (
     points_independent as points_independent,
 )
 
-exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
-
 
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
     """Stacks 1-D rows of different lengths into (len(rows), longest or 1), NaN-padded."""
@@ -95,6 +93,7 @@ class PlanBase:
         stagnation: int | None = None,
         aim: float = 1.0,
     ):
+        exact_matmuls()  # its programs: full float32 products on GPUs too
         self.sim, self.goal = sim, goal
         self.sharding = sharding
         self.n_points = int(goal.shape[0])
