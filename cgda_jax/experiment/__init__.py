@@ -122,6 +122,7 @@ from cgda_jax.experiment.run import (
 )
 from cgda_jax.experiment.validate import (
     MAX_SEED as MAX_SEED,
+    check_and_build as check_and_build,
     check_experiment as check_experiment,
 )
 from cgda_jax.results_folder.rules import (
@@ -144,6 +145,7 @@ __all__ = [
     "RunFolder",
     "SceneConfig",
     "StrategyConfig",
+    "check_and_build",
     "check_experiment",
     "dump_config",
     "load_config",

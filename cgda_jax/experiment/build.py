@@ -4,6 +4,7 @@ by `cgda_jax.experiment.rules.strategy_function`, which checks its options.)"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -312,6 +313,36 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
         timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce,
         control=control, **timing,
     )
+
+
+@dataclasses.dataclass
+class BuiltExecution:
+    """An execution run's objects, built once: by its checks
+    (`cgda_jax.experiment.validate.check_and_build`), then used by the run
+    (`cgda_jax.experiment.compute.compute_execution`,
+    `cgda_jax.experiment.trials.trial_records`).
+
+    Attributes:
+        goal: (N, F) the goal; demos: its demonstrations ([] without);
+        generalization: theirs (None without); waypoint_s: seconds per waypoint
+        from their timing (`default_waypoint_s`); sim: the `Simulator`.
+    """
+
+    goal: np.ndarray
+    demos: list
+    generalization: Any
+    waypoint_s: float
+    sim: Any
+
+
+def build_execution(cfg: ExperimentConfig) -> BuiltExecution:
+    """The goal and the simulator of an execution run, unchecked (a worker of a
+    job whose launcher checked the config; a run checks them with
+    `cgda_jax.experiment.validate.check_and_build`)."""
+    goal, demos, gen = build_goal(cfg)
+    waypoint_s = default_waypoint_s(demos, len(goal))
+    return BuiltExecution(goal, demos, gen, waypoint_s,
+                          build_simulator(cfg, waypoint_s, goal))
 
 
 def build_control(cfg: ExperimentConfig):
