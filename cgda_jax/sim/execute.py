@@ -57,6 +57,7 @@ from jax import Array
 
 from cgda_jax.sim.executions import Executions
 from cgda_jax.sim.feasibility import scene_obstacles
+from cgda_jax.sim.host_replay import reference_ctrl
 from cgda_jax.sim.robot import Robot
 from cgda_jax.sim.sim_state import (
     MODES,
@@ -335,10 +336,7 @@ class Simulator(Executions):
         """Physics from ``state`` along the min-jerk reference ``profile`` (T,) to
         ``target``: (physics state, scene state, marker (3,), features (F,))."""
         phys = self.physics
-        qpos0 = jnp.asarray(phys.qpos0, jnp.float32)
-        c0 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(state.genes))
-        c1 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(target))
-        ctrl = c0 + jnp.asarray(profile)[:, None] * (c1 - c0)  # (T, nu)
+        ctrl = reference_ctrl(phys, state.genes, target, profile, jnp)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
         path = sens[:, phys.marker_adr:phys.marker_adr + 3]
         scene_state = scene_along(self.scene, state.scene, self._from(state), path)
