@@ -111,7 +111,7 @@ def _force(lo, hi) -> str:
 
 def control_lines(control: dict) -> list[str]:
     """The report's control section: how dynamic mode drove each held joint
-    (`cgda_jax.sim.control.ControlPlan.as_dict`)."""
+    (`cgda_jax.sim.drives.ControlPlan.as_dict`)."""
     pds = any(d["drive"] != "position" for d in control["joints"])
     gravity = (f"gravity compensation in the PD {'on' if control['gravity'] else 'off'}"
                if pds else "no joint-space PD (every held joint is a position servo "
