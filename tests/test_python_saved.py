@@ -86,8 +86,8 @@ def test_cgda_plot_and_export_open_a_python_saved_result(saved):
 def test_a_paint_grid_and_an_object_scene_are_described_exactly():
     robot = cg.Robot.from_mjcf(cg.model_path("teo.xml"), TEO_ARM, "marker")
     wall = cg.PaintWall.grid(radius=0.1, ys=(-0.7, -0.5, -0.3), zs=(0.4, 0.6))
-    sim = cg.Simulator(robot, wall, substeps=4, waypoint_s=0.5)
-    tables = describe(sim)
+    sim = cg.Simulator(robot, wall, substeps=4, waypoint_s=0.5, feasibility=True)
+    tables = describe(sim)  # the board, an obstacle of the scene's: a config's
     cfg = load_config(overrides=["kind=execution"])
     from cgda_jax.experiment.config import merge_table
 
@@ -95,7 +95,8 @@ def test_a_paint_grid_and_an_object_scene_are_described_exactly():
     again = build_simulator(cfg)
     np.testing.assert_array_equal(again.scene.centres, wall.centres)
     assert again.scene.radius == wall.radius and again.substeps == sim.substeps
-    assert again.feasibility is None and again.waypoint_s == 0.5
+    assert again.waypoint_s == 0.5
+    assert again.feasibility.collider.pair_names == sim.feasibility.collider.pair_names
     scene = cg.ObjectScene([{"site": "marker", "quantity": "xyz"}])
     assert describe(cg.Simulator(robot, scene))["scene"] == {
         "kind": "objects", "features": [{"site": "marker", "quantity": "xyz"}]}

@@ -96,6 +96,21 @@ def _paint_grid(wall) -> dict[str, Any]:
     return params
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Equal obstacle tables (dicts, lists, arrays and numbers, nested)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (str, bool)) or isinstance(b, (str, bool)) or a is None:
+        return a == b
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) and (
+            len(a) != len(b) or any(isinstance(x, dict) for x in a)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    try:
+        return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+    except (TypeError, ValueError):
+        return False
+
+
 def _feasibility(sim) -> tuple[dict[str, Any], dict[str, Any]]:
     from cgda_jax.sim.feasibility import scene_obstacles
 
@@ -106,7 +121,7 @@ def _feasibility(sim) -> tuple[dict[str, Any], dict[str, Any]]:
         raise NotDescribable("the feasibility check leaves the physics' own contacts "
                              f"{'to it' if f.physics_contacts else 'in'}, which a "
                              f"config does only in dynamic mode")
-    if list(f.obstacles) != scene_obstacles(sim.scene):
+    if not _same(list(f.obstacles), scene_obstacles(sim.scene)):
         raise NotDescribable("the feasibility check has obstacles of its own (a "
                              "config gives it the scene's: the paint board)")
     table = {"penetration": f.penetration, "penalty": f.penalty,
