@@ -29,7 +29,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
                              "recognize"),
     # simulation: robot, scenes, execution, rendering
     "cgda_jax.sim.sim_state": ("SimState",),
-    "cgda_jax.sim.execute": ("Simulator",),
+    "cgda_jax.sim.simulator": ("Simulator",),
     "cgda_jax.sim.render": ("render_trajectory",),
     "cgda_jax.sim.features": ("FeatureSet", "FeatureSpec"),
     "cgda_jax.sim.world": ("compile_world", "compose_world"),

@@ -271,7 +271,7 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
             0 (default 1 s; `run_execution` passes `default_waypoint_s`).
         goal: (N, F) the goal, drawn in renders when ``scene.goal_path`` is on.
     """
-    from cgda_jax.sim.execute import Simulator
+    from cgda_jax.sim.simulator import Simulator
     from cgda_jax.sim.robot import Robot
     from cgda_jax.sim.scenes import MarkerScene, ObjectScene, PaintWall
 

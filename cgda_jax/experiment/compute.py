@@ -281,13 +281,13 @@ def compute_execution(
 
 
 def motion_check(sim, res) -> tuple[dict, dict] | None:
-    """The reported joints checked as a motion (`cgda_jax.sim.motion.motion_report`:
+    """The reported joints checked as a motion (`cgda_jax.sim.motion_check.motion_report`:
     collisions 4 x finer, speeds, accelerations, efforts and tracking in a dynamic
     replay, joint travel) and the commanded profile's arrays (``motion_t``,
     ``motion_q``, ``motion_qd``, ``motion_waypoint_t``) for the figure; None
     when no joints were found."""
     from cgda_jax.logs import warn_once
-    from cgda_jax.sim.motion import motion_profile, motion_report
+    from cgda_jax.sim.motion_check import motion_profile, motion_report
 
     joints = np.asarray(res.joints, np.float64)
     if joints.size == 0 or not np.all(np.isfinite(joints)):

@@ -48,7 +48,7 @@ def _limit(value) -> str:
 
 def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     """The report's feasibility section: the motion against the robot's limits
-    (`cgda_jax.sim.motion.motion_report`)."""
+    (`cgda_jax.sim.motion_check.motion_report`)."""
     lim = motion["limits"]
     col = motion.get("collisions")
     verdict = "feasible" if motion["feasible"] else "NOT feasible: " + "; ".join(

@@ -1,13 +1,13 @@
 """One replay of a dynamic simulator's timed motion on MuJoCo C (host NumPy): the
 physics model stepped along the commanded reference, as the simulator commands it
-(`cgda_jax.sim.execute.Simulator`): each move from the previous waypoint (the
+(`cgda_jax.sim.simulator.Simulator`): each move from the previous waypoint (the
 start posture first) to the next, clipped to the joint limits, on the minimum-jerk
 share of the move at each physics step (`Simulator.reference_profiles`: the
 approach for the first move), the shares turned into actuator targets by
 `reference_ctrl`, the same rule the simulator's own step uses.
 
 `replay_steps` is the one loop; the motion check
-(`cgda_jax.sim.motion.motion_report`: speeds, forces, tracking, contacts) and the
+(`cgda_jax.sim.motion_check.motion_report`: speeds, forces, tracking, contacts) and the
 render (`cgda_jax.sim.render`) read what they need after each step.  (The exported
 file's replay, `cgda_jax.reality.replay`, replays the file's samples instead.)
 """

@@ -295,7 +295,7 @@ class PlanBase:
 
     def rejudge(self, final: dict) -> dict:
         """A finished trial's host arrays with ``violation`` from the judged
-        rollout (`cgda_jax.sim.execute.Simulator.violation`) where its finish
+        rollout (`cgda_jax.sim.simulator.Simulator.violation`) where its finish
         says the stored one is not the result's (``judged`` False: a run cut
         before its last moves were judged); ``judged`` dropped."""
         final = dict(final)

@@ -42,7 +42,7 @@ Example:
     >>> robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
     ...                         "marker")
     >>> sim = Simulator(robot, MarkerScene(), substeps=4)
-    >>> sim.execute(jnp.zeros((5, 3))).shape
+    >>> sim.simulator(jnp.zeros((5, 3))).shape
     (5, 3)
 """
 
@@ -55,7 +55,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from cgda_jax.sim.executions import Executions
+from cgda_jax.sim.rollouts import Executions
 from cgda_jax.sim.feasibility import scene_obstacles
 from cgda_jax.sim.host_replay import reference_ctrl
 from cgda_jax.sim.robot import Robot

@@ -62,7 +62,7 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
     the waypoint's time (``sim.waypoint_s``) is up.
 
     Args:
-        sim: the `cgda_jax.sim.execute.Simulator`.
+        sim: the `cgda_jax.sim.simulator.Simulator`.
         joints: (N, DoF) waypoints.
         samples: samples per move.
     """
@@ -186,7 +186,7 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
     contact); None when every joint reaches its commands.
 
     Args:
-        sim: the dynamic `cgda_jax.sim.execute.Simulator`.
+        sim: the dynamic `cgda_jax.sim.simulator.Simulator`.
         tracking: (N, DoF) |error| at each waypoint's end.
         end_force: (N, DoF) the joint's actuator force there.
         contact: the replay's deepest contact of the arm (``{"pair", "deepest_m"}``),
@@ -242,7 +242,7 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
     """The motion of ``joints`` (N, DoF) checked as a roboticist would.
 
     Args:
-        sim: the `cgda_jax.sim.execute.Simulator` the result was found with.
+        sim: the `cgda_jax.sim.simulator.Simulator` the result was found with.
         joints: (N, DoF) the reported waypoints (radians / metres).
         factor: how much finer than the simulator the check looks (collision
             postures per move; dynamic replay timestep).
