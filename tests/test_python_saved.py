@@ -10,6 +10,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -119,3 +120,5 @@ def test_a_simulator_a_config_cannot_describe_is_said_by_the_readers(tmp_path):
         "not_described"]
     with pytest.raises(FolderError, match="config.toml missing .*compiled model"):
         cg.load_run(folder)
+    with pytest.raises(NotDescribable, match="of its own"):
+        describe(types.SimpleNamespace(feature_names=("x",)))

@@ -143,6 +143,11 @@ def describe(sim) -> dict[str, Any]:
     Raises:
         NotDescribable: a piece a config cannot name (the message says which).
     """
+    from cgda_jax.sim.simulator import Simulator
+
+    if not isinstance(sim, Simulator):
+        raise NotDescribable(f"the simulator is a {type(sim).__name__} of its own, "
+                             "not a cgda_jax Simulator")
     robot, world = _robot(sim)
     feasibility, limits = _feasibility(sim)
     if limits:
@@ -159,7 +164,8 @@ def describe(sim) -> dict[str, Any]:
 def setup_of(sim) -> dict[str, Any]:
     """What a saved result records of its simulator: ``feature_names`` and
     ``config`` (`describe`), or ``not_described`` (the reason) in its place."""
-    out: dict[str, Any] = {"feature_names": list(sim.feature_names)}
+    names = getattr(sim, "feature_names", None)
+    out: dict[str, Any] = {} if names is None else {"feature_names": list(names)}
     try:
         out["config"] = describe(sim)
     except NotDescribable as err:
