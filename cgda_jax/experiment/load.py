@@ -214,11 +214,17 @@ def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict
 def _why_no_config(path: pathlib.Path) -> str:
     """`ExecutionResult.save`'s reason for writing no config.toml, as a hint."""
     try:
-        why = read_json(path).get("not_described")
+        saved = read_json(path)
     except FolderError:
         return ""
-    return (f" (saved from Python with a simulator that a config cannot describe: "
-            f"{why})") if isinstance(why, str) else ""
+    why = saved.get("not_described")
+    if isinstance(why, str):
+        return (f" (saved from Python with a simulator that a config cannot "
+                f"describe: {why})")
+    if "strategy" in saved and "kind" not in saved:
+        return (" (an ExecutionResult saved without the simulator it ran on: "
+                "nothing says how to build it again)")
+    return ""
 
 
 def load_run(folder: str | os.PathLike) -> Run:
