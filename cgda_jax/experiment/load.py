@@ -221,7 +221,7 @@ def _why_no_config(path: pathlib.Path) -> str:
     if isinstance(why, str):
         return (f" (saved from Python with a simulator that a config cannot "
                 f"describe: {why})")
-    if "strategy" in saved:
+    if "strategy" in saved and "build" not in saved:  # not a `cgda run` one
         return (" (an ExecutionResult saved without the simulator it ran on: "
                 "nothing says how to build it again)")
     return ""
