@@ -17,8 +17,8 @@ __version__ = "0.1.0"
 #: The public names, each listed once, by the module that defines them.  They are
 #: imported on first use (PEP 562 ``__getattr__``): every one of these modules
 #: imports JAX (most also MuJoCo, evosax or matplotlib), and ``import cgda_jax``
-#: would take seconds instead of milliseconds for the ``cgda`` command's help and
-#: listing (measured: README "Development").
+#: would take seconds instead of milliseconds, for the ``cgda`` command's help and
+#: listing too (measured: README "Development").
 _EXPORTS: dict[str, tuple[str, ...]] = {
     # core: data, generalization, distances, recognition
     "cgda_jax.data": ("Demonstration", "load_csv", "load_npz", "load_xgnitive",
