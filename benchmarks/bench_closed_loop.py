@@ -79,7 +79,7 @@ def tiny() -> None:
     sim = Simulator(robot, MarkerScene(), mode="dynamic", waypoint_s=0.5,
                     physics="mujoco")
     wps = np.array([[0.1, 0.2, 0.1], [0.3, 0.4, 0.2], [0.5, 0.5, 0.3]], np.float32)
-    goal = np.asarray(sim.simulator(wps), np.float64)
+    goal = np.asarray(sim.execute(wps), np.float64)
     kw = {"population_size": 16, "tolerance": 0.01, "max_generations": 80}
     rows = []
     for world_seed in (5, 6):

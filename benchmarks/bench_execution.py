@@ -55,7 +55,7 @@ def bench_ours(
     sim: Simulator, pop: np.ndarray, repeats: int
 ) -> tuple[dict, np.ndarray]:
     x = jnp.asarray(pop)
-    compiled, t_compile = compile_jax(jax.vmap(sim.simulator), x)
+    compiled, t_compile = compile_jax(jax.vmap(sim.execute), x)
     out = np.asarray(compiled(x))
     t = median_time(lambda: compiled(x), repeats=repeats)
     return {"compile_s": t_compile, "time_s": t}, out

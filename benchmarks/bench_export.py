@@ -61,7 +61,7 @@ def bench(name: str, repeats: int, profile: str) -> dict:
     t0 = time.perf_counter()
     feats = replay_trajectory(sim, back)
     t_replay = time.perf_counter() - t0
-    want = np.asarray(sim.simulator(joints), np.float64)
+    want = np.asarray(sim.execute(joints), np.float64)
     return {"experiment": name, "profile": profile, "mode": sim.mode,
             "waypoints": len(joints),
             "samples": traj.n_samples, "duration_s": round(traj.duration, 2),

@@ -136,8 +136,8 @@ class Stepper:
     def execute(self, joints):
         """(features (N, F), summed violation) from the start."""
         if self.feas is None:
-            return self.sim.simulator(joints), 0.0
-        return self.sim.simulator(joints)
+            return self.sim.execute(joints), 0.0
+        return self.sim.execute(joints)
 
     def outcome(self, joints, goal, extra=None) -> dict:
         feats, violation = self.execute(joints)
@@ -215,7 +215,7 @@ def pycma_fte(
     goal = np.asarray(goal, np.float64)
 
     def fitness(u):
-        feats, v = sim.simulator(to_joints(np.reshape(u, (n, dof)), lo, hi))
+        feats, v = sim.execute(to_joints(np.reshape(u, (n, dof)), lo, hi))
         return sim.penalized(dtai_pair(feats, goal), v)
 
     u, best, gens, evals = _evolve(

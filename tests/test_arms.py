@@ -39,7 +39,7 @@ def test_every_seed_succeeds_on_a_random_arm(strategy, n):
     assert not failed, failed
     # what was reported is what the joints do
     r = results[3]
-    np.testing.assert_allclose(np.asarray(sim.simulator(r.joints)), r.features, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(sim.execute(r.joints)), r.features, atol=1e-5)
 
 
 def test_ie_restarts_from_sampled_postures_escape_a_local_minimum():

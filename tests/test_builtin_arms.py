@@ -163,7 +163,7 @@ def test_mjx_physics_equals_mujoco_c_on_every_shipped_model(name):
     for backend in ("mujoco", "mjx"):
         sim = Simulator(robot, MarkerScene(), mode="dynamic", physics=backend,
                         waypoint_s=0.1, timestep=0.01)
-        feats[backend] = np.asarray(jax.jit(sim.simulator)(jnp.asarray(way)))
+        feats[backend] = np.asarray(jax.jit(sim.execute)(jnp.asarray(way)))
     assert np.all(np.isfinite(feats["mujoco"]))
     # the backends' stated tolerance (float32 MJX vs float64 MuJoCo C): 1e-4 m
     np.testing.assert_allclose(feats["mjx"], feats["mujoco"], atol=1e-4)

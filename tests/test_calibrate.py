@@ -100,7 +100,7 @@ class _Tool:
     (lambda m: np.full_like(m, np.nan), "measured NaN or inf marker"),
 ])
 def test_a_wrong_tool_measurement_stops_the_run(sim, marker, match):
-    goal = np.asarray(sim.simulator(WAYPOINTS), np.float64)
+    goal = np.asarray(sim.execute(WAYPOINTS), np.float64)
     with pytest.raises(RealityError, match=match):
         run_oet_closed_loop(sim, goal, _Tool(sim, marker), **KW)
 
@@ -120,7 +120,7 @@ class _NoTool:
 
 
 def test_the_calibrated_closed_loop_ends_nearer_the_goal(sim):
-    goal = np.asarray(sim.simulator(WAYPOINTS), np.float64)
+    goal = np.asarray(sim.execute(WAYPOINTS), np.float64)
     mm = Mismatch(joint_offset_deg=OFFSETS_DEG, marker_noise=0.001, seed=1)
     cal = run_oet_closed_loop(sim, goal, MismatchedWorld(sim, mm), **KW)
     raw = run_oet_closed_loop(sim, goal, MismatchedWorld(sim, mm), calibrate=False,

@@ -27,7 +27,7 @@ def sim():
 
 @pytest.fixture(scope="module")
 def goal(sim):
-    return np.asarray(sim.simulator(WAYPOINTS), np.float64)
+    return np.asarray(sim.execute(WAYPOINTS), np.float64)
 
 
 @pytest.fixture(scope="module")
@@ -148,7 +148,7 @@ def test_the_replay_check_judges_oet_steps_in_order(sim, goal):
     from cgda_jax.experiment.compute import replay_check
 
     steps = np.concatenate([WAYPOINTS[:1], WAYPOINTS])  # 4 steps, 3 points
-    feats = np.asarray(sim.simulator(steps), np.float64)
+    feats = np.asarray(sim.execute(steps), np.float64)
     res = types.SimpleNamespace(strategy="oet", joints=steps, goal=goal,
                                 features=feats, tolerance=0.01)
     out = replay_check(sim, res)

@@ -30,7 +30,7 @@ from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
 robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                         "marker")
 sim = Simulator(robot, MarkerScene(), substeps=2)
-goal = sim.simulator(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
+goal = sim.execute(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
 """
 
 WORKER = """
@@ -197,7 +197,7 @@ def test_single_process_without_a_job(monkeypatch):
     robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                             "marker")
     sim = Simulator(robot, MarkerScene(), substeps=2)
-    goal = sim.simulator(jnp.array([[0.3, 0.4, -0.5]]))
+    goal = sim.execute(jnp.array([[0.3, 0.4, -0.5]]))
     with pytest.raises(ValueError, match="decides `devices`"):
         dist.distributed_trials("ie", sim, goal, 2, devices=2, **KW)
 

@@ -89,7 +89,7 @@ def test_simulator_set_up_and_replay_are_one_program_each(caplog):
         sim = Simulator(robot, scene, substeps=7)
         _, names = compiled(caplog, sim.init_state, jnp.full(3, 0.1))
         assert names == ["_start"]
-        feats, names = compiled(caplog, sim.simulator, np.zeros((11, 3), np.float32))
+        feats, names = compiled(caplog, sim.execute, np.zeros((11, 3), np.float32))
         assert names == ["_rollout_checked"]
         assert feats.shape == (11, scene.n_features)
     pts = np.random.default_rng(3).uniform(-0.5, 0.5, (13, 3)).astype(np.float32)

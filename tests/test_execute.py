@@ -58,7 +58,7 @@ def test_marker_rollout_matches_mujoco_c(robot_name, request):
 def test_waypoints_are_clipped_into_the_limits(tiny):
     sim = Simulator(tiny, MarkerScene(), substeps=1)
     wp = np.array([[3.0, -3.0, 0.0]], np.float32)
-    feats = sim.simulator(wp)
+    feats = sim.execute(wp)
     clipped = np.clip(wp[0], tiny.lower, tiny.upper)
     np.testing.assert_allclose(
         np.asarray(feats[0]), _c_marker(tiny, clipped), atol=1e-5
@@ -94,7 +94,7 @@ def test_teo_paint_features_match_a_host_reference(teo):
     k_sub = sim.substeps
     assert k_sub > 4  # raised for the wall's path tolerance
     wps = _random_waypoints(teo, (8,), seed=3)
-    got = np.asarray(sim.simulator(wps))[:, 0]
+    got = np.asarray(sim.execute(wps))[:, 0]
 
     def seg_near(p, q):
         d = q - p
@@ -137,7 +137,7 @@ def test_population_equals_each_alone_and_does_not_recompile(teo):
     pop = _random_waypoints(teo, (5, 17), seed=5)
     batched = np.asarray(sim.execute_population(pop))
     assert batched.shape == (5, 17, 1)
-    alone = np.stack([np.asarray(sim.simulator(p)) for p in pop])
+    alone = np.stack([np.asarray(sim.execute(p)) for p in pop])
     np.testing.assert_allclose(batched, alone)
     assert len(np.unique(batched[:, -1])) > 1  # the candidates really differ
     before = sim._execute_population._cache_size()
@@ -153,12 +153,12 @@ def test_dynamic_population_in_slices_equals_each_candidate(tiny):
                     physics="mjx")
     pop = _random_waypoints(tiny, (5, 3), seed=11)
     out = np.asarray(sim.execute_population(pop))
-    one = jax.jit(sim.simulator)
+    one = jax.jit(sim.execute)
     want = np.stack([np.asarray(one(w)) for w in pop])
     np.testing.assert_allclose(out, want, atol=1e-5)
     assert len({tuple(np.round(o.ravel(), 4)) for o in out}) == 5  # really distinct
     # the generic helper the strategies can use gives the same as a plain vmap
-    mapped = jax.jit(lambda q: sim.map_population(sim.simulator, q))(pop)
+    mapped = jax.jit(lambda q: sim.map_population(sim.execute, q))(pop)
     np.testing.assert_allclose(np.asarray(mapped), want, atol=1e-5)
     with pytest.raises(ValueError, match="batch_size"):
         Simulator(tiny, MarkerScene(), mode="dynamic", batch_size=0)
@@ -176,9 +176,9 @@ def test_dynamic_teo_population(teo):
 def test_bad_inputs_name_the_problem(tiny, tmp_path):
     sim = Simulator(tiny, MarkerScene())
     with pytest.raises(ValueError, match=r"expected \(N, DoF\) with DoF = 3"):
-        sim.simulator(np.zeros((4, 2)))
+        sim.execute(np.zeros((4, 2)))
     with pytest.raises(ValueError, match=r"expected \(N, DoF\)"):
-        sim.simulator(np.zeros(3))
+        sim.execute(np.zeros(3))
     with pytest.raises(ValueError, match=r"expected \(P, N, DoF\)"):
         sim.execute_population(np.zeros((4, 3)))
     with pytest.raises(ValueError, match="waypoint"):

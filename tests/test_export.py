@@ -240,7 +240,7 @@ def test_a_bent_path_would_be_caught():
     """The replay sees the path between samples: samples off the straight
     joint-space line (one joint lagging 0.3 s) miss a square the run painted."""
     sim = Simulator(_robot(), _wall(), substeps=4)
-    want = np.asarray(sim.simulator(BENT), np.float64)
+    want = np.asarray(sim.execute(BENT), np.float64)
     np.testing.assert_array_equal(want[:, 0], [0.0, 50.0, 100.0])
     traj = trajectory_of(sim, BENT)
     np.testing.assert_array_equal(replay_trajectory(sim, traj), want)

@@ -107,4 +107,4 @@ def test_a_pair_the_task_needs_is_named_with_the_way_out(tmp_path):
     np.testing.assert_allclose(np.asarray(data.xpos), d.xpos, atol=2e-6)
     sim = Simulator(robot, MarkerScene(), mode="dynamic", physics="mujoco",
                     waypoint_s=0.05)  # MuJoCo C collides them
-    assert np.all(np.isfinite(np.asarray(sim.simulator(WAYPOINTS[:1]))))
+    assert np.all(np.isfinite(np.asarray(sim.execute(WAYPOINTS[:1]))))

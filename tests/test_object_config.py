@@ -66,7 +66,7 @@ def test_world_and_object_scene_keys_load_dump_and_build(tmp_path):
     assert sim.feature_names == ("box.x [m]", "box.y [m]")
     path = sim.scene.goal_path
     np.testing.assert_allclose(path, np.column_stack([goal, np.zeros(len(goal))]))
-    feats = np.asarray(sim.simulator(np.zeros((2, 3), np.float32)))
+    feats = np.asarray(sim.execute(np.zeros((2, 3), np.float32)))
     np.testing.assert_allclose(feats, [[0.45, 0.0]] * 2, atol=1e-6)
 
 

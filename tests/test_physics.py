@@ -70,7 +70,7 @@ def test_teo_features_equal_mujoco_c_for_each_backend(teo):
                          waypoint_s=0.5) for b in ("mujoco", "mjx")}
     want, _ = c_reference(sims["mujoco"], wps)
     for name, sim in sims.items():
-        got = np.asarray(jax.jit(sim.simulator)(wps))
+        got = np.asarray(jax.jit(sim.execute)(wps))
         np.testing.assert_allclose(got, want, atol=1e-4, err_msg=name)
 
 
@@ -100,7 +100,7 @@ def test_dynamic_paint_scene_paints_along_the_physical_path(teo):
     sim = Simulator(teo, PaintWall.grid(), mode="dynamic", physics="mujoco",
                     timestep=0.01)
     wps = np.radians([[60, -20, 30], [60, -60, 30]]).astype(np.float32)
-    feats = np.asarray(jax.jit(sim.simulator)(wps))
+    feats = np.asarray(jax.jit(sim.execute)(wps))
     assert feats.shape == (2, 1) and feats[1, 0] >= feats[0, 0] > 0
     assert feats[0, 0] % 6.25 == 0
 
@@ -196,7 +196,7 @@ def test_dynamic_ie_on_the_tiny_arm_succeeds_in_sequence(tiny):
     assert res.info["sequential_context"] is True
     assert res.success, res.point_errors
     # success is that of the sequential execution: re-execute from the start
-    again = np.asarray(sim.simulator(res.joints))
+    again = np.asarray(sim.execute(res.joints))
     np.testing.assert_allclose(again, res.features, atol=1e-5)
     assert np.all(np.linalg.norm(again - goal, axis=-1) < 0.02)
     # a finer simulation of the same joints gives the same features
@@ -222,7 +222,7 @@ def test_object_features_from_the_simulated_world_in_every_mode():
                     waypoint_s=0.3)
     assert sim.feature_names == ("box.x [m]", "box.y [m]", "box.yaw [rad]",
                                  "marker.z [m]")
-    feats = np.asarray(jax.jit(sim.simulator)(wps))
+    feats = np.asarray(jax.jit(sim.execute)(wps))
     # MuJoCo C reference: same controls, features from mj_forward's state
     phys = sim.physics
     d = mujoco.MjData(phys.model)

@@ -66,7 +66,7 @@ def test_load_run_reads_a_python_saved_result_and_rebuilds_its_simulator(saved):
     assert again.feasibility.limits.as_dict() == sim.feasibility.limits.as_dict() | {
         "source": again.feasibility.limits.as_dict()["source"]}
     np.testing.assert_array_equal(run.replay(again), np.asarray(
-        sim.simulator(np.asarray(res.joints, np.float32)), np.float64))
+        sim.execute(np.asarray(res.joints, np.float32)), np.float64))
     back = run.execution_result()
     assert back.setup["feature_names"] == ["X", "Y", "Z"]
 
@@ -112,7 +112,7 @@ def test_a_simulator_a_config_cannot_describe_is_said_by_the_readers(tmp_path):
     with pytest.raises(NotDescribable, match="compiled model"):
         describe(cg.Simulator(robot, cg.MarkerScene()))
     sim = cg.Simulator(robot, cg.MarkerScene())
-    goal = np.asarray(sim.simulator(np.zeros((2, 3), np.float32)), np.float64)
+    goal = np.asarray(sim.execute(np.zeros((2, 3), np.float32)), np.float64)
     res = cg.run_ie(sim, goal, population_size=4, max_generations=1)
     folder = res.save(tmp_path / "r")
     assert not (folder / "config.toml").exists()

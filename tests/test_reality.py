@@ -30,7 +30,7 @@ def test_a_world_equal_to_the_model_measures_what_the_simulator_computes(sim):
         sim.robot.marker_position(sim.robot.start_genes)), atol=1e-6)
     traj = trajectory_of(sim, WAYPOINTS)
     got = measure(world, traj)
-    want = np.asarray(sim.simulator(WAYPOINTS), np.float64)
+    want = np.asarray(sim.execute(WAYPOINTS), np.float64)
     np.testing.assert_allclose(got.features, want, atol=2e-3)
     np.testing.assert_allclose(got.joints, WAYPOINTS, atol=np.deg2rad(1.0))
     # the robot stays where it went: the next move starts from there
@@ -55,9 +55,9 @@ def test_a_mismatched_world_is_seeded_and_offsets_move_the_features(sim):
     fa, fb = a.execute(traj), b.execute(traj)
     np.testing.assert_array_equal(fa.features, fb.features)
     # independent: the model executing the offset joints (where the world's are)
-    want = np.asarray(sim.simulator(WAYPOINTS + off.astype(np.float32)), np.float64)
+    want = np.asarray(sim.execute(WAYPOINTS + off.astype(np.float32)), np.float64)
     np.testing.assert_allclose(fa.features, want, atol=2e-3)
-    assert np.abs(fa.features - np.asarray(sim.simulator(WAYPOINTS))).max() > 5e-3
+    assert np.abs(fa.features - np.asarray(sim.execute(WAYPOINTS))).max() > 5e-3
     np.testing.assert_allclose(fa.joints, WAYPOINTS, atol=np.deg2rad(1.0))  # encoders
     # noise: seeded, of the stated size
     noisy = MismatchedWorld(sim, Mismatch(noise=0.002, seed=1))
@@ -158,14 +158,14 @@ def test_open_loop_on_the_mismatched_world_is_judged_per_point(sim):
     from cgda_jax.experiment.compute import reality_check
     from cgda_jax.experiment.report import reality_rows
 
-    feats = np.asarray(sim.simulator(WAYPOINTS), np.float64)
+    feats = np.asarray(sim.execute(WAYPOINTS), np.float64)
     res = types.SimpleNamespace(strategy="ie", joints=WAYPOINTS, goal=feats,
                                 features=feats, tolerance=0.01)
     same = reality_check(sim, res, {})
     assert same["executed"] and same["success"] and same["max_point_error"] < 2e-3
     off = reality_check(sim, res, {"joint_offset_deg": 3.0})
     # independent: the model at the offset joints, against the same goal
-    want = np.linalg.norm(np.asarray(sim.simulator(
+    want = np.linalg.norm(np.asarray(sim.execute(
         WAYPOINTS + np.float32(np.deg2rad(3.0))), np.float64) - feats, axis=1)
     np.testing.assert_allclose(off["point_errors"], want, atol=2e-3)
     assert not off["success"]

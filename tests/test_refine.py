@@ -55,7 +55,7 @@ def test_ie_polish_brings_points_far_below_tolerance(sim, goal, method):
     assert np.all(polished.point_errors <= plain.point_errors + 1e-7)
     assert polished.point_errors.max() < 1e-3 < plain.point_errors.max()
     # the reported features are those of executing the reported joints
-    again = np.asarray(sim.simulator(polished.joints))
+    again = np.asarray(sim.execute(polished.joints))
     np.testing.assert_allclose(again, polished.features, atol=1e-6)
 
 

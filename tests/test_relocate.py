@@ -41,7 +41,7 @@ def sim():
 @pytest.fixture(scope="module")
 def goal(sim):
     wps = np.array([[0.1, 0.2, 0.1], [0.3, 0.4, 0.2]], np.float32)
-    return np.asarray(sim.simulator(wps), np.float64)
+    return np.asarray(sim.execute(wps), np.float64)
 
 
 def _forward(m, state):

@@ -23,7 +23,7 @@ robot = c.Robot.from_mjcf(c.model_path("teo.xml"),
     fixed={"r_forearm_rotation": math.radians(45)})
 sim = c.Simulator(robot, c.PaintWall.grid(), substeps=3)
 wps = np.radians([[40, 0, 60], [60, -30, 60], [70, -60, 40]]).astype(np.float32)
-print("FEATURES", sim.simulator(wps)[:, 0].tolist())
+print("FEATURES", sim.execute(wps)[:, 0].tolist())
 render_trajectory(sim, wps, out + "/run.gif", width=240, height=180,
                   frames_per_waypoint=3)
 render_trajectory(sim, wps, out + "/frames", width=240, height=180,

@@ -73,7 +73,7 @@ assert jax.device_count() == 4, jax.devices()
 robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                         "marker")
 sim = Simulator(robot, MarkerScene(), substeps=2)
-goal = sim.simulator(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
+goal = sim.execute(jnp.array([[0.3, 0.4, -0.5], [-0.2, 0.6, 0.3]]))
 kw = dict(population_size=6, tolerance=0.02, max_generations=12, chunk_size=4)
 
 def same(a, b):

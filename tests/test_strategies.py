@@ -302,7 +302,7 @@ def test_iet_commits_best_try_when_every_try_fails(sim):
     np.testing.assert_allclose(committed, tries.min(axis=1), rtol=1e-6)
     assert np.any(tries.argmin(axis=1) != 2)  # the last try is not always the best
     # the committed postures, re-executed from scratch, give those fitnesses
-    feats = np.asarray(sim.simulator(jnp.asarray(res.joints)), float)
+    feats = np.asarray(sim.execute(jnp.asarray(res.joints)), float)
     prefix = np.sqrt(np.cumsum(np.sum((feats - goal) ** 2, axis=1)))
     np.testing.assert_allclose(committed, prefix, rtol=1e-5)
 

@@ -127,7 +127,7 @@ class Run:
         self._need_execution("replay()")
         sim = sim if sim is not None else self.simulator()
         joints = np.asarray(self.arrays["joints"], np.float32)
-        return np.asarray(sim.simulator(joints), np.float64)
+        return np.asarray(sim.execute(joints), np.float64)
 
     def execution_result(self):
         """The strategy's `cgda_jax.ExecutionResult` (``ExecutionResult.load``)."""

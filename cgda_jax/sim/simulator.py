@@ -42,7 +42,7 @@ Example:
     >>> robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
     ...                         "marker")
     >>> sim = Simulator(robot, MarkerScene(), substeps=4)
-    >>> sim.simulator(jnp.zeros((5, 3))).shape
+    >>> sim.execute(jnp.zeros((5, 3))).shape
     (5, 3)
 """
 
