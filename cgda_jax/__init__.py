@@ -23,10 +23,14 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     # core: data, generalization, distances, recognition
     "cgda_jax.data": ("Demonstration", "load_csv", "load_npz", "load_xgnitive",
                       "save_csv", "save_npz", "validate_demonstrations"),
-    "cgda_jax.distance": ("dtw", "dtw_multi", "euclidean", "resample", "soft_dtw"),
+    "cgda_jax.distance": ("dtw", "dtw_multi", "dtw_per_feature", "euclidean",
+                          "resample", "soft_dtw"),
     "cgda_jax.generalization": ("GeneralizedAction", "generalize", "rbf_interpolate"),
     "cgda_jax.recognition": ("ActionLibrary", "Recognition", "cost_matrix",
                              "recognize"),
+    # selection of features and demonstrations (issue 44)
+    "cgda_jax.select": ("DemonstrationSelection", "FeatureSelection",
+                        "select_demonstrations", "select_features"),
     # simulation: robot, scenes, execution, rendering
     "cgda_jax.sim.sim_state": ("SimState",),
     "cgda_jax.sim.simulator": ("Simulator",),

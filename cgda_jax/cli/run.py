@@ -28,8 +28,8 @@ and plots/ (PNGs; execution runs also plots/execution.gif of the robot). It is
 written aside and moved into place when complete: a failed or interrupted run
 leaves the folder as it was. A non-empty --out is refused unless --overwrite; a
 lock refuses a second run into a folder in use.
-Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
-tables printed by --dry-run. With --trials N the folder gets trials.json and a
+Config keys: the [data], [recognition], [selection], [robot], [scene], [strategy]
+and [output] tables printed by --dry-run. With --trials N the folder gets trials.json and a
 report.md success-rate table instead, and the exit status is 0 once they are
 written, whatever the rate. Exit status: 0 goal met, 1 goal not met, 2 bad input
 (config, files, results folder not empty, in use or not writable), 3 any other

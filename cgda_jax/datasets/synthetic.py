@@ -216,9 +216,32 @@ def _generate(n_repetitions: int, seed: int, rate_hz: float) -> dict:
     }
 
 
+#: Irrelevant features of ``synthetic_actions(..., irrelevant=k)``: distractor k's
+#: position [mm], a second object someone else moves about the desk meanwhile.
+DISTRACTOR_AMPLITUDE_MM = 300.0
+
+
+def distractor_names(k: int) -> tuple[str, ...]:
+    """The names of ``k`` irrelevant features (with their unit)."""
+    return tuple(f"distractor_{i + 1} [mm]" for i in range(int(k)))
+
+
+def _distractors(rng: np.random.Generator, times: np.ndarray, k: int) -> np.ndarray:
+    """(T, k) smooth positions unrelated to the action: per column an offset and
+    three sinusoids of random frequency (0.1-0.6 Hz) and phase."""
+    cols = []
+    for _ in range(k):
+        f = rng.uniform(0.1, 0.6, 3)
+        phase = rng.uniform(0.0, 2 * np.pi, 3)
+        amp = rng.uniform(0.3, 1.0, 3) * DISTRACTOR_AMPLITUDE_MM / 3
+        wave = (amp * np.sin(2 * np.pi * f * times[:, None] + phase)).sum(axis=1)
+        cols.append(rng.uniform(-1, 1) * DISTRACTOR_AMPLITUDE_MM + wave)
+    return np.stack(cols, axis=1)
+
+
 def synthetic_actions(
     n_repetitions: int = 7, seed: int = 0, *, rate_hz: float = 30.0,
-    features: str = "marker",
+    features: str = "marker", irrelevant: int = 0,
 ) -> dict[str, list[Demonstration]]:
     """Seeded demonstrations of MOVE, ROTATE, CLEAN and PAINT (paper section 4.1-4.2).
 
@@ -231,6 +254,12 @@ def synthetic_actions(
             hue, saturation, value, angle [deg]; F = 8) or ``"arm"`` for the
             demonstrator's hand tip, wrist, elbow and shoulder X, Y, Z [m] (F = 12).
             Both views of one seed describe the same repetitions.
+        irrelevant: adds this many irrelevant features after those,
+            ``"distractor_k [mm]"`` (`distractor_names`): the position of a second
+            object moved about by someone else, unrelated to the action (an
+            offset up to +-300 mm and slow waves of about that size, drawn anew
+            for every repetition from a generator of its own, so the other
+            features are those of ``irrelevant=0``).
 
     Returns:
         ``{action: [Demonstration, ...]}`` in the order MOVE, ROTATE, CLEAN, PAINT;
@@ -244,13 +273,24 @@ def synthetic_actions(
     """
     if features not in ("marker", "arm"):
         raise ValueError(f"features must be 'marker' or 'arm', got {features!r}")
-    names = MARKER_FEATURES if features == "marker" else ARM_FEATURES
+    if isinstance(irrelevant, bool) or int(irrelevant) != irrelevant or irrelevant < 0:
+        raise ValueError(f"irrelevant must be a whole number >= 0, got {irrelevant!r}")
+    names = (MARKER_FEATURES if features == "marker" else ARM_FEATURES
+             ) + distractor_names(irrelevant)
     reps = _generate(n_repetitions, seed, rate_hz)
+    noise = np.random.default_rng([int(seed), 44])  # its own stream
+
+    def values(r: _Repetition) -> np.ndarray:
+        own = r.marker if features == "marker" else r.arm
+        if not irrelevant:
+            return own
+        return np.concatenate([own, _distractors(noise, r.times, irrelevant)], 1)
+
     return {
         a: [
             Demonstration(
                 times=r.times,
-                features=r.marker if features == "marker" else r.arm,
+                features=values(r),
                 feature_names=names,
                 name=f"{a}-{k + 1}",
             )

@@ -25,6 +25,7 @@ from cgda_jax.experiment.sections import (
     RecognitionConfig,
     RobotConfig,
     SceneConfig,
+    SelectionConfig,
     StrategyConfig,
     WorldConfig,
 )
@@ -55,6 +56,7 @@ class ExperimentConfig:
     description: str = ""
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
     recognition: RecognitionConfig = dataclasses.field(default_factory=RecognitionConfig)
+    selection: SelectionConfig = dataclasses.field(default_factory=SelectionConfig)
     robot: RobotConfig = dataclasses.field(default_factory=RobotConfig)
     world: WorldConfig = dataclasses.field(default_factory=WorldConfig)
     scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)

@@ -65,6 +65,26 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
             path=path,
         )
         written.append(path)
+    return written + _selection_figures(run, out)
+
+
+def _selection_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
+    """The z-scores of a ``[selection]`` against alpha, features and
+    demonstrations of each action (none without a selection)."""
+    from cgda_jax.plotting import plot_zscores
+
+    sel = run.result.get("selection")
+    written = []
+    for part, what in (("features", "feature"), ("demonstrations", "demonstration")):
+        panels = {a: (rec[part]["names"], [np.nan if z is None else z
+                                          for z in rec[part]["zscores"]])
+                  for a, rec in (sel or {}).get("actions", {}).items() if part in rec}
+        if panels:
+            written.append(out / f"selection_{part}.png")
+            plot_zscores(
+                panels, sel["alpha"], what=what, path=written[-1],
+                title=f"{run.name}: {what} selection, z-scores of the summed DTW "
+                      f"({sel['normalization']} normalization)")
     return written
 
 

@@ -233,6 +233,34 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     return rows
 
 
+def _z(value) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.2f}"
+
+
+def selection_rows(selection: dict | None) -> list[str]:
+    """The ``[selection]`` of a recognition run: per action the z-scores of its
+    features and demonstrations, a discarded one struck through."""
+    if not selection:
+        return []
+
+    def cells(part: dict) -> str:
+        return ", ".join(
+            f"{n} {_z(z)}" if keep else f"~~{n} {_z(z)}~~"
+            for n, z, keep in zip(part["names"], part["zscores"], part["selected"]))
+
+    lines = ["", f"Selection (normalization {selection['normalization']}, alpha "
+             f"{selection['alpha']:g}; z-scores, discarded struck through):", "",
+             "| action | features | demonstrations |", "|---|---|---|"]
+    for action, rec in selection["actions"].items():
+        feats, dems = rec.get("features"), rec.get("demonstrations")
+        lines.append(f"| {action} | {cells(feats) if feats else 'all'} | "
+                     f"{cells(dems) if dems else 'all'} |")
+    if "features" in selection:
+        lines += ["", "Features kept (by at least one action): "
+                  + ", ".join(selection["features"]) + "."]
+    return lines
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -255,6 +283,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             cells = [f"**{v:.4g}**" if j == best else f"{v:.4g}" for j, v in enumerate(row)]
             lines.append(f"| {q.lower()} | " + " | ".join(cells) + " |")
         lines += ["", f"Accuracy: {result['accuracy']:.0%}."]
+        lines += selection_rows(result.get("selection"))
     else:
         lines += [
             f"Strategy {result['strategy'].upper()} ({cfg.strategy.algorithm}, population "
@@ -311,6 +340,10 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
         elif render:
             lines += ["", f"Frames not rendered: {render['reason']} (set MUJOCO_GL=egl "
                       "or osmesa; `output.render = false` turns rendering off)."]
+    if result.get("selected_demonstrations"):
+        lines += ["", "Demonstrations kept by the selection (normalization "
+                  f"{cfg.selection.normalization}, alpha {cfg.selection.alpha:g}): "
+                  + ", ".join(result["selected_demonstrations"]) + "."]
     if result.get("feature_labels"):
         lines += ["", "Features: " + ", ".join(result["feature_labels"]) + "."]
     plots = sorted(plots if plots is not None else result.get("plots", []))

@@ -12,6 +12,7 @@ paper figure / table              function
 ================================  ===========================================
 Fig. 2, Fig. 7                    :func:`plot_demonstrations`
 Tables 2-4                        :func:`plot_cost_matrix`
+(selection z-scores vs alpha)     :func:`plot_zscores`
 Fig. 4                            :func:`plot_fitness`
 Fig. 5, 6, 10                     :func:`plot_goal_vs_executed`
 Fig. 9                            :func:`plot_time_per_point`
@@ -21,7 +22,8 @@ Fig. 8, 11                        :func:`plot_frames`
 ================================  ===========================================
 
 Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.evolution`,
-`~cgda_jax.plotting.tables`, `~cgda_jax.plotting.frames`, `~cgda_jax.plotting.units`.
+`~cgda_jax.plotting.tables`, `~cgda_jax.plotting.selection`,
+`~cgda_jax.plotting.frames`, `~cgda_jax.plotting.units`.
 """
 
 from cgda_jax.plotting import units as units
@@ -37,6 +39,7 @@ from cgda_jax.plotting.evolution import (
 )
 from cgda_jax.plotting.frames import plot_frames as plot_frames
 from cgda_jax.plotting.motion import plot_motion as plot_motion
+from cgda_jax.plotting.selection import plot_zscores as plot_zscores
 from cgda_jax.plotting.tables import plot_cost_matrix as plot_cost_matrix
 from cgda_jax.plotting.trajectories import (
     plot_demonstrations as plot_demonstrations,
@@ -54,5 +57,6 @@ __all__ = [
     "plot_goal_vs_executed",
     "plot_point_errors",
     "plot_time_per_point",
+    "plot_zscores",
     "units",
 ]
