@@ -28,6 +28,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "cgda_jax.generalization": ("GeneralizedAction", "generalize", "rbf_interpolate"),
     "cgda_jax.recognition": ("ActionLibrary", "Recognition", "cost_matrix",
                              "recognize"),
+    "cgda_jax.segmentation": ("Segment", "execute_sequence", "segment"),
     # selection of features and demonstrations (issue 44)
     "cgda_jax.select": ("DemonstrationSelection", "FeatureSelection",
                         "select_demonstrations", "select_features"),

@@ -68,6 +68,12 @@ def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None):
              + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
+    if cfg.kind == "execution":
+        from cgda_jax.experiment.report import not_met_hint
+
+        hint = not_met_hint(cfg, result)
+        if hint:
+            say(args, f"[{cfg.name}] hint: {hint}")
     return pending
 
 
@@ -126,7 +132,8 @@ def cmd_run(args) -> int:
     if args.dry_run:
         folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
         print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
-              f"{folder}\n" + dump_config(cfg), end="")
+              f"{folder}\n# the keys that apply to it (a run's config.toml holds them "
+              f"all)\n" + dump_config(cfg, applicable_only=True), end="")
         return EXIT_MET
     if args.trials is not None:
         return run_trials_command(

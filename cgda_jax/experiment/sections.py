@@ -292,6 +292,10 @@ class OutputConfig:
     dir: str = "results"
     plots: bool = True
     render: bool = True
+    #: the video's free camera, over a default that frames the goal and the arm:
+    #: ``lookat`` [x, y, z] m, ``distance`` m, ``azimuth``, ``elevation`` deg
+    #: (`cgda_jax.experiment.rules.check_camera`)
+    camera: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass

@@ -36,6 +36,7 @@ from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import (
     MAX_INTERVALS,
+    check_camera,
     check_interval_count,
     validate_config,
 )
@@ -121,6 +122,7 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
             raise ConfigError("key 'recognition.n_samples' must be >= 2")
         return
     check_seed(s.seed, "strategy.seed")
+    check_camera(cfg.output.camera)  # names a bad [output] camera key
     if trials is not None and s.seed + trials - 1 > MAX_SEED:
         raise ConfigError(
             f"key 'strategy.seed' with --trials {trials}: the seeds {s.seed} .. "
