@@ -5,6 +5,7 @@ video (MP4 + GIF, 640x480) and frame strip, with the goal drawn in."""
 from __future__ import annotations
 
 import logging
+import math
 import os
 import pathlib
 import textwrap
