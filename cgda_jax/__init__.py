@@ -58,15 +58,15 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "cgda_jax.reality.calibrate": ("estimate_offsets", "OffsetEstimate"),
 }
 #: Submodules reached as attributes (``cgda_jax.datasets.clean_circle_demos``).
-_SUBMODULES = ("checks", "datasets", "sizes")
+_SUBMODULES = ("checks", "datasets", "plotting", "sizes")
 
 _ORIGIN = {name: module for module, names in _EXPORTS.items() for name in names}
 __all__ = ["__version__", *_ORIGIN, *_SUBMODULES]
 
 
 def __getattr__(name: str):
-    """A public name (or the ``checks`` / ``datasets`` / ``sizes`` module), imported
-    on first access."""
+    """A public name (or the ``checks``, ``datasets``, ``plotting`` or ``sizes``
+    module), imported on first access."""
     if name in _SUBMODULES:
         value = _importlib.import_module(f"cgda_jax.{name}")
     elif name in _ORIGIN:
