@@ -383,10 +383,10 @@ def _tiny_demo(monkeypatch, fail_second=False):
     if fail_second:
         real = ex.start_run
 
-        def start_run(cfg, folder, progress_fn=None):
+        def start_run(cfg, folder, progress_fn=None, built=None):
             if cfg.name == "b":  # while a's figures may still be drawing
                 raise KeyboardInterrupt
-            return real(cfg, folder, progress_fn)
+            return real(cfg, folder, progress_fn, built)
 
         monkeypatch.setattr(ex, "start_run", start_run)
 
