@@ -52,6 +52,8 @@ from cgda_jax.sizes import (
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
+#: Largest goal value (in its features' units): its square must fit float32 (3.4e38).
+MAX_GOAL_VALUE = 1e18
 #: Goal points (paint ramp length, generalized knots).
 MAX_GOAL_POINTS = 10_000
 #: Candidates per generation.
@@ -122,6 +124,7 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
             raise ConfigError("key 'recognition.n_samples' must be >= 2")
         return
     check_seed(s.seed, "strategy.seed")
+    check_seed(cfg.reality.seed, "reality.seed")
     check_camera(cfg.output.camera)  # names a bad [output] camera key
     if trials is not None and s.seed + trials - 1 > MAX_SEED:
         raise ConfigError(
@@ -308,19 +311,25 @@ def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | Non
                     processes: int, local: bool) -> None:
     """What the run will hold at once (`cgda_jax.sizes.run_estimate`) within XLA's
     32-bit sizes and the memory of each process; `processes` against the cores."""
-    from cgda_jax.sizes import dynamic_width
+    from cgda_jax.sizes import dynamic_width, motion_width
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)
     backend = getattr(sim.backend, "name", None)
+    feas = getattr(sim, "feasibility", None)
     n = trials or 1
     share = -(-n // max(processes, 1))  # each process batches its own seeds
     est = run_estimate(
         trials=share, population=s.population_size, points=n_points,
         features=sim.n_features, dof=sim.n_dof, bodies=sim.robot.mj_model.nbody,
         strategy=s.name, samples=samples,
-        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0)
+        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0,
+        motion_width=0 if feas is None else motion_width(
+            feas.samples, 0 if feas.collider is None else feas.collider.n_pairs,
+            0 if feas.collider is None else sim.robot.mj_model.ngeom, sim.n_dof))
     name = ("--trials" if trials and trials > 1
+            else "keys 'strategy.population_size' and 'feasibility.samples'"
+            if est.part == "motion"
             else f"key 'strategy.options.{option}'" if est.part != "generation"
             else "key 'strategy.population_size'")
     try:
@@ -346,6 +355,12 @@ def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
         raise ConfigError(f"key 'data': {err}") from None
     n_points = int(goal.shape[0])
     _at_most(n_points, MAX_GOAL_POINTS, "data", " goal points")
+    top = float(np.max(np.abs(goal))) if goal.size else 0.0
+    if not top <= MAX_GOAL_VALUE:  # squared feature errors must fit float32
+        raise ConfigError(
+            f"key '{'data.scale' if cfg.data.scale != 1 else 'data'}': the goal "
+            f"reaches {top:.3g} (its demonstrations x data.scale = {cfg.data.scale:g}), "
+            f"beyond {MAX_GOAL_VALUE:.0e}: its squared errors would overflow float32")
     _at_most(s.population_size * n_points, MAX_CANDIDATE_POINTS,
              "strategy.population_size", f" x {n_points} goal points")
     waypoint_s = default_waypoint_s(demos, n_points)
