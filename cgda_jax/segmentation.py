@@ -19,6 +19,16 @@ in which several library actions follow each other (with or without pauses) into
 3. A dynamic programme over the boundaries (one ``lax.scan`` over the grid) picks
    the segmentation of least total cost, each segment's cost weighted by its
    duration (a per-second mismatch), with no two rests in a row.
+4. The boundaries are refined on the recording's own samples (`refine_boundaries`):
+   DTW places a boundary only roughly (it lets an action absorb a neighbouring
+   pause or slow end almost for free by stretching the held end of its template),
+   so around each gap between two actions (and before the first, after the last)
+   the samples are fitted by an explicit model of a human motion's ends: the object
+   held still, then leaving (or, before, reaching) its rest along a minimum-jerk
+   profile (Flash & Hogan 1985) over the action's duration, each feature with its
+   own amplitude (linear least squares); the end and start times of least residual
+   are searched jointly, on every sample within a share of the action's duration of
+   the search's boundaries.
 
 Rests are dropped from the result; each action segment says its start and end in
 the recording's time unit (seconds) and its cost.
@@ -28,6 +38,8 @@ References:
     Actions: An Evolutionary Approach", Advanced Robotics 2015, section 2.2.
     Sakoe, "Two-level DP-matching -- a dynamic programming-based pattern matching
     algorithm for connected word recognition", IEEE TASSP 1979.
+    Flash & Hogan, "The coordination of arm movements: an experimentally confirmed
+    mathematical model", J. Neuroscience 1985 (the minimum-jerk profile).
 """
 
 from __future__ import annotations
@@ -45,8 +57,8 @@ from cgda_jax.recognition import METRICS, ActionLibrary
 from cgda_jax.sizes import check_recognition
 
 __all__ = [
-    "REST", "Segment", "best_segmentation", "execute_sequence", "segment",
-    "segment_costs",
+    "REST", "Segment", "best_segmentation", "execute_sequence", "refine_boundaries",
+    "segment", "segment_costs",
 ]
 
 #: Label of a pause (the object held still) in `segment_costs` and
@@ -57,6 +69,16 @@ REST = "rest"
 _GRID_STEPS = 200
 #: Candidate starts whose segments are compared in one vectorised step.
 _STARTS_PER_CHUNK = 64
+#: `refine_boundaries`: a boundary moves at most this share of its action's
+#: (search) duration; the samples fitted reach this share into each action.
+_REACH = 0.25
+_INTO = 0.3
+#: `refine_boundaries`: rounds of refitting (each centres its window on the last).
+_ROUNDS = 10
+#: (end, start) pairs of candidate times fitted in one vectorised step.
+_PAIRS_PER_CHUNK = 512
+#: `refine_boundaries`: candidate times per side in the coarse pass.
+_COARSE = 24
 
 
 class Segment(NamedTuple):
@@ -300,6 +322,7 @@ def segment(
     n_samples: int = 16,
     step_s: float | None = None,
     durations_s: tuple[float, float] | None = None,
+    refine: bool = True,
 ) -> list[Segment]:
     """The sequence of library actions in one recording (segmental search).
 
@@ -315,6 +338,9 @@ def segment(
         durations_s: (shortest, longest) duration in seconds of an action (default:
             4 grid steps to the whole recording); a rest lasts one grid step to the
             longest. A range close to the actions' durations is faster and safer.
+        refine: refine the boundaries on the recording's samples
+            (`refine_boundaries`, the default); ``False`` keeps the search's grid
+            points.
 
     Returns:
         The recognized actions in time order; pauses between them are left out.
@@ -349,11 +375,129 @@ def segment(
             f"{lengths[-1] * step:.4g} s; allow longer segments (durations_s)")
     costs = np.asarray(costs)
     index = {int(v): k for k, v in enumerate(lengths)}
-    return [
+    found = [
         Segment(library.names[a], float(grid_t[s]), float(grid_t[e]),
                 float(costs[s, index[e - s], a]))
         for s, e, a in path if a < len(library)
     ]
+    return refine_boundaries(recording, found) if refine else found
+
+
+def _min_jerk(u: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress ``10 u^3 - 15 u^4 + 6 u^5`` of ``u`` clipped to [0, 1]."""
+    u = np.clip(u, 0.0, 1.0)
+    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
+
+
+def _fit_gap(t, y, end, start, box_end, box_start):
+    """The (end, start) times of least residual around one gap.
+
+    ``end``: (estimate, duration) of the action before the gap, or None (the gap
+    opens the recording); ``start``: the same for the action after it, or None (it
+    closes the recording). ``box_*``: (lowest, highest) allowed time. The samples
+    from ``_INTO`` durations before the end to ``_INTO`` after the start (1 s of
+    rest where a side is missing) are fitted by, per feature, a constant plus an
+    amplitude times the minimum-jerk descent ending at ``t1`` (over the previous
+    action's duration) plus one times the rise starting at ``t0``; ``t1 <= t0``.
+    Returns ``(t1, t0)``, None for a missing side.
+    """
+    lo = end[0] - _INTO * end[1] if end else start[0] - 1.0
+    hi = start[0] + _INTO * start[1] if start else end[0] + 1.0
+    keep = (t >= lo) & (t <= hi)
+    tt, yy = t[keep], y[keep]
+    c1 = tt[(tt >= box_end[0]) & (tt <= box_end[1])] if end else np.array([np.nan])
+    c0 = (tt[(tt >= box_start[0]) & (tt <= box_start[1])] if start
+          else np.array([np.nan]))
+    # coarse to fine: every few samples, then every sample around the best
+    stride = max(int(np.ceil(max(c1.size, c0.size) / _COARSE)), 1)
+    arg = _best_pair(tt, yy, end, start, c1[::stride], c0[::stride])
+    if stride > 1 and arg is not None:
+        half = stride * (t[1] - t[0])
+        arg = _best_pair(tt, yy, end, start,
+                         c1[np.abs(c1 - arg[0]) <= half] if end else c1,
+                         c0[np.abs(c0 - arg[1]) <= half] if start else c0)
+    if arg is None:  # the window missed the allowed range
+        return (end[0] if end else None), (start[0] if start else None)
+    return (float(arg[0]) if end else None), (float(arg[1]) if start else None)
+
+
+def _best_pair(tt, yy, end, start, c1, c0):
+    """`_fit_gap`'s search over the candidate end times ``c1`` and start times
+    ``c0`` (``[nan]`` for a missing side): the (t1, t0) of least residual, or None
+    when no pair is allowed."""
+    t1, t0 = (v.ravel() for v in np.meshgrid(c1, c0, indexing="ij"))
+    ok = np.isnan(t1) | np.isnan(t0) | (t1 <= t0)
+    t1, t0 = t1[ok], t0[ok]
+    if t1.size == 0:
+        return None
+    total = float(np.sum(yy**2))
+    best, arg = np.inf, None
+    for i in range(0, t1.size, _PAIRS_PER_CHUNK):
+        a, b = t1[i:i + _PAIRS_PER_CHUNK], t0[i:i + _PAIRS_PER_CHUNK]
+        cols = [np.ones((a.size, tt.size))]
+        if end:
+            cols.append(_min_jerk((a[:, None] - tt[None]) / end[1]))
+        if start:
+            cols.append(_min_jerk((tt[None] - b[:, None]) / start[1]))
+        x = np.stack(cols, -1)  # (pairs, samples, basis)
+        xt = x.transpose(0, 2, 1)
+        gram = xt @ x + 1e-12 * np.eye(x.shape[-1])
+        rhs = xt @ yy[None]
+        residual = total - np.sum(rhs * np.linalg.solve(gram, rhs), axis=(1, 2))
+        j = int(np.argmin(residual))
+        if residual[j] < best:
+            best, arg = residual[j], (a[j], b[j])
+    return arg
+
+
+def refine_boundaries(recording: Demonstration,
+                      segments: Sequence[Segment]) -> list[Segment]:
+    """The segments' starts and ends refined on the recording's samples.
+
+    Each gap between two segments (and the stretches before the first and after
+    the last) is fitted by the object at rest between a minimum-jerk end of the
+    action before and a minimum-jerk start of the action after (`segment`, step
+    4), each feature in units of its noise; the end and start times (samples of the
+    recording, the end not after the start) within ``0.25`` of each action's
+    duration of the given boundaries are chosen jointly by least residual, the
+    window recentred and refitted until it settles (at most 10 rounds).
+
+    Args:
+        recording: the recording the segments were found in.
+        segments: its action segments in time order (as `segment` with
+            ``refine=False`` returns them).
+
+    Returns:
+        The same segments with refined ``start`` and ``end`` (seconds); actions and
+        costs unchanged.
+    """
+    if not segments:
+        return []
+    t = recording.times
+    y = recording.features / _noise(recording)
+    n = len(segments)
+    dur = [s.end - s.start for s in segments]
+    box = [(s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
+            s.end + _REACH * d) for s, d in zip(segments, dur)]
+    starts = [s.start for s in segments]
+    ends = [s.end for s in segments]
+    for _ in range(_ROUNDS):
+        new_starts, new_ends = list(starts), list(ends)
+        for g in range(n + 1):
+            before = (ends[g - 1], dur[g - 1]) if g > 0 else None
+            after = (starts[g], dur[g]) if g < n else None
+            t1, t0 = _fit_gap(t, y, before, after,
+                              box[g - 1][2:] if g > 0 else None,
+                              box[g][:2] if g < n else None)
+            if g > 0:
+                new_ends[g - 1] = t1
+            if g < n:
+                new_starts[g] = t0
+        if new_starts == starts and new_ends == ends:
+            break
+        starts, ends = new_starts, new_ends
+    return [s._replace(start=float(a), end=float(b))
+            for s, a, b in zip(segments, starts, ends)]
 
 
 def execute_sequence(
