@@ -6,6 +6,7 @@ untouched tree and comparing after:
 
     python benchmarks/same_results.py --save DIR      # before
     python benchmarks/same_results.py --compare DIR   # after: exit 1 on a difference
+    python benchmarks/same_results.py --compare DIR --stored DIR2  # DIR2 saved after
 
 Runs (CPU by default; set JAX_PLATFORMS to change): the built-in experiments
 clean_ie, paint_iet, clean_fte and iron_ie_xgnitive (the last needs the xgnitive
@@ -16,7 +17,7 @@ or its parent), each with seeds 0-3
   (`cgda_jax.experiment.compute.compute_execution`: the goal and simulator built
   from the config, the strategy function of `cgda_jax.experiment.rules` with the
   config's settings), without the replays, figures and reports;
-- batched: one `cgda_jax.strategies.trials.run_seeds` call over seeds 0-3, as
+- batched: one `cgda_jax.strategies.run_seeds` call over seeds 0-3, as
   ``cgda run CONFIG --trials 4`` calls it (`cgda_jax.experiment.trials`).
 
 Stored per run: every `ExecutionResult` array (joints, features, goal, point
@@ -26,6 +27,9 @@ violation, per-point generations and tries, ...) but times.
 
 ``--only NAME ...`` restricts the experiments, ``--set KEY=VALUE`` overrides config
 keys (as ``cgda run --set``; the same overrides must be given to save and compare).
+JAX's persistent compilation cache is on, as in ``cgda run``, in ``DIR/jax_cache``:
+a program compiled for the save is taken from there when the compare's is the same
+(the cache is keyed by the program), so unchanged programs are not compiled twice.
 """
 
 from __future__ import annotations
@@ -92,8 +96,8 @@ def build(name: str, overrides: list[str]):
     cfg = ex.load_config(REPO / "experiments" / f"{name}.toml", overrides)
     if cfg.data.source == "xgnitive" and not cfg.data.data_dir:
         found = [p for p in (os.environ.get("CGDA_XGNITIVE_DIR"),
-                             REPO.parent / "shared" / "data" / "xgnitive",
-                             REPO.parents[1] / "shared" / "data" / "xgnitive")
+                             *(r / "shared" / "data" / "xgnitive"
+                               for r in REPO.parents))
                  if p and pathlib.Path(p).is_dir()]
         cfg.data.data_dir = str(found[0]) if found else ""
     goal, demos, _ = build_goal(cfg)
@@ -114,7 +118,10 @@ def single(cfg, goal, sim, seed: int):
 
 def batched(cfg, goal, sim, seeds):
     """One batched call as ``cgda run --trials`` makes it."""
-    from cgda_jax.strategies.trials import run_seeds
+    try:
+        from cgda_jax.strategies import run_seeds
+    except ImportError:  # a tree before issue 40
+        from cgda_jax.strategies.trials import run_seeds
 
     s = cfg.strategy
     return run_seeds(
@@ -124,11 +131,14 @@ def batched(cfg, goal, sim, seeds):
         progress_fn=None, **s.options)
 
 
-def collect(names, overrides) -> dict[str, np.ndarray]:
-    """``{run/key: array}`` of every run."""
+def collect(names, overrides, folder: pathlib.Path | None = None
+            ) -> dict[str, np.ndarray]:
+    """``{run/key: array}`` of every run; with ``folder``, each experiment's arrays
+    are also stored there (``results_NAME.npz``) as soon as its runs end."""
     out: dict[str, np.ndarray] = {}
     for name in names:
         t0 = time.perf_counter()
+        mine = set(out)
         cfg, goal, sim = build(name, overrides)
         for seed in SEEDS:
             for k, v in result_arrays(single(cfg, goal, sim, seed)).items():
@@ -136,7 +146,19 @@ def collect(names, overrides) -> dict[str, np.ndarray]:
         for seed, res in zip(SEEDS, batched(cfg, goal, sim, SEEDS)):
             for k, v in result_arrays(res).items():
                 out[f"{name}/batched/seed{seed}/{k}"] = v
+        if folder is not None:
+            np.savez(folder / f"results_{name}.npz",
+                     **{k: v for k, v in out.items() if k not in mine})
         print(f"{name}: {time.perf_counter() - t0:.0f} s", flush=True)
+    return out
+
+
+def stored(folder: pathlib.Path, names) -> dict[str, np.ndarray]:
+    """The arrays `collect` stored in ``folder`` for the experiments ``names``."""
+    out = {}
+    for name in names:
+        with np.load(folder / f"results_{name}.npz") as f:
+            out.update({k: f[k] for k in f.files})
     return out
 
 
@@ -169,19 +191,30 @@ def main() -> int:
                        help="run and compare with DIR exactly")
     parser.add_argument("--only", nargs="*", default=list(EXPERIMENTS))
     parser.add_argument("--set", action="append", default=[], dest="overrides")
+    parser.add_argument("--cache", type=pathlib.Path,
+                        help="JAX compilation cache folder (default DIR/jax_cache)")
+    parser.add_argument("--stored", type=pathlib.Path,
+                        help="with --compare: take this tree's results from a folder "
+                        "--save wrote (e.g. saved from another checkout at the same "
+                        "time) instead of running")
     args = parser.parse_args()
     folder = args.save or args.compare
+    from cgda_jax.cli import enable_compilation_cache
+
+    enable_compilation_cache((args.cache or folder / "jax_cache").resolve())
     names = [n for n in args.only if n in EXPERIMENTS] or list(EXPERIMENTS)
-    got = collect(names, args.overrides)
+    if args.stored:  # this tree's results as --save stored them elsewhere
+        got = stored(args.stored, names)
+    else:
+        if args.save:
+            folder.mkdir(parents=True, exist_ok=True)
+        got = collect(names, args.overrides, folder if args.save else None)
     if args.save:
-        folder.mkdir(parents=True, exist_ok=True)
-        np.savez(folder / "results.npz", **got)
         (folder / "runs.json").write_text(json.dumps(
             {"experiments": names, "seeds": SEEDS, "overrides": args.overrides}))
-        print(f"stored {len(got)} arrays in {folder / 'results.npz'}")
+        print(f"stored {len(got)} arrays in {folder}")
         return 0
-    with np.load(folder / "results.npz") as f:
-        want = {k: f[k] for k in f.files if k.split("/")[0] in names}
+    want = stored(folder, names)
     lines = compare(got, want)
     for line in lines:
         print(line)
