@@ -5,7 +5,9 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 - ``init(key) -> carry``
 - ``step(carry) -> (carry, metrics)``: one generation; done parts are frozen inside.
 - ``done(carry) -> bool``: nothing left to evolve.
-- ``progress(carry) -> dict``: host figures for ``progress_fn`` (one entry per trial).
+- ``progress(carry) -> dict``: host figures for ``progress_fn`` (one entry per trial),
+  ``generations`` among them: the count its result reports (IE: the slowest point's;
+  IET, OET: summed over points; restarts included), not the chunks driven.
 - ``finish(carry) -> dict``: final arrays (best trajectory, its execution, ...).
 - ``to_result(final, history, timing) -> ExecutionResult`` on host NumPy arrays.
 - ``max_generations_total``: an upper bound on generations (loop guard).
@@ -579,7 +581,8 @@ def drive_ie_points(
         return jax.tree.map(lambda x: x.reshape((n, n_pts, *x.shape[1:])), flat)
 
     def frozen(flat):
-        return flat.best_fitness, flat.tries, flat.done
+        return (flat.best_fitness, flat.tries, flat.done,
+                flat.generations + flat.evo.generation)
 
     init_c = progs.get("init", jax.vmap(plan.init), keys)
     carry_shape = jax.eval_shape(jax.vmap(plan.init), keys)
@@ -589,7 +592,7 @@ def drive_ie_points(
                          flat_shape)
     t1, compiled_before = time.perf_counter(), progs.compile_s
     flat = flatten_c(init_c(keys))
-    best_f, tries, done = jax.device_get(progs("frozen", frozen, flat))
+    best_f, tries, done, gens = jax.device_get(progs("frozen", frozen, flat))
     active = np.flatnonzero(~done)
     chunks: list[dict[str, np.ndarray]] = []
     batch_sizes: list[int] = []
@@ -618,13 +621,16 @@ def drive_ie_points(
         chunks.append(full)
         batch_sizes.append(size)
         generations += chunk_size
-        best_f, tries, done = jax.device_get(progs("frozen", frozen, flat))
+        best_f, tries, done, gens = jax.device_get(progs("frozen", frozen, flat))
         active = np.flatnonzero(~done)
         if generations >= plan.max_generations_total:
             active = active[:0]
         report_progress(progress_fn, plan, generations, not active.size, t1,
-                  SimpleNamespace(done=done.reshape((n, n_pts)),
-                                  best_fitness=best_f.reshape((n, n_pts))))
+                  SimpleNamespace(  # the fields IEPlan.progress reads, per trial
+                      done=done.reshape((n, n_pts)),
+                      best_fitness=best_f.reshape((n, n_pts)),
+                      generations=gens.reshape((n, n_pts)),
+                      evo=SimpleNamespace(generation=np.zeros((n, n_pts), int))))
     final = jax.device_get(jax.block_until_ready(finish_c(flat)))
     wall = time.perf_counter() - t1 - (progs.compile_s - compiled_before)
     history = {k: np.concatenate([c[k] for c in chunks] or [np.zeros((0, total))],
