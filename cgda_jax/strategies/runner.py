@@ -462,7 +462,7 @@ def drive_repacked(
     progress_fn: Callable[[dict[str, Any]], None] | None = None,
     min_size: int = 2,
 ) -> list[Any]:
-    """Like `runner.drive` (same arguments and results), but finished trials leave
+    """Like `drive` (same arguments and results), but finished trials leave
     the batch between chunks and the rest are re-packed into the smallest size of
     `ladder` (R) that holds them (padding repeats the last running trial; its copy
     is dropped).
@@ -542,7 +542,7 @@ def drive_ie_points(
     min_size: int = 8,
     block_evaluations: int | None = -1,
 ) -> list[Any]:
-    """Like `runner.drive` for an IE plan with independent points, but the batch is
+    """Like `drive` for an IE plan with independent points, but the batch is
     the pool of (trial, point) evolutions still running, re-packed between chunks
     into the smallest size of `ladder` (R * N) that holds them.
 
@@ -648,10 +648,10 @@ BATCHING = ("auto", "trials", "lockstep")
 
 
 def driver(batching: str) -> Callable[..., list[Any]] | None:
-    """The drive function of a ``batching`` mode (None: `runner.drive`, lock-step).
+    """The drive function of a ``batching`` mode (None: `drive`, lock-step).
 
     "auto": IE points pooled when the plan's points are independent, else trials
-    re-packed; "trials": trials re-packed; "lockstep": `runner.drive`.
+    re-packed; "trials": trials re-packed; "lockstep": `drive`.
     """
     if batching not in BATCHING:
         raise ValueError(f"batching must be one of {list(BATCHING)}; got {batching!r}")
