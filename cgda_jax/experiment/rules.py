@@ -91,12 +91,11 @@ def validate_config(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'robot.{key}' must be >= 0 (0 = default)")
     if not 0 < cfg.robot.move_fraction <= 1:
         raise ConfigError("key 'robot.move_fraction' must be in (0, 1]")
-    for key in ("population_size", "max_generations", "chunk_size"):
-        if getattr(cfg.strategy, key) < 1:
-            raise ConfigError(f"key 'strategy.{key}' must be >= 1")
-    if not (math.isfinite(cfg.strategy.tolerance) and cfg.strategy.tolerance > 0):
-        raise ConfigError(f"key 'strategy.tolerance' must be a finite number > 0, got "
-                          f"{cfg.strategy.tolerance}")
+    settings = STRATEGIES[cfg.strategy.name].settings
+    for key in SET_BY_CONFIG:  # checked by the strategy's settings, as in Python
+        problem = settings.option_problem(key, getattr(cfg.strategy, key))
+        if problem:
+            raise ConfigError(f"key 'strategy.{key}' {problem}")
     _validate_feasibility(cfg)
     _validate_reality(cfg)
     check_strategy_options(cfg.strategy)
