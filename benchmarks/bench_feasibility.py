@@ -39,7 +39,7 @@ from cgda_jax.builtin import resolve_config
 from cgda_jax.experiment import load_config
 from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
 from cgda_jax.sim.motion_check import motion_report
-from cgda_jax.strategies.trials import run_trials
+from cgda_jax.strategies import run_trials
 
 EXPERIMENTS = ["clean_ie", "clean_fte", "paint_iet", "clean_ie_dynamic",
                "paint_iet_dynamic", "move_push_box", "rotate_valve", "iron_ie_xgnitive"]

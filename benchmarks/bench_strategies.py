@@ -167,8 +167,8 @@ def flatness(times) -> dict:
 
 def trials_benchmark(cfg, goal, sim, n_trials: int) -> dict:
     from cgda_jax.cli import enable_compilation_cache
-    from cgda_jax.strategies.ie import run_ie
-    from cgda_jax.strategies.trials import run_trials
+    from cgda_jax.strategies import run_ie
+    from cgda_jax.strategies import run_trials
 
     enable_compilation_cache(pathlib.Path(tempfile.mkdtemp(prefix="cgda_bench_")))
     kw = strategy_kwargs(cfg)

@@ -1,6 +1,6 @@
 """Batched trials vs sequential runs: 30 clean-IE trials (experiments/clean_ie.toml).
 
-Three batched drivers of `run_trials` (`cgda_jax.strategies.batching`) against R
+Three batched drivers of `run_trials` (`cgda_jax.strategies.runner`) against R
 sequential `run_ie` calls (seeds 0..R-1), all in this process:
 
 - lockstep: one batch of R trials until the slowest stops (one compiled chunk);
@@ -51,8 +51,8 @@ def main() -> None:
                                  "sequential"])
     args = parser.parse_args()
     from cgda_jax.cli import enable_compilation_cache
-    from cgda_jax.strategies.ie import run_ie
-    from cgda_jax.strategies.trials import run_trials
+    from cgda_jax.strategies import run_ie
+    from cgda_jax.strategies import run_trials
 
     enable_compilation_cache(pathlib.Path(tempfile.mkdtemp(prefix="cgda_bench_")))
     overrides = ["strategy.max_generations=40"] if args.quick else []

@@ -180,7 +180,7 @@ def clean_on_teo(folders, demos_dir: pathlib.Path) -> dict:
 
     from cgda_jax.datasets.synthetic import CLEAN_CENTRE_M, clean_circle_demos
     from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
-    from cgda_jax.strategies.ie import run_ie
+    from cgda_jax.strategies import run_ie
     from cgda_jax.vision.camera import load_intrinsics, save_intrinsics
 
     clean = [f for f in folders if f.name.startswith("CLEAN-")][:6]

@@ -349,7 +349,7 @@ def distributed_trials(strategy: str, sim: Any, goal: Any, n_trials: int, *,
     """
     import jax
 
-    from cgda_jax.strategies.trials import run_trials
+    from cgda_jax.strategies import run_trials
 
     if "devices" in kwargs:
         raise ValueError("distributed_trials decides `devices` itself (each "

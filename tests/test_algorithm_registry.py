@@ -19,9 +19,14 @@ from evosax.algorithms import algorithms as EVOSAX_REGISTRY
 
 from cgda_jax import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.strategies import run_ie
-from cgda_jax.strategies.algorithms import ALGORITHMS, default_kwargs, make_algorithm
 from cgda_jax.strategies.base import to_joints
-from cgda_jax.strategies.evolution import evolution_init, evolution_step
+from cgda_jax.strategies.evolution import (
+    ALGORITHMS,
+    default_kwargs,
+    evolution_init,
+    evolution_step,
+    make_algorithm,
+)
 
 POP, GENES = 16, 3
 #: Constructor arguments cgda_jax cannot choose: the test passes them, as users must.

@@ -248,7 +248,8 @@ def test_c_fitness_equals_ours_with_feasibility(teo_paint_sim):
     _, goal = sim.step(state, jnp.asarray(near, jnp.float32))
     goal = np.asarray(goal, np.float64)
     plan = IETPlan(sim, jnp.asarray(goal[None], jnp.float32), algorithm="CMA_ES",
-                   population_size=8, tolerance=3.0, max_generations=5)
+                   population_size=8, tolerance=3.0, max_generations=5,
+                   restarts=0, backtracks=0, stagnation=None)
     lo, hi = np.asarray(sim.robot.lower), np.asarray(sim.robot.upper)
     postures = np.deg2rad([[25.0, -10.0, 20.0], [26.0, -9.0, 21.0],  # meet it
                            [10.0, -5.0, 10.0], [15.0, -15.0, 10.0],  # miss it

@@ -42,7 +42,7 @@ assert jax.process_count() == 2 and len(jax.devices()) == 2, jax.devices()
 assert dist.is_writer() == (jax.process_index() == 0)
 """ + SETUP + f"""
 if os.environ.get("FAIL_ON") == str(jax.process_index()):
-    import cgda_jax.strategies.trials as t
+    import cgda_jax.strategies as t
     def boom(*a, **k):
         raise ValueError("planned failure")
     t.run_trials = boom

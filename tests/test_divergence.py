@@ -24,11 +24,12 @@ from cgda_jax.strategies import (
     run_iet,
     run_oet,
 )
-from cgda_jax.strategies.algorithms import default_kwargs, make_algorithm
 from cgda_jax.strategies.evolution import (
     Evolution,
+    default_kwargs,
     evolution_init,
     evolution_step,
+    make_algorithm,
     screen,
 )
 

@@ -39,7 +39,7 @@ def goal(robot):
 
 def _first_try(sim, goal, warm):
     plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.01,
-                  max_generations=10, warm_start=warm)
+                  max_generations=10, warm_start=warm, restarts=0, stagnation=None)
     return plan.init(jax.random.key(0)).evo.algo
 
 

@@ -15,7 +15,6 @@ from cgda_jax import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.sim.feasibility import Feasibility
 from cgda_jax.strategies.fte import FTEPlan
 from cgda_jax.strategies.ie import IEPlan
-from cgda_jax.strategies.ie_context import contexts, judged_generation
 from cgda_jax.strategies.iet import IETPlan
 
 WALL = {"name": "wall", "type": "box", "pos": (0.3, 0.0, 0.125),
@@ -98,16 +97,16 @@ def test_the_bests_judged_with_the_candidates_equal_the_judged_rollout(sim):
     reference is the rollout that judges every move in order."""
     plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
                   tolerance=0.03,
-                  max_generations=20, restarts=0)
+                  max_generations=20, restarts=0, stagnation=None)
     s = plan.init(jax.random.key(1))
     seen = []
     for seed in range(6):  # some of these moves cross the wall, some are too fast
         best_u = jax.random.uniform(jax.random.key(seed), (3, 3), minval=-1.0,
                                     maxval=1.0)
-        states, none = contexts(plan, best_u)
+        states, none = plan.contexts(best_u)
         assert none is None
         errors, viol, (pops, _, fitness) = jax.jit(
-            lambda b, st: judged_generation(plan, s.evo, b, st))(best_u, states)
+            lambda b, st: plan.judged_generation(s.evo, b, st))(best_u, states)
         assert pops.shape == (3, 8, 3) and fitness.shape == (3, 8)
         q = plan.joints(best_u)
         feats, _ = sim.rollout(q)
@@ -131,7 +130,7 @@ def _check_result_and_finish(sim, res, plan_cls, monkeypatch):
     assert res.info["violation"] == pytest.approx(ref, abs=1e-6)
     assert res.success and res.info["feasible"]
     plan = plan_cls(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
-                    tolerance=0.03, max_generations=20, restarts=0)
+                    tolerance=0.03, max_generations=20, restarts=0, stagnation=None)
     carry = plan.init(jax.random.key(0))
     jax.clear_caches()
     calls = _move_traces(monkeypatch)
@@ -169,7 +168,7 @@ def test_a_result_whose_bests_were_not_judged_is_judged_again(sim):
     result's violation is computed again (`PlanBase.rejudge`), equal to the judged
     rollout's, also where it is not 0."""
     plan = IEPlan(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
-                  tolerance=0.03, max_generations=20, restarts=0)
+                  tolerance=0.03, max_generations=20, restarts=0, stagnation=None)
     s = plan.init(jax.random.key(0))
     assert not bool(plan.done(s))  # nothing judged yet: never done
     refs = []
@@ -210,7 +209,7 @@ def test_iet_kept_violations_equal_the_judged_moves():
     judged `Simulator.step` from the point's state); a speed limit of 0.8 rad/s
     makes bests infeasible on the way."""
     from cgda_jax.sim.limits import read_limits
-    from cgda_jax.strategies.iet_state import tree_at
+    from cgda_jax.strategies.iet import tree_at
 
     tiny = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                            "marker")
@@ -218,7 +217,8 @@ def test_iet_kept_violations_equal_the_judged_moves():
     slow = Simulator(tiny, MarkerScene(), substeps=4,
                      feasibility=Feasibility(tiny, limits, obstacles=[WALL]))
     plan = IETPlan(slow, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=16,
-                   tolerance=0.03, max_generations=25, restarts=0, backtracks=0)
+                   tolerance=0.03, max_generations=25, restarts=0, backtracks=0,
+                   stagnation=None)
     s = plan.init(jax.random.key(3))
     step = jax.jit(plan.step)
     seen = []

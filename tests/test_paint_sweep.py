@@ -12,7 +12,7 @@ from cgda_jax.experiment.build import build_goal, build_simulator
 from cgda_jax.experiment.config import load_config
 from cgda_jax.sim.chain import path_substeps
 from cgda_jax.sim.scenes import segment_distance2
-from cgda_jax.strategies.trials import run_trials
+from cgda_jax.strategies import run_trials
 
 
 @pytest.fixture(scope="module")

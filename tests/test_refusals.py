@@ -3,7 +3,6 @@
 mode cannot honour (equality constraints, limited tendons, features only contact
 moves), each refused by name before a run starts."""
 
-import inspect
 import os
 import pathlib
 import subprocess
@@ -73,14 +72,15 @@ def test_every_option_value_is_checked_by_its_key(capsys, name, setting, words):
         assert w in err
 
 
-def test_every_strategy_keyword_has_a_kind():
-    """A new keyword of a run_* function must say how its config value is checked."""
-    from cgda_jax.experiment.rules import OPTION_KINDS, SET_BY_CONFIG, strategy_function
+def test_every_strategy_setting_has_a_kind():
+    """A new setting of a strategy must say how its config value is checked: every
+    field of every settings dataclass is declared with `option` and a known kind."""
+    from cgda_jax.strategies import STRATEGIES
+    from cgda_jax.strategies.settings import OPTION_KINDS
 
-    for name in ("fte", "ie", "iet", "oet"):
-        params = inspect.signature(strategy_function(name)).parameters
-        missing = [k for k in params if k not in SET_BY_CONFIG and k not in OPTION_KINDS]
-        assert not missing, (name, missing)
+    for name, entry in STRATEGIES.items():
+        for key, field in entry.settings.fields().items():
+            assert field.metadata.get("kind") in OPTION_KINDS, (name, key)
 
 
 def test_options_that_need_independent_points_are_refused_in_the_dry_run(capsys):

@@ -14,7 +14,7 @@ from cgda_jax.reality.protocol import Measurement
 from cgda_jax.sim.features import FeatureSet
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop
-from cgda_jax.strategies.oet import run_oet
+from cgda_jax.strategies import run_oet
 
 JOINTS = ["yaw", "shoulder", "elbow"]
 # a box on a table behind the tiny arm (out of its reach) and a valve beside it

@@ -101,7 +101,7 @@ same([run_ie(sim, goal, devices=4, **kw)], [run_ie(sim, goal, **kw)])
 
 s4 = sh.population_sharding()
 plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
-              max_generations=8)
+              max_generations=8, restarts=0, stagnation=None)
 # trials: each device evolves 1 trial x 2 points x 8 candidates
 hlo = compile_plan(plan, sh.shard_leading(seed_keys(np.arange(4)), s4),
                    chunk_size=2, sharding=s4)[1].as_text()
@@ -109,7 +109,7 @@ assert "f32[1,2,8,3]" in hlo and "f32[4,2,8,3]" not in hlo
 # population: each device simulates 2 of the 8 candidates of each of the 2 points
 # (one trial: the plan's step runs on the trial itself, no trials axis)
 plan = IEPlan(sim, goal, algorithm="CMA_ES", population_size=8, tolerance=0.02,
-              max_generations=8, sharding=s4)
+              max_generations=8, restarts=0, stagnation=None, sharding=s4)
 hlo = compile_plan(plan, seed_keys(np.arange(1)), chunk_size=2)[1].as_text()
 assert "f32[2,2,3]" in hlo and "all-gather" in hlo
 print("STRATEGIES-OK")

@@ -110,7 +110,8 @@ def test_ie_without_restarts_traces_no_restart_branch(sim, goal):
     kw = dict(population_size=8, tolerance=0.01, max_generations=40)
     traced = {}
     for restarts in (0, 2):
-        plan = IEPlan(sim, goal, algorithm="CMA_ES", restarts=restarts, **kw)
+        plan = IEPlan(sim, goal, algorithm="CMA_ES", restarts=restarts,
+                      stagnation=None, **kw)
         carry = jax.eval_shape(jax.vmap(plan.init), runner.seed_keys([0]))
         calls, try_ = [], plan._try
         plan._try = lambda *a, **k: (calls.append(1), try_(*a, **k))[1]
@@ -479,13 +480,15 @@ def test_iet_stagnation_ends_a_stuck_evolution_early(paint_sim):
 @pytest.mark.parametrize("run", [run_ie, run_iet, run_oet, run_fte])
 @pytest.mark.parametrize("bad", [0, -3, 2.5, True, "10"])
 def test_every_strategy_refuses_a_bad_stagnation_by_value(sim, goal, run, bad):
-    # one check (base.check_stagnation) for every strategy: the value is named
+    # one check (the settings' Settings.check) for every strategy: the value is named
     with pytest.raises(ValueError, match=f"stagnation must be .*got {bad!r}"):
         run(sim, goal[:2], population_size=8, max_generations=2, stagnation=bad)
 
 
-def test_check_stagnation_takes_whole_numbers_of_any_type():
-    from cgda_jax.strategies.base import check_stagnation
+def test_settings_take_whole_numbers_of_any_type(sim, goal):
+    from cgda_jax.strategies.ie import IEPlan, IESettings
 
-    assert check_stagnation(None) is None and check_stagnation(7.0) == 7
-    assert isinstance(check_stagnation(np.int64(3)), int)
+    assert IESettings(stagnation=None).stagnation is None
+    for value in (7.0, np.int64(3)):
+        plan = IEPlan(sim, goal[:2], IESettings(stagnation=value, population_size=8))
+        assert plan.stagnation == int(value) and isinstance(plan.stagnation, int)

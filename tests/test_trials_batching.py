@@ -1,4 +1,4 @@
-"""Shrinking trial batches (cgda_jax.strategies.batching): each trial equals its single
+"""Shrinking trial batches (cgda_jax.strategies.runner): each trial equals its single
 run, and the batch really shrinks as trials (or IE points) finish."""
 
 import functools
@@ -9,8 +9,8 @@ import pytest
 
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
 from cgda_jax.strategies import run_fte, run_ie, run_iet, run_trials, runner
-from cgda_jax.strategies.batching import drive_ie_points, ladder
-from cgda_jax.strategies.ie import IEPlan
+from cgda_jax.strategies.runner import drive_ie_points, ladder
+from cgda_jax.strategies.ie import IEPlan, IESettings
 
 JOINTS = ["yaw", "shoulder", "elbow"]
 
@@ -82,9 +82,9 @@ def test_ie_points_pooled_equal_single_runs_and_the_pool_shrinks(sim, goal):
         assert t.info["point_generations"] == q.info["point_generations"]
         assert t.info["point_tries"] == q.info["point_tries"]
     # the pool evaluated in blocks of 3 evolutions (sizes rounded up to whole blocks)
-    blocked = runner.run(
-        IEPlan, sim, goal, [3, 4, 5, 6], algorithm="CMA_ES",
-        driver=functools.partial(drive_ie_points, block_evaluations=24), **IE_KW)
+    blocked = runner.run_plan(
+        IEPlan, sim, goal, IESettings(algorithm="CMA_ES", **IE_KW), [3, 4, 5, 6],
+        driver=functools.partial(drive_ie_points, block_evaluations=24))
     assert blocked[0].info["batch_sizes"][0] == 21  # 20 points -> 7 blocks of 3
     for t, q in zip(blocked, lock, strict=True):
         same(t, q)

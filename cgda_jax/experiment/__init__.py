@@ -65,7 +65,6 @@ from cgda_jax.experiment.config import (
     KINDS as KINDS,
     SCENES as SCENES,
     SOURCES as SOURCES,
-    STRATEGIES as STRATEGIES,
     XGNITIVE_ENV as XGNITIVE_ENV,
     ConfigError as ConfigError,
     DataConfig as DataConfig,

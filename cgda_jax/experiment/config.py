@@ -33,7 +33,6 @@ from cgda_jax.experiment.sections import (
 KINDS = ("recognition", "execution")
 SOURCES = ("synthetic", "clean_circle", "paint_ramp", "xgnitive", "move_box",
            "rotate_valve", "video", "csv")
-STRATEGIES = ("fte", "ie", "iet", "oet")
 SCENES = ("marker", "paint", "objects")
 #: Sources whose demonstrations are object features (goal columns = the scene's).
 OBJECT_SOURCES = ("move_box", "rotate_valve")

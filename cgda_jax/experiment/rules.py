@@ -6,8 +6,6 @@ robot and algorithm are in `cgda_jax.experiment.validate`.
 
 from __future__ import annotations
 
-import importlib
-import inspect
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -19,7 +17,6 @@ from cgda_jax.experiment.config import (
     OBJECT_SOURCES,
     SCENES,
     SOURCES,
-    STRATEGIES,
     ConfigError,
     ExperimentConfig,
     StrategyConfig,
@@ -84,7 +81,9 @@ def validate_config(cfg: ExperimentConfig) -> None:
         demonstration_files(cfg)
     _choice(cfg.scene.kind, SCENES, "scene.kind")
     _validate_objects(cfg)
-    _choice(cfg.strategy.name, STRATEGIES, "strategy.name")
+    from cgda_jax.strategies import STRATEGIES
+
+    _choice(cfg.strategy.name, list(STRATEGIES), "strategy.name")
     _choice(cfg.robot.mode, ("kinematic", "dynamic"), "robot.mode")
     _choice(cfg.robot.physics, ("auto", "mjx", "mujoco"), "robot.physics")
     for key in ("waypoint_s", "timestep"):
@@ -92,12 +91,11 @@ def validate_config(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'robot.{key}' must be >= 0 (0 = default)")
     if not 0 < cfg.robot.move_fraction <= 1:
         raise ConfigError("key 'robot.move_fraction' must be in (0, 1]")
-    for key in ("population_size", "max_generations", "chunk_size"):
-        if getattr(cfg.strategy, key) < 1:
-            raise ConfigError(f"key 'strategy.{key}' must be >= 1")
-    if not (math.isfinite(cfg.strategy.tolerance) and cfg.strategy.tolerance > 0):
-        raise ConfigError(f"key 'strategy.tolerance' must be a finite number > 0, got "
-                          f"{cfg.strategy.tolerance}")
+    settings = STRATEGIES[cfg.strategy.name].settings
+    for key in SET_BY_CONFIG:  # checked by the strategy's settings, as in Python
+        problem = settings.option_problem(key, getattr(cfg.strategy, key))
+        if problem:
+            raise ConfigError(f"key 'strategy.{key}' {problem}")
     _validate_feasibility(cfg)
     _validate_reality(cfg)
     check_strategy_options(cfg.strategy)
@@ -267,114 +265,40 @@ def check_interval_count(demos: Sequence, interval_s: float, method: str = "pape
 
 
 def strategy_function(name: str) -> Callable:
-    """``run_<name>`` from `cgda_jax.strategies` (or its module of that name)."""
+    """``run_<name>`` of `cgda_jax.strategies` for a name of its `STRATEGIES`."""
     from cgda_jax import strategies
 
-    fn = getattr(strategies, f"run_{name}", None)
-    if fn is None:
-        try:
-            mod = importlib.import_module(f"cgda_jax.strategies.{name}")
-        except ModuleNotFoundError:
-            raise ConfigError(f"key 'strategy.name': strategy {name!r} is not available") from None
-        fn = getattr(mod, f"run_{name}")
-    return fn
+    if name not in strategies.STRATEGIES:
+        raise ConfigError(f"key 'strategy.name': strategy {name!r} is not available; "
+                          f"choose one of {sorted(strategies.STRATEGIES)}")
+    return getattr(strategies, f"run_{name}")
 
 
-#: Arguments of ``run_<name>`` that the config sets itself (not through ``options``).
-SET_BY_CONFIG = ("sim", "goal", "algorithm", "population_size", "tolerance",
-                  "max_generations", "seed", "chunk_size", "progress_fn")
-
-
-#: The kind of every ``strategy.options`` value a config can set: ("int", lowest),
-#: ("number", rule), ("bool", None), ("choice", where the choices are), ("devices",
-#: None), ("table", None); "api": a keyword only Python callers can pass.
-OPTION_KINDS: dict[str, tuple[str, Any]] = {
-    "restarts": ("int", 0), "restart_samples": ("int", 0), "backtracks": ("int", 0),
-    "stagnation": ("int", 1), "init_samples": ("int", 1), "refine_steps": ("int", 1),
-    "max_steps": ("int", 1), "lookahead": ("int", 1),
-    "min_improvement": ("number", "in [0, 1)"), "aim": ("number", "in (0, 1]"),
-    "init_std": ("number", "> 0"),
-    "refine_gamma": ("number", "> 0"),
-    "reach_check": ("bool", None), "warm_start": ("bool", None),
-    "init": ("choice", "fte.INITS"), "refine": ("choice", "refine.REFINE"),
-    "distance": ("choice", "fte.DISTANCES"),
-    "devices": ("devices", None),
-    "algorithm_kwargs": ("table", None), "algorithm_params": ("table", None),
-    "keys": ("api", None),
-}
-
-
-def _choices(where: str) -> tuple[str, ...]:
-    module, _, name = where.partition(".")
-    return tuple(getattr(importlib.import_module(f"cgda_jax.strategies.{module}"),
-                         name))
-
-
-def _number_ok(value: float, rule: str) -> bool:
-    if rule == "in [0, 1)":
-        return 0 <= value < 1
-    if rule == "in (0, 1]":
-        return 0 < value <= 1
-    return value > 0
-
-
-def _device_count() -> int:
-    import jax
-
-    return jax.device_count()
-
-
-def option_problem(key: str, value: Any) -> str | None:
-    """What is wrong with ``strategy.options.<key> = value`` (None: nothing), by the
-    kind `OPTION_KINDS` gives the key (type first, then range)."""
-    kind, rule = OPTION_KINDS.get(key, ("any", None))
-    is_int = isinstance(value, int) and not isinstance(value, bool)
-    if kind == "int":
-        if not is_int:
-            return f"must be a whole number >= {rule}, got {value!r}"
-        return None if value >= rule else f"must be >= {rule}, got {value}"
-    if kind == "number":
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            return f"must be a number {rule}, got {value!r}"
-        ok = math.isfinite(value) and _number_ok(float(value), rule)
-        return None if ok else f"must be a finite number {rule}, got {value}"
-    if kind == "bool":
-        return None if isinstance(value, bool) else f"must be true or false, got " \
-            f"{value!r}"
-    if kind == "choice":
-        options = _choices(rule)
-        return None if value in options else f"{value!r} is not one of {list(options)}"
-    if kind == "devices":
-        if value == "all":
-            return None
-        if not is_int:
-            return f"must be \"all\" or a device count, got {value!r}"
-        have = _device_count()
-        return None if 1 <= value <= have else (
-            f"{value} devices asked, this machine has {have}")
-    if kind == "table":
-        return None if isinstance(value, dict) else f"must be a table, got {value!r}"
-    if kind == "api":
-        return "only a Python caller can pass it (an array), not a config"
-    return None
+#: Settings of a strategy that the config sets itself (not through ``options``).
+SET_BY_CONFIG = ("algorithm", "population_size", "tolerance", "max_generations",
+                 "chunk_size")
 
 
 def check_strategy_options(s: StrategyConfig) -> None:
-    """Every ``strategy.options`` key must be a keyword of ``run_<name>``, and its
-    value of the type and in the range that keyword takes (`option_problem`)."""
-    params = inspect.signature(strategy_function(s.name)).parameters
-    allowed = sorted(k for k in params if k not in SET_BY_CONFIG)
+    """Every ``strategy.options`` key must be a field of the strategy's settings
+    (`cgda_jax.strategies.STRATEGIES`), and its value of the kind that field
+    takes (`cgda_jax.strategies.settings.Settings.option_problem`)."""
+    from cgda_jax.strategies import STRATEGIES
+
+    settings = STRATEGIES[s.name].settings
+    fields = settings.fields()
+    allowed = sorted(k for k in fields if k not in SET_BY_CONFIG)
     for key in s.options:
-        if key in SET_BY_CONFIG:
+        if key in SET_BY_CONFIG or key in ("seed", "progress_fn"):
             raise ConfigError(
                 f"key 'strategy.options.{key}': set it as 'strategy.{key}' instead"
             )
-        if key not in params:
+        if key not in fields:
             raise ConfigError(
                 f"key 'strategy.options.{key}': not an option of strategy "
                 f"'{s.name}'; it takes {allowed}"
             )
-        problem = option_problem(key, s.options[key])
+        problem = settings.option_problem(key, s.options[key])
         if problem:
             raise ConfigError(f"key 'strategy.options.{key}': {problem}")
 

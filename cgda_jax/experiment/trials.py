@@ -1,8 +1,8 @@
 """Success rate of an execution experiment over N seeds (``cgda run CONFIG --trials N``).
 
 Seeds ``strategy.seed, strategy.seed + 1, ...`` run as ONE batched call
-(`cgda_jax.strategies.trials.run_seeds`: each trial gives the same bits in any batch;
-`cgda_jax.strategies.batching` says how it can differ from the single run). Three
+(`cgda_jax.strategies.run_seeds`: each trial gives the same bits in any batch;
+`cgda_jax.strategies.runner` says how it can differ from the single run). Three
 steps, usable apart (e.g. seeds split over processes and their records joined before
 writing):
 
@@ -83,7 +83,7 @@ def trial_records(
         share of the batch), ``batch_run_time_s``, ``compile_time_s`` (the
         batch's) and ``trials_in_batch``.
     """
-    from cgda_jax.strategies.trials import run_seeds
+    from cgda_jax.strategies import run_seeds
 
     built = built if built is not None else build_execution(cfg)
     goal, sim = built.goal, built.sim

@@ -240,7 +240,7 @@ def _build_simulator(cfg: ExperimentConfig, waypoint_s: float, goal: np.ndarray)
 
 
 def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
-    from cgda_jax.strategies.algorithms import (
+    from cgda_jax.strategies.evolution import (
         ALGORITHMS,
         default_kwargs,
         make_algorithm,
@@ -274,10 +274,10 @@ def _sampled_postures(cfg: ExperimentConfig, sim) -> tuple[int, str]:
     """Postures the strategy samples once per trial and the option that sets them
     (the plans' own rule: `cgda_jax.strategies.runner.plan_estimate`)."""
     from cgda_jax.strategies.base import points_independent
-    from cgda_jax.strategies.trials import STRATEGIES
+    from cgda_jax.strategies import STRATEGIES
 
     s = cfg.strategy
-    opts = {**STRATEGIES[s.name][1], **s.options}
+    opts = {**STRATEGIES[s.name].settings.defaults(), **s.options}
     if s.name == "fte":
         init = opts["init"]
         if init == "auto":

@@ -1,14 +1,12 @@
 """Shared machinery of the execution strategies: the plan base.
 
 Every strategy (FTE, IE, IET, OET) runs one or more evolutions of the same kind: an
-`evosax` algorithm (`cgda_jax.strategies.algorithms`) asks for a population of gene
+`evosax` algorithm (`cgda_jax.strategies.evolution`) asks for a population of gene
 vectors, the whole population is executed in ONE batched simulator call, its fitness
-against the goal is computed and told back (`cgda_jax.strategies.evolution`). This
-module holds what the plans share: `PlanBase`; the gene bounds
-(`cgda_jax.strategies.genes`), the checks before a run
-(`cgda_jax.strategies.settings`) and the names of those two modules and of
-`cgda_jax.strategies.algorithms` and `cgda_jax.strategies.evolution` are
-re-exported here.
+against the goal is computed and told back (`cgda_jax.strategies.evolution`, which
+also holds the gene bounds and the algorithms). This module holds what the plans
+share: `PlanBase`; the names of `cgda_jax.strategies.evolution` and the checks before
+a run (`cgda_jax.strategies.settings`) are re-exported here.
 
 Divergence: see `cgda_jax.strategies.evolution`.
 
@@ -29,26 +27,25 @@ from jax.sharding import NamedSharding, PartitionSpec
 from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sharding import shard_population
 from cgda_jax.sim.description import setup_of
-from cgda_jax.strategies.algorithms import (
-    ALGORITHMS as ALGORITHMS,
-    algorithm_name as algorithm_name,
-    default_kwargs,
-    make_algorithm as make_algorithm,
-)
 from cgda_jax.strategies.evolution import (
+    ALGORITHMS as ALGORITHMS,
     INVALID_PENALTY as INVALID_PENALTY,
     Evolution as Evolution,
     FitnessFn as FitnessFn,
+    algorithm_name as algorithm_name,
+    default_kwargs,
     evolution_init as evolution_init,
     evolution_step as evolution_step,
     freeze as freeze,
+    from_joints as from_joints,
+    make_algorithm as make_algorithm,
     screen as screen,
+    to_joints as to_joints,
 )
-from cgda_jax.strategies.genes import from_joints as from_joints, to_joints as to_joints
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.settings import (
+    Settings,
     check_config as check_config,
-    check_stagnation as check_stagnation,
     points_independent as points_independent,
 )
 
@@ -64,9 +61,10 @@ def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
 class PlanBase:
     """Shared set-up and pieces of the strategy plans driven by `runner.drive`.
 
-    A plan is built from an already checked goal (`check_config`); subclasses add their
-    own settings (checked in their ``__init__``) and the plan functions ``init``,
-    ``step``, ``finish``, ``progress`` and ``to_result`` (see `runner`).
+    A plan is built from an already checked goal (`check_config`) and its strategy's
+    settings (`cgda_jax.strategies.settings.Settings`, checked when made; the plan
+    checks only what needs the simulator); subclasses add the plan functions
+    ``init``, ``step``, ``finish``, ``progress`` and ``to_result`` (see `runner`).
 
     With ``sharding`` (`cgda_jax.sharding.population_sharding`) every fitness
     evaluation, the one batched simulator call of a generation, has its population
@@ -81,19 +79,13 @@ class PlanBase:
         sim: Any,
         goal: jax.Array,
         n_genes: int,
+        settings: Settings,
         *,
-        algorithm: Any,
-        population_size: int,
-        tolerance: float,
-        max_generations: int,
-        algorithm_kwargs: dict[str, Any] | None = None,
-        algorithm_params: dict[str, Any] | None = None,
         info: dict[str, Any] | None = None,
         sharding: NamedSharding | None = None,
-        stagnation: int | None = None,
-        aim: float = 1.0,
     ):
         exact_matmuls()  # its programs: full float32 products on GPUs too
+        self.settings = settings
         self.sim, self.goal = sim, goal
         self.sharding = sharding
         self.n_points = int(goal.shape[0])
@@ -101,19 +93,18 @@ class PlanBase:
         self.upper = jnp.asarray(sim.upper, jnp.float32)
         self.n_dof = int(sim.n_dof)
         self.n_genes = int(n_genes)
-        self.tolerance = float(tolerance)
-        aim = float(aim)
-        if not (np.isfinite(aim) and 0.0 < aim <= 1.0):
-            raise ValueError(f"aim must be in (0, 1] (a share of the tolerance); "
-                             f"got {aim}")
+        self.tolerance = float(settings.tolerance)
+        aim = float(settings.aim)
         #: what each point's evolution aims for: ``aim * tolerance``; the run is
         #: still judged at ``tolerance`` (the difference is room for a finer
         #: replay, the exported trajectory or a robot to differ a little)
         self.aim_tolerance = self.tolerance * aim
-        self.max_generations = int(max_generations)
+        self.max_generations = int(settings.max_generations)
         self.max_generations_total = self.max_generations
-        self.stagnation = check_stagnation(stagnation)
-        kwargs = dict(algorithm_kwargs or {})
+        stagnation = getattr(settings, "stagnation", None)
+        self.stagnation = None if stagnation is None else int(stagnation)
+        algorithm, population_size = settings.algorithm, settings.population_size
+        kwargs = dict(settings.algorithm_kwargs or {})
         if isinstance(algorithm, (str, type)):  # built here: defaults that fit genes
             kwargs = {**default_kwargs(algorithm_name(algorithm)), **kwargs}
         self.algo, self.params = make_algorithm(
@@ -121,7 +112,7 @@ class PlanBase:
             population_size,
             self.n_genes,
             algorithm_kwargs=kwargs,
-            algorithm_params=algorithm_params,
+            algorithm_params=settings.algorithm_params,
         )
         self.info = {
             "algorithm": algorithm_name(algorithm),

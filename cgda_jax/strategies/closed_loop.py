@@ -47,7 +47,7 @@ from cgda_jax.reality.export import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.base import check_config
-from cgda_jax.strategies.oet import OETPlan, ordered_point_errors
+from cgda_jax.strategies.oet import OETPlan, OETSettings, ordered_point_errors
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import seed_keys
 
@@ -94,9 +94,9 @@ _COMPILED: dict = {}  # (sim, goal, settings) -> the compiled loop; a few kept
 _KEEP = 4
 
 
-def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
+def compiled_loop(sim, goal: jax.Array, settings: OETSettings, locator: Any = None):
     """The loop's compiled functions ``(plan, init, advance, relocate, start)``: OET's plan
-    of ``settings`` (`OETPlan`'s keyword arguments) on ``sim`` and ``goal``, its
+    of ``settings`` on ``sim`` and ``goal``, its
     ``init(key)``, ``advance(state)`` (OET's steps until one posture is executed
     in the model, with that step's best fitness) and ``relocate(state, prev_k,
     joints, features, correct)`` (`OETPlan.relocalize` on `measured_state`, the
@@ -108,11 +108,11 @@ def compiled_loop(sim, goal: jax.Array, settings: dict, locator: Any = None):
     kept, so a loop over seeds or realities compiles once."""
     goal_np = np.asarray(goal)
     cache_key = (id(sim), goal_np.shape, goal_np.tobytes(),
-                 repr(sorted(settings.items())), locator is not None)
+                 repr(settings), locator is not None)
     hit = _COMPILED.get(cache_key)
     if hit is not None and hit[0] is sim:
         return hit[1]
-    plan = OETPlan(sim, goal, **settings)
+    plan = OETPlan(sim, goal, settings)
 
     def advance(s):
         n0 = s.steps
@@ -175,17 +175,8 @@ def run_oet_closed_loop(
     sim: Any,
     goal: Any,
     reality: Reality,
+    settings: OETSettings | None = None,
     *,
-    algorithm: Any = "CMA_ES",
-    population_size: int = 16,
-    tolerance: float = 0.02,
-    max_generations: int = 100,
-    max_steps: int | None = None,
-    lookahead: int = 1,
-    restarts: int = 0,
-    stagnation: int | None = None,
-    aim: float = 1.0,
-    warm_start: bool = False,
     seed: int = 0,
     rate: float = 100.0,
     correct: bool = True,
@@ -193,11 +184,8 @@ def run_oet_closed_loop(
     step_tolerance: float | None = None,
     calibrate: bool = True,
     min_offset_deg: float = 0.1,
-    algorithm_kwargs: dict | None = None,
-    algorithm_params: dict | None = None,
     progress_fn: Any = None,
-    chunk_size: int | None = None,
-    devices: Any = None,
+    **changes: Any,
 ) -> ExecutionResult:
     """OET closed on ``reality`` (see the module doc).
 
@@ -230,16 +218,15 @@ def run_oet_closed_loop(
             (a slide's, in metres, against the same value in radians): below what
             the tool's measurement resolves, and a world without offsets stays
             OET's.
-        algorithm, population_size, tolerance, max_generations, max_steps,
-            lookahead, restarts, stagnation, aim, warm_start, seed,
-            algorithm_kwargs, algorithm_params: as in
-            `cgda_jax.strategies.oet.run_oet` (``warm_start``: the first step
-            starts from the posture the reality measured at its start).
+        settings, changes: OET's settings (`cgda_jax.strategies.oet.OETSettings`;
+            ``changes`` replace its fields, e.g. ``population_size=32``), as
+            `cgda_jax.strategies.run_oet` takes them (``warm_start``: the first
+            step starts from the posture the reality measured at its start;
+            ``chunk_size`` unused: the loop steps per executed posture;
+            ``devices`` None or 1: the loop runs on one device).
+        seed: the run's seed.
         progress_fn: called after each step with a dict (step, k, planning_s,
             execution_s, error).
-        chunk_size: unused (the loop steps per executed posture); accepted so the
-            call matches the other strategies'.
-        devices: None or 1: the loop runs on one device.
 
     Returns:
         An `ExecutionResult` (strategy "oet") whose joints are the planned
@@ -261,22 +248,18 @@ def run_oet_closed_loop(
             its names are not the simulator's.
         ValueError: bad settings (as `run_oet`), or ``devices`` other than 1.
     """
-    del chunk_size
-    if devices not in (None, 1):
-        raise ValueError(f"devices={devices!r}: the closed loop runs on one device "
+    st = OETSettings.of(settings, **changes)
+    tolerance = st.tolerance
+    if st.devices not in (None, 1):
+        raise ValueError(f"devices={st.devices!r}: the closed loop runs on one device "
                          "(None or 1)")
-    goal = check_config(sim, goal, tolerance=tolerance, max_generations=max_generations)
+    goal = check_config(sim, goal)
     if step_tolerance is not None and not (np.isfinite(step_tolerance)
                                            and step_tolerance > 0):
         raise ValueError(f"step_tolerance must be > 0; got {step_tolerance}")
     _check_names(sim, reality)
-    settings = {"algorithm": algorithm, "population_size": population_size,
-                "tolerance": tolerance if step_tolerance is None else
-                float(step_tolerance), "max_generations": max_generations,
-                "algorithm_kwargs": algorithm_kwargs,
-                "algorithm_params": algorithm_params, "max_steps": max_steps,
-                "lookahead": lookahead, "restarts": restarts,
-                "stagnation": stagnation, "aim": aim, "warm_start": warm_start}
+    settings = (st if step_tolerance is None else
+                dataclasses.replace(st, tolerance=float(step_tolerance)))
     first = measure(reality)  # (a failing reality stops the run before compiling)
     t0 = time.perf_counter()
     found = ObjectLocator.of(sim) if relocate_objects else None

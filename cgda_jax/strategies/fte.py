@@ -29,7 +29,7 @@ wrong inverse-kinematics branch.
 Initialisation (``init``): "middle" (u = 0, the paper), "start" (the start posture at
 every point), "sampled" (for every goal point the nearest of `init_samples` random
 postures, executed once per run in batches of the population size; restarts draw
-from the same pool; `cgda_jax.strategies.seeding`), "reach" (the 8 nearest samples of
+from the same pool; `cgda_jax.strategies.refine`), "reach" (the 8 nearest samples of
 every point descended by gradient on its error, as `refine.reachability` does; the
 best candidate per point is the first mean, restarts draw other candidates; needs a
 differentiable execution: kinematic mode, stateless scene) or "auto" (default:
@@ -46,6 +46,7 @@ FTE distance (never worse; `cgda_jax.strategies.refine.polish_trajectory`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -59,12 +60,26 @@ from cgda_jax.strategies.base import (
     PlanBase,
     evolution_init,
     freeze,
+    from_joints,
     points_independent,
 )
-from cgda_jax.strategies.fte_starts import first_mean, restart_mean, start_pool
-from cgda_jax.strategies.refine import REFINE, polish_trajectory
-from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import run
+from cgda_jax.strategies.refine import (
+    REFINE,
+    descended_candidates,
+    nearest_in_pool,
+    pick_candidate,
+    point_loss,
+    polish_trajectory,
+    sample_pool,
+)
+from cgda_jax.strategies.settings import Settings, option
+
+#: Sampled postures descended per goal point (init "reach").
+REACH_STARTS = 8
+#: Adam steps of that descent (redundant 6-7 joint arms need more than 60).
+REACH_STEPS = 200
+_SAMPLE_SALT = 0x5EED  # key of the pool: fold_in(key, salt)
+
 
 #: Fitness names accepted by ``distance=``.
 DISTANCES = ("dtw", "dtw_multi", "euclidean")
@@ -141,30 +156,78 @@ class FTEState:
     done: jax.Array
 
 
-class FTEPlan(PlanBase):
-    """FTE as a plan for `runner.drive`.
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FTESettings(Settings):
+    """FTE's settings (beyond `Settings`'s; its own defaults: population_size 32,
+    max_generations 500, the budget shared by all tries). The paper's FTE is
+    ``restarts=0, min_improvement=0, init="middle"``; the defaults add restarts
+    and a sampled start (see the module docstring).
 
-    Args (beyond `PlanBase`'s):
-        stagnation: a try stops after this many generations without improvement.
-        distance: fitness name or callable (see `resolve_distance`).
-        restarts, min_improvement, init, init_samples, init_std, refine,
-            refine_steps, refine_gamma: see `run_fte`.
+    ``tolerance``: success threshold on every point's executed error. Without
+    restarts FTE does not stop on it (it stops on stagnation); with restarts the
+    run ends once the best trajectory meets it at every point, and a try that
+    stagnated short of it is restarted.
+
+    Attributes:
+        stagnation: a try stops after this many generations without improvement
+            (paper: 10).
+        distance: fitness (`resolve_distance`): "dtw" (None, the default: the
+            paper's per-dimension DTW), "dtw_multi" (the authors' C++ fitness),
+            "euclidean", or (Python callers) a callable
+            ``(executed (N, F), goal (N, F)) -> scalar``.
+        restarts: tries after the first (inside the compiled step): odd ones repair
+            the best trajectory's missed points with fresh postures, even ones start
+            wholly fresh; ``info["tries"]`` says how many ran.
+        min_improvement: with restarts, a try also stops after `stagnation`
+            generations in which the worst point error of its best trajectory did
+            not drop by more than this fraction (the DTW fitness may keep creeping
+            down while one point sits in a local minimum).
+        init: first mean (`INITS`): "middle" (the paper), "start" (the start
+            posture at every point), "sampled" (nearest of `init_samples` random
+            postures to each goal point; these evaluations count in
+            ``evaluations``), "reach" (the nearest samples descended by gradient;
+            kinematic mode, stateless scene) or "auto" ("reach" where possible,
+            else "sampled").
+        init_samples: random postures sampled per sampled start.
+        init_std: initial step size of tries that start elsewhere than the middle
+            (algorithms with ``std_init``, unless `algorithm_params` sets it).
+            None: 0.01 after init "reach" (the mean is already near a solution),
+            else 0.08 (`MODE_STD`).
+        refine: "none", "adam" or "lbfgs": polish the best trajectory by descending
+            the soft-DTW to the goal through the kinematic chain, keeping the
+            iterate with the lowest true `distance` (never worse). Needs kinematic
+            mode and a stateless scene. ``info["evolved_fitness"]`` is the fitness
+            before the polish.
+        refine_steps: optimiser steps of the polish.
+        refine_gamma: soft-DTW smoothing of the polish (feature units).
+    """
+
+    population_size: int = option(32, "int", 1)
+    max_generations: int = option(500, "int", 1)
+    stagnation: int = option(10, "int", 1)
+    distance: str | Callable | None = option(None, "choice", DISTANCES, none=True,
+                                             callables=True)
+    restarts: int = option(RESTARTS, "int", 0)
+    min_improvement: float = option(MIN_IMPROVEMENT, "number", "in [0, 1)")
+    init: str = option(INIT, "choice", INITS)
+    init_samples: int = option(INIT_SAMPLES, "int", 1)
+    init_std: float | None = option(INIT_STD, "number", "> 0", none=True)
+    refine: str = option("none", "choice", REFINE)
+    refine_steps: int = option(100, "int", 1)
+    refine_gamma: float = option(REFINE_GAMMA, "number", "> 0")
+
+
+class FTEPlan(PlanBase):
+    """FTE as a plan for `runner.drive`, built from `FTESettings` (or its fields
+    as keywords, changing the defaults); ``info``, ``sharding``: see `PlanBase`.
     """
 
     name = "fte"
 
-    def __init__(self, sim, goal, *, stagnation=10, distance=None, restarts=0,
-                 min_improvement=0.0, init="middle", init_samples=INIT_SAMPLES,
-                 init_std=INIT_STD, refine="none", refine_steps=100,
-                 refine_gamma=REFINE_GAMMA, **kwargs):
-        if stagnation is None:
-            raise ValueError("FTE needs stagnation (a whole number >= 1); got None")
-        if int(restarts) < 0:
-            raise ValueError(f"restarts must be >= 0; got {restarts}")
-        if not 0 <= float(min_improvement) < 1:
-            raise ValueError(f"min_improvement must be in [0, 1); got {min_improvement}")
-        if init not in INITS:
-            raise ValueError(f"init={init!r}; expected one of {list(INITS)}")
+    def __init__(self, sim, goal, settings: FTESettings | None = None, *,
+                 info=None, sharding=None, **changes):
+        st = FTESettings.of(settings, **changes)
+        init, refine, distance = st.init, st.refine, st.distance
         if init == "auto":
             init = "reach" if points_independent(sim) else "sampled"
         if init == "reach" and not points_independent(sim):
@@ -173,24 +236,18 @@ class FTEPlan(PlanBase):
                 f"scene without state (e.g. the marker); this simulator is "
                 f"{getattr(sim, 'mode', '?')} with {type(sim.scene).__name__}; use "
                 "init='sampled'")
-        if int(init_samples) < 1:
-            raise ValueError(f"init_samples must be >= 1; got {init_samples}")
-        if init_std is not None and not float(init_std) > 0:
-            raise ValueError(f"init_std must be > 0 or None; got {init_std}")
-        if refine not in REFINE:
-            raise ValueError(f"refine={refine!r}; expected one of {list(REFINE)}")
         if refine != "none" and not points_independent(sim):
             raise ValueError(
                 "refine needs a differentiable execution: kinematic mode and a scene "
                 f"without state (e.g. the marker); this simulator is "
                 f"{getattr(sim, 'mode', '?')} with {type(sim.scene).__name__}")
-        if not float(refine_gamma) > 0 or int(refine_steps) < 1:
-            raise ValueError(f"refine_gamma must be > 0 and refine_steps >= 1; got "
-                             f"{refine_gamma}, {refine_steps}")
-        user_params = dict(kwargs.get("algorithm_params") or {})
-        info = {**(kwargs.pop("info", None) or {}), "init": init, "refine": refine}
-        super().__init__(sim, goal, goal.shape[0] * int(sim.n_dof), info=info,
-                         stagnation=stagnation, **kwargs)
+        user_params = dict(st.algorithm_params or {})
+        info = {**(info or {}), "init": init, "refine": refine}
+        super().__init__(sim, goal, goal.shape[0] * int(sim.n_dof), st, info=info,
+                         sharding=sharding)
+        restarts, min_improvement = st.restarts, st.min_improvement
+        init_samples, init_std = st.init_samples, st.init_std
+        refine_steps, refine_gamma = st.refine_steps, st.refine_gamma
         self.distance_name = distance if isinstance(distance, str) else None
         self.distance = resolve_distance(distance)
         self.restarts = int(restarts)
@@ -240,22 +297,93 @@ class FTEPlan(PlanBase):
             invalid=evo.invalid + (~jnp.isfinite(f)).astype(jnp.int32))
 
     def _restart(self, s: FTEState) -> Evolution:
-        mean, key = restart_mean(self, s)
+        mean, key = self.restart_mean(s)
         return self._start(key, mean, self.try_params)
 
     def _met(self, errors):
         return jnp.all(errors < self.aim_tolerance)
 
+    # ---- start means: the sampled pool, the descended candidates, restart means
+    def start_pool(self, key: jax.Array) -> tuple:
+        """The sampled postures of a run and, for init "reach", the descended
+        candidates of every point (empty arrays where unused), and the
+        evaluations spent (count, invalid)."""
+        zero = jnp.zeros((), jnp.int32)
+        f_dim = self.goal.shape[1]
+        empty = (jnp.zeros((0, self.n_dof)), jnp.zeros((0, f_dim)),
+                 jnp.zeros((self.n_points, 0, self.n_dof)),
+                 jnp.zeros((self.n_points, 0)))
+        if self.init_mode not in ("sampled", "reach"):
+            return (*empty, zero, zero)
+        state = self.sim.init_state()
+        u, f, bad = sample_pool(
+            jax.random.fold_in(key, _SAMPLE_SALT),
+            lambda x: self.point_features(state, x), self.n_dof, self.init_samples,
+            batch=self.algo.population_size)
+        evals = jnp.asarray(u.shape[0], jnp.int32)
+        if self.init_mode == "sampled":
+            return (u, f, *empty[2:], evals, bad)
+        cand_u, cand_err = descended_candidates(
+            u, f, self.goal,
+            lambda g: point_loss(self.sim, state, g, self.lower, self.upper),
+            n_starts=REACH_STARTS, steps=REACH_STEPS)
+        return (*empty[:2], cand_u, cand_err, evals, bad)
+
+
+    def first_mean(self, s: FTEState) -> jax.Array | None:
+        """The first try's mean (N * D,) of the plan's init mode (None: the middle)."""
+        if self.init_mode == "middle":
+            return None
+        if self.init_mode == "start":
+            q0 = self.sim.init_state().genes
+            u0 = from_joints(jnp.asarray(q0, jnp.float32), self.lower, self.upper)
+            return jnp.tile(u0, self.n_points)
+        if self.init_mode == "reach":
+            i = jnp.argmin(s.cand_err, axis=1)
+            return jnp.take_along_axis(s.cand_u, i[:, None, None], axis=1).reshape(-1)
+        genes, _ = nearest_in_pool(s.pool_u, s.pool_f, self.goal)
+        return genes.reshape(-1)
+
+
+    def restart_mean(self, s: FTEState) -> tuple[jax.Array, jax.Array]:
+        """The mean (N * D,) and key of try ``s.tries``.
+
+        Odd tries repair the best trajectory (its points that miss the tolerance get
+        fresh postures), even ones start wholly fresh. Fresh postures: init "reach", a
+        random descended candidate within tolerance, away from the posture the point
+        stuck at (`pick_candidate`); "sampled", the nearest of a random half of the
+        pool, away from it (`nearest_in_pool`); otherwise uniform random.
+        """
+        t = s.tries
+        k_mean, k_evo = jax.random.split(jax.random.fold_in(s.key, t))
+        best = s.best_u.reshape(self.n_points, self.n_dof)
+        miss = ~(s.best_errors < self.aim_tolerance)
+        avoid = jnp.where((miss & jnp.isfinite(s.best_fitness))[:, None], best,
+                          jnp.nan)
+        if self.init_mode == "reach":
+            fresh = pick_candidate(k_mean, s.cand_u, s.cand_err, self.aim_tolerance,
+                                   avoid)
+        elif self.init_mode == "sampled":
+            fresh, _ = nearest_in_pool(s.pool_u, s.pool_f, self.goal, key=k_mean,
+                                       avoid=avoid)
+        else:
+            fresh = jax.random.uniform(k_mean, (self.n_points, self.n_dof),
+                                       minval=-1.0, maxval=1.0)
+        repair = jnp.where(miss[:, None], fresh, best)
+        use = (t % 2 == 1) & jnp.isfinite(s.best_fitness)
+        mean = jnp.where(use, repair, fresh).reshape(-1)
+        return mean, k_evo
+
     # ---- plan functions
     def init(self, key):
-        pool_u, pool_f, cand_u, cand_err, evals, bad = start_pool(self, key)
+        pool_u, pool_f, cand_u, cand_err, evals, bad = self.start_pool(key)
         zero = jnp.zeros((), jnp.int32)
         s = FTEState(
             evo=None, key=key, tries=zero + 1, ref=None, stall=zero, best_u=None,
             best_fitness=None, best_errors=None, generations=zero,
             evaluations=evals, invalid=bad, pool_u=pool_u, pool_f=pool_f,
             cand_u=cand_u, cand_err=cand_err, done=jnp.asarray(False))
-        mean = first_mean(self, s)
+        mean = self.first_mean(s)
         evo = self._start(key, mean, self.params if mean is None else self.try_params)
         errors = jnp.where(evo.found, self._errors(evo.best_u), jnp.inf)
         errors = jnp.broadcast_to(errors, (self.n_points,))
@@ -354,95 +482,3 @@ class FTEPlan(PlanBase):
             ),
             **info,
         )
-
-
-def run_fte(
-    sim: Any,
-    goal: Any,
-    *,
-    algorithm: Any = "CMA_ES",
-    population_size: int = 32,
-    tolerance: float = 0.02,
-    stagnation: int = 10,
-    aim: float = 1.0,
-    max_generations: int = 500,
-    seed: int = 0,
-    chunk_size: int = 10,
-    distance: str | Callable[[jax.Array, jax.Array], jax.Array] | None = None,
-    restarts: int = RESTARTS,
-    min_improvement: float = MIN_IMPROVEMENT,
-    init: str = INIT,
-    init_samples: int = INIT_SAMPLES,
-    init_std: float | None = INIT_STD,
-    refine: str = "none",
-    refine_steps: int = 100,
-    refine_gamma: float = REFINE_GAMMA,
-    algorithm_kwargs: dict | None = None,
-    algorithm_params: dict | None = None,
-    progress_fn: Callable[[dict], None] | None = None,
-    devices: int | str | None = None,
-) -> ExecutionResult:
-    """Full Trajectory Evolution of a goal feature trajectory.
-
-    The paper's FTE is ``restarts=0, min_improvement=0, init="middle"``; the defaults
-    add restarts and a sampled start (see the module docstring).
-
-    Args:
-        sim: a simulator (see `run_ie`).
-        goal: goal feature trajectory (N, F).
-        algorithm, population_size, seed, chunk_size, algorithm_kwargs,
-            algorithm_params, progress_fn, devices: as in `run_ie`.
-        tolerance: success threshold on every point's executed error. Without
-            restarts FTE does not stop on it (it stops on stagnation); with restarts
-            the run ends once the best trajectory meets it at every point, and a try
-            that stagnated short of it is restarted.
-        stagnation: a try stops after this many generations without improvement
-            (paper: 10).
-        max_generations: generation budget, shared by all tries.
-        distance: fitness: "dtw" (default, the paper's per-dimension DTW),
-            "dtw_multi" (the authors' C++ fitness), "euclidean", or a callable
-            ``(executed (N, F), goal (N, F)) -> scalar``.
-        restarts: tries after the first (inside the compiled step): odd ones repair
-            the best trajectory's missed points with fresh postures, even ones start
-            wholly fresh; ``info["tries"]`` says how many ran.
-        min_improvement: with restarts, a try also stops after `stagnation`
-            generations in which the worst point error of its best trajectory did
-            not drop by more than this fraction (the DTW fitness may keep creeping
-            down while one point sits in a local minimum).
-        init: first mean: "middle" (the paper), "start" (the start posture at
-            every point) or "sampled" (nearest of `init_samples` random postures to
-            each goal point; these evaluations count in ``evaluations``).
-        init_samples: random postures sampled per sampled start.
-        init_std: initial step size of tries that start elsewhere than the middle
-            (algorithms with ``std_init``, unless `algorithm_params` sets it).
-            None: 0.01 after init "reach" (the mean is already near a solution),
-            else 0.08.
-        refine: "none", "adam" or "lbfgs": polish the best trajectory by descending
-            the soft-DTW to the goal through the kinematic chain, keeping the
-            iterate with the lowest true `distance` (never worse). Needs kinematic
-            mode and a stateless scene. ``info["evolved_fitness"]`` is the fitness
-            before the polish.
-        refine_steps: optimiser steps of the polish.
-        refine_gamma: soft-DTW smoothing of the polish (feature units).
-        aim: the share of the tolerance each point's evolution aims for, in
-            (0, 1]: it stops, restarts and ranks by least motion at
-            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
-            it leaves room for a finer replay, the exported trajectory or a robot
-            to differ a little (1: the paper's rule, anything within tolerance).
-
-    Returns:
-        `ExecutionResult`; final_fitness is the best fitness (`distance`), success =
-        every point's error < tolerance.
-    """
-    (result,) = run(
-        FTEPlan, sim, goal, [seed], algorithm=algorithm,
-        population_size=population_size, tolerance=tolerance,
-        max_generations=max_generations, chunk_size=chunk_size,
-        algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        stagnation=stagnation, distance=distance, restarts=restarts,
-        min_improvement=min_improvement, init=init, init_samples=init_samples,
-        init_std=init_std, refine=refine, refine_steps=refine_steps,
-        refine_gamma=refine_gamma, aim=aim, progress_fn=progress_fn,
-        devices=devices,
-    )
-    return result

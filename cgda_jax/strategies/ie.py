@@ -15,88 +15,148 @@ waypoints), and evaluates point i's candidates from the state reached after poin
 0..i-1, the way the final sequential execution will run them; each point's best is
 re-scored in that context before the stop test.  ``info["sequential_context"]`` says
 which variant ran.
+
+The sequential context (`IEPlan.contexts`, `IEPlan.rescore`): each generation first
+executes the current best postures of all points in order from the start (one
+rollout of N waypoints), so that point i's candidates are evaluated from the state
+after points 0..i-1, and re-scores each point's best where its predecessors now
+leave it before the stop test.
+
+With feasibility the rollout does not judge its moves: `IEPlan.judged_generation`
+evaluates every point's candidates and, first in each row, its current best in one
+batched call, so that the move's judgement (the collision check, the most expensive
+code to compile) appears once in the generation's program, not once more in the
+rollout (clean_ie's chunk: 287 XLA fusions instead of 368).  The values are those of
+judging the rollout's moves: the same move from the same state.  The violations of
+the bests' moves are kept (``IEState.judged_u``, ``judged_violation``), and the run is
+done only when the kept ones are the current bests' (`IEState.fresh`): the result's
+execution then takes them (`IEPlan.judged_execution`) and the finish program carries
+no collision check either.  A run its generation budget cuts before they are fresh is
+judged again on the host (`cgda_jax.strategies.base.PlanBase.rejudge`).
+
+Pooled points (`IEPool`, `IEPlan.pool_step`): with independent points the batched
+trials of `cgda_jax.strategies.runner.drive_ie_points` run the (trial, point)
+evolutions still going as one pool, each point's restarts started from its
+neighbours' bests as in a single run (`better_neighbour`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
 from typing import Any
 
 import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
 
-from cgda_jax.strategies.ie_plan import (
-    LOCAL_STD,
-    RESTART_SAMPLES,
-    RESTARTS,
-    STAGNATION,
-    IEPlan,
+from cgda_jax.strategies.base import (
+    Evolution,
+    PlanBase,
+    from_joints,
+    points_independent,
+    ragged_rows,
 )
-from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import run
+from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
+from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
+from cgda_jax.strategies.settings import Settings, option
 
-# the plan and its defaults live in ie_plan (names kept importable from here)
 __all__ = ["LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "STAGNATION", "IEPlan",
-           "run_ie"]
+           "IEPool", "IESettings", "IEState", "better_neighbour", "point_keys"]
 
-def run_ie(
-    sim: Any,
-    goal: Any,
-    *,
-    algorithm: Any = "CMA_ES",
-    population_size: int = 16,
-    tolerance: float = 0.02,
-    max_generations: int = 100,
-    seed: int = 0,
-    chunk_size: int = 10,
-    algorithm_kwargs: dict | None = None,
-    algorithm_params: dict | None = None,
-    keys: jax.Array | None = None,
-    refine: str = "none",
-    refine_steps: int = 100,
-    reach_check: bool = False,
-    restarts: int = RESTARTS,
-    stagnation: int | None = STAGNATION,
-    aim: float = 1.0,
-    restart_samples: int = RESTART_SAMPLES,
-    warm_start: bool = False,
-    progress_fn: Callable[[dict], None] | None = None,
-    devices: int | str | None = None,
-) -> ExecutionResult:
-    """Individual Evolution of every goal point, all points in one batched evolution.
+#: Default restarts of a point and generations without improvement that stop a try.
+RESTARTS = 9
+STAGNATION = 40
+#: Initial search width of a local restart (from a sampled or a neighbour's
+#: posture), relative to the algorithm's own (distribution-based algorithms).
+LOCAL_STD = 0.15
+#: Postures sampled (one batched kinematics call per run) to seed the restarts.
+RESTART_SAMPLES = 4096
 
-    Args:
-        sim: a simulator (`n_dof`, `n_features`, `lower`, `upper`, `init_state`,
-            `step`, `rollout`).
-        goal: goal feature trajectory (N, F).
-        algorithm: an evosax algorithm: a name (see `ALGORITHMS`), a class, or a
-            configured instance (its population and solution sizes must match; see
-            `cgda_jax.strategies.base.make_algorithm`).
-        population_size: individuals per generation and point.
-        tolerance: a point is done when its error is below this (feature units; the
-            paper used 20 mm).
-        max_generations: generation budget per point.
-        seed: random seed; point i uses ``fold_in(key(seed), i)`` (see `point_keys`).
-        chunk_size: generations per compiled `lax.scan` chunk.
-        algorithm_kwargs, algorithm_params: see `make_algorithm`.
-        keys: optional explicit per-point keys (N,) replacing the seed's (to re-run
-            one point of a batched run alone).
-        refine: "none" (default), "adam" or "lbfgs": after evolution, polish every
-            point's best posture by gradient descent through the differentiable
-            kinematic simulator (optax), keeping the best iterate (never worse).
-        refine_steps: optimiser steps of the polish.
-        reach_check: before evolving, sample 2,048 postures (one batched kinematics
-            call) and descend from the nearest ones; points no posture brings
-            within `tolerance` are not evolved (no budget spent) and listed in
-            ``info["unreachable_points"]`` with their nearest approach.
-            `refine` and `reach_check` need kinematic mode and a stateless scene.
-        restarts: a point whose try stopped above `tolerance` (budget spent or
+
+def point_keys(key: jax.Array, n_points: int) -> jax.Array:
+    """The per-point keys (N,) IE derives from a run's key: ``fold_in(key, i)``."""
+    return jax.vmap(lambda i: jax.random.fold_in(key, i))(jnp.arange(n_points))
+
+
+@struct.dataclass
+class IEState:
+    """Carry of an IE run (every field stacked over the N points).
+
+    Attributes:
+        evo: the current try of each point.
+        keys: the point keys; try t > 0 uses ``fold_in(key, t)``.
+        samples: (N, K, D) the K sampled postures nearest each goal point (nearest
+            first; K = 0 without restart samples), restart means.
+        tries: tries started per point (1 + restarts used).
+        best_u, best_fitness: the best over every try (inf: nothing valid yet).
+        done: the point is finished (tolerance met, or out of tries).
+        generations, evaluations, invalid: spent by the finished tries.
+        judged_u, judged_violation: with feasibility (sequential context): the
+            bests the last generation judged in context and their moves'
+            violations (`IEPlan.judged_generation`); None otherwise.
+    """
+
+    evo: Evolution
+    keys: jax.Array
+    samples: jax.Array
+    tries: jax.Array
+    best_u: jax.Array
+    best_fitness: jax.Array
+    done: jax.Array
+    generations: jax.Array
+    evaluations: jax.Array
+    invalid: jax.Array
+    judged_u: jax.Array | None = None
+    judged_violation: jax.Array | None = None
+
+    def fresh(self) -> jax.Array:
+        """Whether the last judged bests (``judged_u``) are the current ones: their
+        stored violations are then those of executing the result."""
+        return jnp.all(self.judged_u == self.best_u)
+
+
+def better_neighbour(prev_u: jax.Array, prev_f: jax.Array, next_u: jax.Array,
+                     next_f: jax.Array) -> jax.Array:
+    """(N, D) the best genes of each point's better-solved neighbour (previous or
+    next, the one with the lower error ``prev_f`` / ``next_f`` (N)); NaN where
+    neither has a valid one (both errors inf)."""
+    u = jnp.where((prev_f <= next_f)[:, None], prev_u, next_u)
+    ok = jnp.isfinite(jnp.minimum(prev_f, next_f))
+    return jnp.where(ok[:, None], u, jnp.nan)
+
+
+@struct.dataclass
+class IEPool:
+    """IE points gathered from several trials (`IEPlan.pool_step`): `IEState`
+    fields (P, ...) plus each point's goal and its neighbours (position in the pool,
+    or -1 and their frozen best genes and fitness; inf / NaN where there is no
+    neighbour)."""
+
+    s: IEState
+    goal: jax.Array
+    prev_pos: jax.Array
+    next_pos: jax.Array
+    prev_u: jax.Array
+    prev_f: jax.Array
+    next_u: jax.Array
+    next_f: jax.Array
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class IESettings(Settings):
+    """IE's settings (beyond `Settings`'s: algorithm, population_size per point,
+    tolerance, max_generations per point's try, chunk_size, aim, ...).
+
+    Attributes:
+        restarts: a point whose try stopped above the aim (budget spent or
             stalled) is tried again with a fresh key, up to this many times (inside
-            the compiled step), starting alternately from its better-solved
-            neighbour's best posture and from a random mean; the best over its tries
-            is kept and ``info["point_tries"]`` says how many it took. Restart t
-            starts (cycling) from the sampled posture nearest the goal point (see
+            the compiled step); the best over its tries is kept and
+            ``info["point_tries"]`` says how many it took. Restart t starts
+            (cycling) from the sampled posture nearest the goal point (see
             `restart_samples`), a better-solved neighbour's best posture, or a
-            random mean (without samples: neighbour and random alternately).
+            random mean (without samples: neighbour and random alternately); see
+            `IEPlan`.
         stagnation: a try stops after this many generations without improvement
             (None: only at `max_generations`), so a stuck point restarts early.
         restart_samples: with independent points (kinematic mode, stateless
@@ -104,37 +164,429 @@ def run_ie(
             limits are evaluated once per run (one batched kinematics call, inside
             the compiled init) and the nearest to each goal point is a restart mean:
             a point stuck in a local minimum restarts in the goal's basin. 0: off.
-        warm_start: every point's first try searches locally around the start
-            posture instead of over the whole joint ranges from their middle
-            (restarts as without it); see `IEPlan`.
-        progress_fn: called with a dict after each chunk.
-        devices: None (default: one device, the unsharded program), "all" or a
-            device count: each generation's batched simulator call (N points x
-            population) has its population axis split over these devices (padded
-            to a multiple of their count by repeating the last candidate, whose
-            results are dropped); same results as unsharded. Multi-host: see
-            `cgda_jax.sharding`.
-        aim: the share of the tolerance each point's evolution aims for, in
-            (0, 1]: it stops, restarts and ranks by least motion at
-            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
-            it leaves room for a finer replay, the exported trajectory or a robot
-            to differ a little (1: the paper's rule, anything within tolerance).
-
-    Returns:
-        `ExecutionResult`; success = every point's executed error < tolerance.
-
-    Examples:
-        >>> res = run_ie(sim, goal, tolerance=0.02)  # doctest: +SKIP
-        >>> res.point_errors.max() < 0.02  # doctest: +SKIP
+        warm_start: every point's first try searches locally (initial width
+            `LOCAL_STD`) around the start posture (where the arm is before the
+            approach) instead of over the whole joint ranges from their middle
+            (restarts as without it).  All points then start in the same branch of
+            the arm's inverse kinematics, so in dynamic mode each point's posture
+            is a short move from its neighbour's, within the speed limits (a
+            7-joint arm's clean circle: 13-19 generations against 74-120 without).
+        refine: "none" (default), "adam" or "lbfgs": after evolution, polish every
+            point's best posture by gradient descent through the differentiable
+            kinematic simulator (optax, `cgda_jax.strategies.refine.polish`),
+            keeping the best iterate (never worse).
+        refine_steps: optimiser steps of the polish.
+        reach_check: before evolving, sample 2,048 postures (one batched
+            kinematics call) and descend from the nearest ones; points no posture
+            brings within `tolerance` are not evolved (no budget spent) and listed
+            in ``info["unreachable_points"]`` with their nearest approach.
+            `refine` and `reach_check` need kinematic mode and a stateless scene.
+        keys: optional explicit per-point keys (N,) replacing the seed's (to re-run
+            one point of a batched run alone; Python callers only).
     """
-    (result,) = run(
-        IEPlan, sim, goal, [seed], algorithm=algorithm,
-        population_size=population_size, tolerance=tolerance,
-        max_generations=max_generations, chunk_size=chunk_size,
-        algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        keys=keys, refine=refine, refine_steps=refine_steps, reach_check=reach_check,
-        restarts=restarts, stagnation=stagnation, restart_samples=restart_samples,
-        warm_start=warm_start,
-        aim=aim, progress_fn=progress_fn, devices=devices,
-    )
-    return result
+
+    restarts: int = option(RESTARTS, "int", 0)
+    stagnation: int | None = option(STAGNATION, "int", 1, none=True)
+    restart_samples: int = option(RESTART_SAMPLES, "int", 0)
+    warm_start: bool = option(False, "bool")
+    refine: str = option("none", "choice", REFINE)
+    refine_steps: int = option(100, "int", 1)
+    reach_check: bool = option(False, "bool")
+    keys: jax.Array | None = option(None, "api", none=True)
+
+
+class IEPlan(PlanBase):
+    """IE as a plan for `runner.drive` (see there), built from `IESettings` (or
+    its fields as keywords, changing the defaults); ``info`` extends its
+    ``info``, ``sharding`` splits each generation's population (`PlanBase`).
+    Restart means: see `_try`.
+    """
+
+    name = "ie"
+
+    def __init__(self, sim, goal, settings: IESettings | None = None, *,
+                 info=None, sharding=None, **changes):
+        st = IESettings.of(settings, **changes)
+        keys, refine, reach_check = st.keys, st.refine, st.reach_check
+        if keys is not None and keys.shape[0] != goal.shape[0]:
+            raise ValueError(
+                f"keys has {keys.shape[0]} entries for {goal.shape[0]} points"
+            )
+        # with feasibility the moves between points count: point i is evolved from
+        # where points 0..i-1 leave the arm, like the final execution
+        feasible_moves = getattr(sim, "feasibility", None) is not None
+        self.sequential = not points_independent(sim) or feasible_moves
+        if not points_independent(sim) and (refine != "none" or reach_check):
+            raise ValueError(
+                "refine and reach_check need independent points: kinematic mode and a "
+                "scene without state (e.g. the marker); this simulator is "
+                f"{getattr(sim, 'mode', '?')} with {type(sim.scene).__name__}")
+        info = {**(info or {}), "sequential_context": self.sequential,
+                "refine": refine}
+        super().__init__(sim, goal, int(sim.n_dof), st, info=info, sharding=sharding)
+        warm_start, restarts = st.warm_start, st.restarts
+        refine_steps, restart_samples = st.refine_steps, st.restart_samples
+        self.keys = keys
+        self.warm_start = bool(warm_start)
+        self.info["warm_start"] = self.warm_start
+        self.refine, self.refine_steps = refine, int(refine_steps)
+        self.restarts = int(restarts)
+        # sampled restart means need postures whose features do not depend on the
+        # context (independent features; with feasibility the move to them is still
+        # judged in context) and at least one restart to use them
+        self.restart_samples = (0 if not points_independent(sim) or self.restarts == 0
+                                else int(restart_samples))
+        self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
+        self.max_generations_total = self.max_generations * (1 + self.restarts)
+        self.unreachable = np.zeros(self.n_points, bool)
+        self.reach_genes = np.zeros((self.n_points, self.n_dof), np.float32)
+        self.reach_nearest = np.full(self.n_points, np.inf, np.float32)
+        if reach_check:
+            reach = reachability(sim, goal, self.tolerance)
+            self.unreachable[reach["unreachable"]] = True
+            self.reach_genes = reach["genes"].astype(np.float32)
+            self.reach_nearest = reach["nearest"].astype(np.float32)
+            self.info["reach_check_s"] = reach["seconds"]
+            self.info["unreachable_points"] = [
+                {"index": i, "nearest_approach": float(reach["nearest"][i])}
+                for i in reach["unreachable"]]
+
+    def point_stop(self, evo: Evolution) -> jax.Array:
+        """One try of a point stops: tolerance met, its budget spent, or stalled."""
+        return self.stop(evo) | self.stalled(evo)
+
+    def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None):
+        """Try ``t`` of a point. Try 0 starts from the mid-range mean (with
+        `warm_start`: a local search at the start posture) with the point key;
+        restart ``t > 0`` uses key ``fold_in(key, t)``. With restart samples,
+        odd restarts start from the sampled postures nearest the goal point in turn
+        (restart t from the (t-1)//2-th nearest: each near the goal, in whichever
+        basin, whatever the previous tries converged to) and even restarts
+        alternate between a solved neighbour's best genes (the goal curve is
+        continuous, so a neighbour's posture is often in the right basin) and a
+        random mean; without samples: neighbour, random, alternately.
+        Without a solved neighbour a random mean replaces it. Sample and neighbour
+        restarts search locally (initial std scaled by `LOCAL_STD`)."""
+        k_mean, k_evo = jax.random.split(jax.random.fold_in(key, t))
+        mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
+        k = 0 if samples is None else samples.shape[0]
+        restart = t > 0
+        if k:  # odd restarts: the samples in turn; even: neighbour, random, ...
+            use_sample = restart & ((t - 1) % 2 == 0)
+            use_neighbour = restart & ((t - 1) % 4 == 1)
+        else:  # alternate: neighbour, random
+            use_sample, use_neighbour = jnp.bool_(False), restart & ((t - 1) % 2 == 0)
+        if neighbour_u is None:
+            use_neighbour = jnp.bool_(False)
+        else:
+            use_neighbour = use_neighbour & jnp.all(jnp.isfinite(neighbour_u))
+            mean = jnp.where(use_neighbour, jnp.nan_to_num(neighbour_u), mean)
+        if k:
+            mean = jnp.where(use_sample, samples[jnp.clip((t - 1) // 2, 0, k - 1)],
+                             mean)
+        # a sampled or neighbouring posture is near a solution: search locally there
+        local = use_sample | use_neighbour
+        first = 0.0
+        if self.warm_start:  # try 0: a local search from where the arm starts
+            first = from_joints(self.sim.init_state().genes, self.lower, self.upper)
+            local = local | ~restart
+        mean = jnp.where(restart, mean, first)
+        return self.start(jnp.where(restart, k_evo, key),
+                          self.point_fitness(state, goal_point), mean=mean,
+                          std_scale=jnp.where(local, LOCAL_STD, 1.0))
+
+    def _neighbours(self, best_u, best_fitness):
+        """(N, D) the best genes of each point's better-solved neighbour (i-1 or
+        i+1, the one with the lower error); NaN where neither has a valid one."""
+        inf = jnp.full((1,), jnp.inf)
+        nan = jnp.full((1, self.n_dof), jnp.nan)
+        return better_neighbour(
+            jnp.concatenate([nan, best_u[:-1]]), jnp.concatenate([inf, best_fitness[:-1]]),
+            jnp.concatenate([best_u[1:], nan]), jnp.concatenate([best_fitness[1:], inf]))
+
+    def init(self, key):
+        keys = point_keys(key, self.n_points) if self.keys is None else self.keys
+        states, _ = self.contexts(jnp.zeros((self.n_points, self.n_dof)))
+        zero = jnp.zeros((self.n_points,), jnp.int32)
+        if self.restart_samples:  # one batched kinematics call (points independent)
+            start = self.sim.init_state()
+            samples, _ = nearest_samples(
+                lambda u: self.point_features(start, u), self.goal,
+                jax.random.fold_in(key, 2**31 - 1), self.n_dof, self.restart_samples,
+                self.n_nearest)
+        else:
+            samples = jnp.zeros((self.n_points, 0, self.n_dof))
+        evo = jax.vmap(self._try)(keys, self.goal, states, zero)
+        # no posture reaches the unreachable points: keep the nearest approach
+        off = jnp.asarray(self.unreachable)
+        best_u = jnp.where(off[:, None], jnp.asarray(self.reach_genes), evo.best_u)
+        best_f = jnp.where(off, jnp.asarray(self.reach_nearest), evo.best_fitness)
+        return IEState(
+            evo=evo.replace(done=evo.done | off), keys=keys, samples=samples,
+            tries=zero + 1,
+            best_u=best_u, best_fitness=best_f,
+            done=(best_f < self.aim_tolerance) | off,
+            generations=zero, evaluations=zero, invalid=zero,
+            **({} if not self.judges_in_step else {
+                "judged_u": jnp.full_like(best_u, jnp.nan),
+                "judged_violation": jnp.full((self.n_points,), jnp.nan)}))
+
+    @property
+    def judges_in_step(self) -> bool:
+        """Feasibility with the sequential context: the bests' moves are judged
+        with the candidates each generation (`judged_generation`)."""
+        return self.sequential and self.feasibility is not None
+
+    @property
+    def finish_takes_judged(self) -> bool:
+        """`judges_in_step` and no polish: the result's execution takes the
+        kept judgements (`judged_execution`); a polish judges its
+        postures in the finish."""
+        return self.judges_in_step and self.refine == "none"
+
+    def done(self, s: IEState) -> jax.Array:
+        """Every point finished (and, `finish_takes_judged`, its move judged as
+        executed: `IEState.fresh`)."""
+        if not self.finish_takes_judged:
+            return jnp.all(s.done)
+        return jnp.all(s.done) & s.fresh()
+
+    def step(self, s: IEState):
+        states, errors = self.contexts(s.best_u)
+        asked = None
+        if self.judges_in_step:  # the bests' moves judged with the candidates
+            errors, violation, asked = self.judged_generation(s.evo, s.best_u, states)
+            s = s.replace(judged_u=s.best_u, judged_violation=violation)
+        if self.sequential:  # re-score the bests where the others now leave them
+            s, evo = self.rescore(s, errors)
+        else:
+            evo = s.evo
+        if asked is None:
+            evo, metrics = jax.vmap(
+                lambda e, g, st: self.evolve(e, self.point_fitness(st, g),
+                                             self.point_stop)
+            )(evo, self.goal, states)
+        else:
+            evo, metrics = jax.vmap(
+                lambda e, pop, a, f: evolution_tell(self.algo, self.params, e, pop,
+                                                    a, f, self.point_stop)
+            )(evo, *asked)
+        s = self.settle(s, evo, self.goal, states, self._neighbours)
+        return s, {"best_fitness": s.best_fitness, "invalid": metrics["invalid"],
+                   "try": s.tries - 1}
+
+    def settle(self, s, evo, goal, states, neighbours_of):
+        """After a generation: keep each point's best over its tries, restart the
+        tries that stopped short of the tolerance while tries are left (`_try`,
+        starting from ``neighbours_of(best_u, best_fitness)`` or the sampled
+        postures), and mark the points done. Shared by `step` and the pooled
+        points of `pool_step` (``goal``, ``states``: per point)."""
+        better = evo.best_fitness < s.best_fitness
+        best_u = jnp.where(better[:, None], evo.best_u, s.best_u)
+        best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
+        met = best_f < self.aim_tolerance
+        # a try that stopped short of the tolerance restarts while tries are left
+        again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
+        if self.restarts == 0:  # never restarts (tries >= 1): nothing to trace
+            fresh = evo
+        else:
+            neighbours = neighbours_of(best_u, best_f)
+            fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
+                jnp.any(again), lambda: jax.vmap(self._try)(
+                    s.keys, goal, states, s.tries, neighbours,
+                    s.samples if self.restart_samples else None),
+                lambda: evo)
+        s = s.replace(
+            generations=s.generations + jnp.where(again, evo.generation, 0),
+            evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
+            invalid=s.invalid + jnp.where(again, evo.invalid, 0),
+            evo=jax.tree.map(
+                lambda f, e: jnp.where(again.reshape((-1,) + (1,) * (e.ndim - 1)),
+                                       f, e), fresh, evo),
+            tries=s.tries + again, best_u=best_u, best_fitness=best_f)
+        return s.replace(done=met | (evo.done & ~again))
+
+    def progress(self, s):
+        gens = np.asarray(s.generations + s.evo.generation)
+        return {  # generations: the slowest point's, as the result's
+            "generations": gens.max(axis=-1).tolist(),
+            "points_done": np.asarray(s.done).sum(axis=-1).tolist(),
+            "points_met": (np.asarray(s.best_fitness) < self.tolerance
+                           ).sum(axis=-1).tolist(),
+            "worst_error": np.asarray(s.best_fitness).max(axis=-1).tolist(),
+        }
+
+    def finish(self, s):
+        found = jnp.isfinite(s.best_fitness)
+        joints = jnp.where(found[:, None], self.joints(s.best_u), jnp.nan)
+        if self.finish_takes_judged:
+            executed = self.judged_execution(s, joints)
+        else:
+            executed = self.execution(joints)
+        if self.refine != "none":
+            u, _ = polish(self.sim, s.best_u, self.goal, method=self.refine,
+                          steps=self.refine_steps)
+            polished = self.execution(jnp.where(found[:, None], self.joints(u),
+                                                joints))
+            if "violation" in executed:  # kept only if the motion stays as feasible
+                better = polished["violation"] <= executed["violation"]
+                polished = jax.tree.map(lambda a, b: jnp.where(better, a, b),
+                                        polished, executed)
+            executed = polished
+        return {
+            **executed,
+            "generation": s.generations + s.evo.generation,
+            "evaluations": s.evaluations + s.evo.evaluations,
+            "invalid": s.invalid + s.evo.invalid,
+            "found": found,
+            "tries": s.tries,
+        }
+
+    def to_result(self, final, history, timing):
+        final = self.rejudge(final)
+        gens = final["generation"]
+        hist = history["best_fitness"].astype(np.float64)  # (G, N)
+        rows = [hist[: int(g), i] for i, g in enumerate(gens)]
+        return self.result(
+            final, timing,
+            fitness_history=ragged_rows(rows),
+            evaluations=final["evaluations"].sum(),
+            generations=gens.max(),
+            point_generations=gens.tolist(),
+            point_tries=final["tries"].tolist(),
+            restarts=self.restarts, stagnation=self.stagnation,
+            invalid_evaluations=final["invalid"].sum(),
+            point_invalid=final["invalid"].tolist(),
+            points_without_valid=np.flatnonzero(~final["found"]).tolist(),
+        )
+
+    # ---- the sequential context (see the module docstring)
+    def contexts(self, best_u: jax.Array) -> tuple[Any, jax.Array | None]:
+        """Start states of every point (stacked, N) and each point's error (N,) when
+        ``self.joints(best_u)`` (N, DoF) are executed in order; independent points:
+        the start state each and inf.  With feasibility the error is None: the moves
+        are judged by `judged_generation`."""
+        start = self.sim.init_state()
+        if not self.sequential:
+            states = jax.tree.map(
+                lambda x: jnp.broadcast_to(x, (self.n_points, *jnp.shape(x))), start)
+            return states, jnp.full((self.n_points,), jnp.inf)
+        if self.feasibility is not None:
+            return jax.lax.scan(lambda st, w: (self.advance(st, w)[0], st), start,
+                                self.joints(best_u))[1], None
+
+        def body(state, w):
+            new, feats = self.sim.step(state, w)
+            return new, (state, feats, new.move_violation)
+
+        _, (states, feats, violation) = jax.lax.scan(body, start, self.joints(best_u))
+        errors = self.penalize(jnp.linalg.norm(feats - self.goal, axis=-1), violation)
+        return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
+
+    def judged_generation(self, evo, best_u: jax.Array, states):
+        """One batched evaluation of every point's candidates (asked of ``evo``, N
+        evolutions) with, first in each row, its best ``best_u`` (N, D) from its
+        context ``states``.  Returns the bests' errors (N; inf where not finite),
+        their moves' violations (N) and ``(populations (N, P, D), algorithm states,
+        fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`."""
+        pops, algo_states = jax.vmap(
+            lambda e: evolution_ask(self.algo, self.params, e))(evo)
+        cands = jnp.concatenate([best_u[:, None], pops], axis=1)  # (N, P + 1, D)
+        feats, violation = jax.vmap(
+            lambda st, c: self.sharded(lambda u: self.point_outcome(st, u))(c)
+        )(states, cands)
+        errors = self.penalize(jnp.linalg.norm(feats[:, 0] - self.goal, axis=-1),
+                               violation[:, 0])
+        fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
+                                                 violation[:, 1:], self.goal)
+        return (jnp.where(jnp.isfinite(errors), errors, jnp.inf), violation[:, 0],
+                (pops, algo_states, fitness))
+
+    def judged_execution(self, s: IEState, joints: jax.Array) -> dict:
+        """`PlanBase.execution` of the result ``joints`` (N, DoF; NaN where nothing
+        was found) without a judgement of its own: the features of the unjudged
+        rollout and the sum of the moves' violations the last generation stored
+        (NaN where a point has no posture, as the judged rollout gives), and
+        ``judged``: whether those are the current bests' (`IEState.fresh`; else
+        `PlanBase.rejudge` on the host)."""
+        found = jnp.all(jnp.isfinite(joints))
+        return {"joints": joints, "features": self.executed_features(joints),
+                "violation": jnp.where(found, jnp.sum(s.judged_violation), jnp.nan),
+                "judged": s.fresh()}
+
+    def rescore(self, s: IEState, errors: jax.Array):
+        """The IE state ``s`` and its evolutions with each point's best re-scored to
+        ``errors`` (N) (its error in the current context), the stop test redone."""
+        evo = s.evo
+        now = jnp.where(jnp.isfinite(s.best_fitness), errors, s.best_fitness)
+        same = jnp.all(evo.best_u == s.best_u, axis=-1)
+        evo = evo.replace(best_fitness=jnp.where(
+            same & jnp.isfinite(evo.best_fitness), now, evo.best_fitness))
+        evo = evo.replace(done=jax.vmap(self.point_stop)(evo))
+        s = s.replace(best_fitness=now, done=(now < self.aim_tolerance)
+                      | (evo.done & (s.tries > self.restarts)))
+        return s, evo
+
+    # ---- pooled points of several trials (independent points)
+    def pool_step(self, p: IEPool, block: int | None
+                  ) -> tuple[IEPool, dict[str, jax.Array]]:
+        """`step` (independent points) on a pool of points from several trials.
+
+        With `block`, the evolutions (ask, evaluate, tell) run in ``ceil(P / block)``
+        equal blocks one after the other (`lax.map`), not as one batch: on a CPU a
+        simulator call of many thousand candidates outgrows the caches and costs
+        about twice as much per candidate (measured, benchmarks/bench_trials.py).
+        """
+        s = p.s
+        size = s.done.shape[0]
+        start = self.sim.init_state()
+        states = jax.tree.map(lambda x: jnp.broadcast_to(x, (size, *jnp.shape(x))),
+                              start)
+
+        def evolve(e, g, st):
+            return jax.vmap(
+                lambda e, g, st: self.evolve(e, self.point_fitness(st, g),
+                                             self.point_stop)
+            )(e, g, st)
+
+        n_blocks = 1 if not block or size <= block else -(-size // block)
+        if n_blocks == 1:
+            evo, metrics = evolve(s.evo, p.goal, states)
+        else:
+            split = (lambda t: jax.tree.map(
+                lambda x: x.reshape((n_blocks, size // n_blocks, *x.shape[1:])), t))
+            evo, metrics = jax.lax.map(lambda a: evolve(*a),
+                                       (split(s.evo), split(p.goal), split(states)))
+            evo, metrics = jax.tree.map(lambda x: x.reshape((size, *x.shape[2:])),
+                                        (evo, metrics))
+
+        def neighbours_of(best_u, best_f):
+            # the neighbours of `_neighbours`: in the pool, or frozen outside it
+            def at(pos, inside, outside):
+                mask = pos >= 0 if inside.ndim == 1 else (pos >= 0)[:, None]
+                return jnp.where(mask, inside[jnp.maximum(pos, 0)], outside)
+
+            return better_neighbour(
+                at(p.prev_pos, best_u, p.prev_u), at(p.prev_pos, best_f, p.prev_f),
+                at(p.next_pos, best_u, p.next_u), at(p.next_pos, best_f, p.next_f))
+
+        s = self.settle(s, evo, p.goal, states, neighbours_of)
+        return p.replace(s=s), {"best_fitness": s.best_fitness,
+                                "invalid": metrics["invalid"], "try": s.tries - 1}
+
+    @staticmethod
+    def gather_pool(flat: IEState, goal, idx, prev_g, next_g, prev_pos, next_pos
+                    ) -> IEPool:
+        """The pool of the points ``idx`` of the flattened trials ``flat`` (R * N),
+        their goal points and neighbours (``prev_g``/``next_g``: a point's
+        neighbours in ``flat``, -1: none; ``prev_pos``/``next_pos``: in the pool)."""
+        def nb(g):
+            ok = g >= 0
+            f = jnp.where(ok, flat.best_fitness[jnp.maximum(g, 0)], jnp.inf)
+            u = jnp.where(ok[:, None], flat.best_u[jnp.maximum(g, 0)], jnp.nan)
+            return u, f
+
+        (pu, pf), (nu, nf) = nb(prev_g[idx]), nb(next_g[idx])
+        return IEPool(s=jax.tree.map(lambda x: x[idx], flat), goal=goal[idx],
+                      prev_pos=prev_pos, next_pos=next_pos, prev_u=pu, prev_f=pf,
+                      next_u=nu, next_f=nf)

@@ -14,7 +14,7 @@ nothing: the run stops there (``info["points_without_valid"]`` names its target)
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
 from typing import Any
 
 import jax
@@ -29,8 +29,7 @@ from cgda_jax.strategies.base import (
     from_joints,
     ragged_rows,
 )
-from cgda_jax.strategies.result import ExecutionResult
-from cgda_jax.strategies.runner import run
+from cgda_jax.strategies.settings import Settings, option
 
 
 @struct.dataclass
@@ -99,36 +98,48 @@ def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
     return out
 
 
-class OETPlan(PlanBase):
-    """OET as a plan for `runner.drive`.
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class OETSettings(Settings):
+    """OET's settings (beyond `Settings`'s; ``tolerance``: one posture's evolution
+    stops when its error to the target goal point is below the aim, and the success
+    threshold; ``max_generations``: the budget per executed posture and try).
 
-    Args (beyond `PlanBase`'s):
+    Attributes:
         max_steps: budget of executed postures (None: 2 N).
         lookahead: localization window size beyond the current step (>= 1).
-        restarts: a step's evolution that stopped above tolerance (stalled) is
-            restarted from a random mean with a fresh key, up to this many times
-            (each try has `max_generations`, as IE's); the best over its tries is
-            executed.
-        stagnation: a try also stops after this many generations without
-            improvement (None: only at tolerance or `max_generations`).
-        warm_start: the first step's evolution starts at the posture the arm is
-            in (the start posture; in a closed loop the measured one) instead of
-            the middle of the joint ranges (later steps always start from the
-            previous posture).
+        restarts: a step's evolution that stopped short of the aim (stalled, see
+            `stagnation`) restarts from a random mean with a fresh key, up to this
+            many times (each try has `max_generations`); the best posture over its
+            tries is executed (``info["step_tries"]``). 0: the original OET.
+        stagnation: a try stops after this many generations without improvement
+            (None: only at tolerance or `max_generations`).
+        warm_start: start the first step's evolution at the posture the arm is in
+            (the start posture; in a closed loop the measured one) instead of the
+            middle of the joint ranges (later steps start from the previous posture
+            either way); for goals reached by small continuous moves from where
+            the arm is (pushing an object).
+    """
+
+    max_steps: int | None = option(None, "int", 1, none=True)
+    lookahead: int = option(1, "int", 1)
+    restarts: int = option(0, "int", 0)
+    stagnation: int | None = option(None, "int", 1, none=True)
+    warm_start: bool = option(False, "bool")
+
+
+class OETPlan(PlanBase):
+    """OET as a plan for `runner.drive`, built from `OETSettings` (or its fields
+    as keywords, changing the defaults); ``info``, ``sharding``: see `PlanBase`.
     """
 
     name = "oet"
 
-    def __init__(self, sim, goal, *, max_steps=None, lookahead=1, restarts=0,
-                 stagnation=None, warm_start=False, **kwargs):
-        max_steps = 2 * goal.shape[0] if max_steps is None else int(max_steps)
-        if max_steps < 1:
-            raise ValueError(f"max_steps must be >= 1; got {max_steps}")
-        if int(lookahead) < 1:
-            raise ValueError(f"lookahead must be >= 1; got {lookahead}")
-        if int(restarts) < 0:
-            raise ValueError(f"restarts must be >= 0; got {restarts}")
-        super().__init__(sim, goal, int(sim.n_dof), stagnation=stagnation, **kwargs)
+    def __init__(self, sim, goal, settings: OETSettings | None = None, *,
+                 info=None, sharding=None, **changes):
+        st = OETSettings.of(settings, **changes)
+        max_steps = 2 * goal.shape[0] if st.max_steps is None else int(st.max_steps)
+        super().__init__(sim, goal, int(sim.n_dof), st, info=info, sharding=sharding)
+        lookahead, restarts, warm_start = st.lookahead, st.restarts, st.warm_start
         self.max_steps = max_steps
         self.lookahead = int(lookahead)
         self.restarts = int(restarts)
@@ -346,72 +357,3 @@ class OETPlan(PlanBase):
                 [min(int(final["k"]) + 1, len(goal) - 1)] if stuck else []
             ),
         )
-
-
-def run_oet(
-    sim: Any,
-    goal: Any,
-    *,
-    algorithm: Any = "CMA_ES",
-    population_size: int = 16,
-    tolerance: float = 0.02,
-    max_generations: int = 100,
-    max_steps: int | None = None,
-    lookahead: int = 1,
-    restarts: int = 0,
-    stagnation: int | None = None,
-    aim: float = 1.0,
-    warm_start: bool = False,
-    seed: int = 0,
-    chunk_size: int = 10,
-    algorithm_kwargs: dict | None = None,
-    algorithm_params: dict | None = None,
-    progress_fn: Callable[[dict], None] | None = None,
-    devices: int | str | None = None,
-) -> ExecutionResult:
-    """Online Evolved Trajectories: localize, evolve one posture, execute, repeat.
-
-    Args:
-        sim: a simulator (see `run_ie`).
-        goal: goal feature trajectory (N, F).
-        tolerance: one posture's evolution stops when its error to the target goal
-            point is below it; also the success threshold.
-        max_generations: generation budget per executed posture.
-        max_steps: budget of executed postures (default 2 N).
-        lookahead: localization window size beyond the current step (>= 1).
-        restarts: a step's evolution that stopped short of `tolerance` (stalled,
-            see `stagnation`) restarts from a random mean with a fresh key, up to
-            this many times (each try has `max_generations`); the best posture
-            over its tries is executed (``info["step_tries"]``). 0: the original
-            OET.
-        stagnation: a try stops after this many generations without
-            improvement (None: only at tolerance or `max_generations`).
-        warm_start: start the first step's evolution at the start posture
-            instead of the middle of the joint ranges (later steps start from the
-            previous posture either way); for goals reached by small continuous
-            moves from where the arm is (pushing an object).
-        algorithm, population_size, seed, chunk_size, algorithm_kwargs,
-            algorithm_params, progress_fn, devices: as in `run_ie`.
-        aim: the share of the tolerance each point's evolution aims for, in
-            (0, 1]: it stops, restarts and ranks by least motion at
-            ``aim * tolerance``; the run is still judged at ``tolerance``.  Below 1
-            it leaves room for a finer replay, the exported trajectory or a robot
-            to differ a little (1: the paper's rule, anything within tolerance).
-
-    Returns:
-        `ExecutionResult` with joints (S, DoF) / features (S, F) the executed steps;
-        point_errors (N,) = each goal point's error when the goal must be followed
-        in order (`ordered_point_errors`); success = all of them < tolerance, i.e.
-        every point reached in order, the last one included.
-    """
-    (result,) = run(
-        OETPlan, sim, goal, [seed], algorithm=algorithm,
-        population_size=population_size, tolerance=tolerance,
-        max_generations=max_generations, chunk_size=chunk_size,
-        algorithm_kwargs=algorithm_kwargs, algorithm_params=algorithm_params,
-        max_steps=max_steps, lookahead=lookahead, restarts=restarts,
-        stagnation=stagnation, aim=aim, warm_start=warm_start,
-        progress_fn=progress_fn,
-        devices=devices,
-    )
-    return result
