@@ -142,3 +142,18 @@ def test_kinematics_refuse_forces(pressing):
     m, fs, datas = pressing
     with pytest.raises(ValueError, match="use dynamic mode"):
         fs.from_data(datas[0])
+
+
+def test_scale_weights_a_feature(pressing):
+    """``scale`` multiplies the values (sensordata and kinematics) and names it."""
+    m, fs, datas = pressing
+    scaled = FeatureSet(m, [{"site": "ft", "quantity": "fz", "scale": 1 / 300},
+                            {"site": "ft", "quantity": "x", "scale": 2.5}])
+    assert scaled.feature_names == ("ft.fz/300 [N]", "ft.x*2.5 [m]")
+    got = np.asarray(scaled.from_sensordata(datas[1].sensordata))
+    ref = _reference(m, datas[1])
+    np.testing.assert_allclose(got, [ref[2] / 300, 2.5 * ref[8]], rtol=1e-6)
+    pos = FeatureSet(m, [{"site": "ft", "quantity": "z", "scale": 0.5}])
+    np.testing.assert_allclose(pos.from_data(datas[1]), [0.5 * ref[10]], rtol=1e-6)
+    with pytest.raises(ValueError, match="scale must be a positive number"):
+        FeatureSpec.from_dict({"site": "ft", "quantity": "fz", "scale": 0})

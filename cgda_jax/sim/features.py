@@ -136,6 +136,11 @@ class FeatureSpec:
             ``"position"`` (slide).
         frame: forces and torques only: ``"sensor"`` (the site's frame, default)
             or ``"world"``.
+        scale: the feature's values are multiplied by it (default 1): a weight
+            between features of different units in the strategies' point
+            distances, e.g. 1/300 for a force beside positions in metres (the
+            CGDA authors' iron fitness counts 300 N like 1 m).  The column's name
+            says so (``"ft.fz/300 [N]"``: the force in N, divided by 300).
 
     Raises:
         ValueError: an unknown kind, a quantity that the kind does not have, or a
@@ -146,6 +151,7 @@ class FeatureSpec:
     name: str
     quantity: str
     frame: str = "sensor"
+    scale: float = 1.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -159,6 +165,10 @@ class FeatureSpec:
                 f"{self.kind} {self.name!r}: quantity {self.quantity!r} unknown; "
                 f"a {self.kind} has {QUANTITIES[self.kind]}"
             )
+        if isinstance(self.scale, bool) or not isinstance(self.scale, (int, float)) \
+                or not np.isfinite(self.scale) or self.scale <= 0:
+            raise ValueError(f"{self.kind} {self.name!r}: scale must be a positive "
+                             f"number, got {self.scale!r}")
         if self.frame not in FRAMES:
             raise ValueError(f"{self.kind} {self.name!r}: frame {self.frame!r} "
                              f"unknown; use one of {FRAMES}")
@@ -189,11 +199,11 @@ class FeatureSpec:
         if not isinstance(entry, Mapping):
             raise ValueError(f"a feature must be a dict like {{'body': 'box', "
                              f"'quantity': 'xy'}}, got {entry!r}")
-        bad = sorted(set(entry) - {*KINDS, "quantity", "frame"})
+        bad = sorted(set(entry) - {*KINDS, "quantity", "frame", "scale"})
         if bad:
             raise ValueError(f"feature {dict(entry)!r}: unknown key(s) {bad}; "
                              f"allowed: 'body' | 'site' | 'joint', 'quantity', "
-                             f"'frame'")
+                             f"'frame', 'scale'")
         kinds = [k for k in KINDS if k in entry]
         if len(kinds) != 1:
             raise ValueError(f"feature {dict(entry)!r}: give exactly one of the keys "
@@ -202,10 +212,20 @@ class FeatureSpec:
             raise ValueError(f"feature {dict(entry)!r}: missing key 'quantity' "
                              f"(a {kinds[0]} has {QUANTITIES[kinds[0]]})")
         return cls(kinds[0], entry[kinds[0]], entry["quantity"],
-                   entry.get("frame", "sensor"))
+                   entry.get("frame", "sensor"), entry.get("scale", 1.0))
 
     def columns(self) -> tuple[str, ...]:
-        """Column names without units, e.g. ``("box.x", "box.y")``."""
+        """Column names without units, e.g. ``("box.x", "box.y")``; a scaled
+        feature's names end in ``/300`` (scale 1/300) or ``*2`` (scale 2)."""
+        cols = self._raw_columns()
+        if self.scale == 1:
+            return cols
+        inv = 1.0 / self.scale
+        tail = f"/{round(inv)}" if abs(inv - round(inv)) < 1e-9 * inv \
+            else f"*{self.scale:g}"
+        return tuple(c + tail for c in cols)
+
+    def _raw_columns(self) -> tuple[str, ...]:
         if self.kind == "joint":
             return (f"{self.name}.{self.quantity}",)
         if self.is_wrench:
@@ -401,6 +421,9 @@ class FeatureSet:
                     groups[group].append((i, c))
                     sens["pos"].append(adr + c)
                 slots.append((group, len(groups[group]) - 1))
+        scales = np.concatenate([[s.scale] * len(s.columns()) for s in self.specs])
+        #: (F,) the declared scales per column (None: all 1)
+        self._scales = None if np.all(scales == 1) else scales.astype(np.float32)
         self.feature_names = tuple(names)
         self.units = tuple(units)
         self.n_features = len(names)
@@ -480,7 +503,10 @@ class FeatureSet:
             parts.append(_yaw_from_mat(data.site_xmat, g["site_yaw"][:, 0]))
         if len(g["qpos"]):
             parts.append(jnp.asarray(data.qpos)[g["qpos"][:, 0]])
-        return jnp.concatenate(parts)[self._order]
+        return self._scaled(jnp.concatenate(parts)[self._order])
+
+    def _scaled(self, values: Array) -> Array:
+        return values if self._scales is None else values * self._scales
 
     def from_sensordata(self, sensordata: Array) -> Array:
         """Features from one sensor vector of a model with `add_sensors`' sensors.
@@ -511,7 +537,7 @@ class FeatureSet:
                 world = _rotate(s[self._sens_wrench_quat], vec)
                 vec = jnp.where(self._wrench_world[:, None], world, vec)
             parts.append(vec[np.arange(len(vec)), self._wrench_col])
-        return jnp.concatenate(parts)[self._sens_order]
+        return self._scaled(jnp.concatenate(parts)[self._sens_order])
 
 
 def _rotate(q: Array, v: Array) -> Array:
