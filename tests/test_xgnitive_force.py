@@ -84,3 +84,25 @@ def test_point_sum_is_the_authors_iron_fitness():
     assert float(point_sum(cands[0], target)) > float(point_sum(cands[0], target, w))
     with pytest.raises(ValueError, match="weights has shape"):
         point_sum(cands[0], target, jnp.ones(3))
+
+
+def test_iron_force_config_goal_and_scene(xgnitive_dir, monkeypatch):
+    """iron_force_xgnitive: the goal is target_iron[9][4] with Fz weighted 1/300 as
+    the scene's force feature; the demonstrations carry the force in the same
+    weight; the scene reads the iron's tool point and sensor."""
+    import pathlib
+
+    from cgda_jax.experiment import load_config
+    from cgda_jax.experiment.build import build_goal, scene_feature_names
+
+    monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(xgnitive_dir))
+    path = pathlib.Path(__file__).parents[1] / "experiments/iron_force_xgnitive.toml"
+    cfg = load_config(path)
+    goal, demos, gen = build_goal(cfg)
+    want = np.loadtxt(xgnitive_dir / "xgnitive_derived/hardcoded_targets/"
+                      "iron_target_9x4.txt")[:, 1:]
+    np.testing.assert_allclose(goal[:, :3], want[:, :3], atol=1e-5, rtol=0)
+    np.testing.assert_allclose(goal[:, 3] * 300, want[:, 3], atol=1e-4, rtol=0)
+    assert len(demos) == 4 and demos[0].feature_names == ("X", "Y", "Z", "Fz")
+    assert scene_feature_names(cfg) == ["iron/tcp.x [m]", "iron/tcp.y [m]",
+                                        "iron/tcp.z [m]", "iron/ft.fz/300 [N]"]
