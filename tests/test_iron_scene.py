@@ -69,7 +69,7 @@ def test_tiny_arm_presses_a_set_force(sim):
     _, air = sim.step(st, jnp.radians(jnp.array([0.0, 45.0, 110.0])))
     _, near = sim.step(st, jnp.radians(jnp.array([0.0, 58.0, 120.0])))
     goal = np.array([np.asarray(air), [*np.asarray(near)[:3], -15.0 * 0.01]])
-    res = run_ie(sim, goal, population_size=16, tolerance=0.01, max_generations=60,
+    res = run_ie(sim, goal, population_size=12, tolerance=0.01, max_generations=30,
                  seed=0)
     feats = np.asarray(res.features)
     assert res.success, res.point_errors
