@@ -30,16 +30,20 @@ _LAZY.update({
     "load_csv": "cgda_jax.data",
     "load_npz": "cgda_jax.data",
     "load_xgnitive": "cgda_jax.data",
+    "load_xgnitive_force": "cgda_jax.data",
+    "xgnitive_clock_offsets": "cgda_jax.data",
     "save_csv": "cgda_jax.data",
     "save_npz": "cgda_jax.data",
     "validate_demonstrations": "cgda_jax.data",
     "dtw": "cgda_jax.distance",
     "dtw_multi": "cgda_jax.distance",
     "euclidean": "cgda_jax.distance",
+    "point_sum": "cgda_jax.distance",
     "resample": "cgda_jax.distance",
     "soft_dtw": "cgda_jax.distance",
     "GeneralizedAction": "cgda_jax.generalize",
     "generalize": "cgda_jax.generalize",
+    "generalize_streams": "cgda_jax.generalize",
     "rbf_interpolate": "cgda_jax.generalize",
     "ActionLibrary": "cgda_jax.recognize",
     "Recognition": "cgda_jax.recognize",
@@ -161,17 +165,19 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
         checks as checks, datasets as datasets, sizes as sizes,
     )
     from cgda_jax.data import (  # noqa: F401
-        Demonstration, load_csv, load_npz, load_xgnitive, save_csv, save_npz,
-        validate_demonstrations,
+        Demonstration, load_csv, load_npz, load_xgnitive, load_xgnitive_force,
+        save_csv, save_npz, validate_demonstrations, xgnitive_clock_offsets,
     )
-    from cgda_jax.distance import dtw, dtw_multi, euclidean, resample, soft_dtw  # noqa: F401
+    from cgda_jax.distance import (  # noqa: F401
+        dtw, dtw_multi, euclidean, point_sum, resample, soft_dtw,
+    )
     from cgda_jax.experiment import (  # noqa: F401
         ExperimentConfig, load_config, run_experiment,
     )
     from cgda_jax.experiment.export import check_exported, export_trajectory  # noqa: F401
     from cgda_jax.experiment.load import Run, load_run  # noqa: F401
     from cgda_jax.generalize import (  # noqa: F401
-        GeneralizedAction, generalize, rbf_interpolate,
+        GeneralizedAction, generalize, generalize_streams, rbf_interpolate,
     )
     from cgda_jax.reality.calibrate import OffsetEstimate, estimate_offsets  # noqa: F401
     from cgda_jax.reality.export import ExportedTrajectory, time_parameterize  # noqa: F401
