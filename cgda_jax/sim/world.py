@@ -9,7 +9,7 @@ the compiled ``mujoco.MjModel``.
 Object dicts (as in a config's ``[[world.objects]]``):
 
 ``piece`` (required)
-    a built-in piece, ``"box"``, ``"table"`` or ``"valve"`` (`list_pieces`; the files
+    a built-in piece, ``"box"``, ``"table"``, ``"valve"`` or ``"iron"`` (`list_pieces`; the files
     in ``models/objects/``), or the path of an MJCF file of your own.
 ``name``
     the object's name (default: the piece name, or the file's stem).  The piece's
