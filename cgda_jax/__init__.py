@@ -49,6 +49,17 @@ _LAZY.update({
     "Recognition": "cgda_jax.recognize",
     "cost_matrix": "cgda_jax.recognize",
     "recognize": "cgda_jax.recognize",
+    "Segment": "cgda_jax.segment",
+    "execute_sequence": "cgda_jax.segment",
+    "segment": "cgda_jax.segment",
+})
+# --- selection of features and demonstrations (issue 44) ---------------------
+_LAZY.update({
+    "dtw_per_feature": "cgda_jax.distance",
+    "DemonstrationSelection": "cgda_jax.select",
+    "FeatureSelection": "cgda_jax.select",
+    "select_demonstrations": "cgda_jax.select",
+    "select_features": "cgda_jax.select",
 })
 
 
@@ -189,6 +200,11 @@ if _TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from cgda_jax.recognize import (  # noqa: F401
         ActionLibrary, Recognition, cost_matrix, recognize,
     )
+    from cgda_jax.select import (  # noqa: F401
+        DemonstrationSelection, FeatureSelection, select_demonstrations,
+        select_features,
+    )
+    from cgda_jax.distance import dtw_per_feature  # noqa: F401
     from cgda_jax.sim.execute import Simulator  # noqa: F401
     from cgda_jax.sim.sim_state import SimState  # noqa: F401
     from cgda_jax.sim.features import FeatureSet, FeatureSpec  # noqa: F401

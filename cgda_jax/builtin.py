@@ -93,18 +93,35 @@ def experiment_path(name: str) -> pathlib.Path:
 
 
 def experiment_description(path: str | pathlib.Path) -> str:
-    """One line about a config: its ``description`` key, else its first comment."""
+    """One line about a config: its ``description`` key, else its first comment;
+    where the config sets ``strategy.options.stagnation``, the stop rule read from it
+    (the number is written once, in the config)."""
     text = pathlib.Path(path).read_text()
     try:
-        description = str(tomllib.loads(text).get("description", "")).strip()
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError:
-        description = ""
+        data = {}
+    description = str(data.get("description", "")).strip()
     if description:
-        return description.splitlines()[0]
+        return description.splitlines()[0] + _stop_rule(data.get("strategy"))
     for line in text.splitlines():
         if line.startswith("#") and line.lstrip("# ").strip():
             return line.lstrip("# ").strip()
     return ""
+
+
+def _stop_rule(strategy) -> str:
+    """`` Stops after N stagnant generations (at most M).`` from a config's
+    ``[strategy]`` table, when it sets ``options.stagnation``."""
+    if not isinstance(strategy, dict):
+        return ""
+    options = strategy.get("options")
+    stagnation = options.get("stagnation") if isinstance(options, dict) else None
+    if not isinstance(stagnation, int):
+        return ""
+    most = strategy.get("max_generations")
+    return (f" Stops after {stagnation} stagnant generations"
+            + (f" (at most {most})." if isinstance(most, int) else "."))
 
 
 def resolve_config(config: str) -> pathlib.Path:

@@ -48,7 +48,8 @@ import jax.numpy as jnp
 from cgda_jax.checks import check_finite, is_traced
 from cgda_jax.sizes import check_elements
 
-__all__ = ["dtw", "dtw_multi", "euclidean", "point_sum", "resample", "soft_dtw"]
+__all__ = ["dtw", "dtw_multi", "dtw_per_feature", "euclidean", "point_sum", "resample",
+           "soft_dtw"]
 
 # A large finite value for "unreachable" cells: inf would turn into NaN under grad.
 # The inputs are scaled to magnitudes below 2 first (`_scale_exponents`), so every
@@ -132,6 +133,7 @@ def _accumulated_cost(
     y: jax.Array,
     local_cost: Callable[[jax.Array, jax.Array], jax.Array],
     combine: Callable[[jax.Array, jax.Array, jax.Array], jax.Array] | None = None,
+    ends: tuple[jax.Array, jax.Array] | None = None,
 ) -> jax.Array:
     """Final cell D(N-1, M-1) of the DTW accumulated-cost matrix.
 
@@ -144,6 +146,9 @@ def _accumulated_cost(
         combine: how a cell combines its three predecessors ``D(i-1, j)``,
             ``D(i, j-1)``, ``D(i-1, j-1)``; default their minimum (soft-DTW: a
             soft minimum).
+        ends: valid lengths ``(n, m)`` (traced ints, ``1 <= n <= N``,
+            ``1 <= m <= M``) of end-padded inputs: the result is then the cell
+            D(n-1, m-1), which depends on ``x[:n]`` and ``y[:m]`` only.
 
     Returns:
         (*C,) accumulated cost of the optimal warping path.
@@ -162,8 +167,12 @@ def _accumulated_cost(
     prev2 = jnp.full((*cost_shape, n + 1), big).at[..., 0].set(0.0)  # d = -2
     prev1 = jnp.full((*cost_shape, n + 1), big)  # d = -1
 
+    # the end cell (n-1, m-1) lies on diagonal n + m - 2, in slot n
+    end_d, end_slot = (n + m - 2, n) if ends is None else (ends[0] + ends[1] - 2,
+                                                           ends[0])
+
     def step(carry, d):
-        prev2, prev1 = carry
+        prev2, prev1, found = carry
         y_diag = jax.lax.dynamic_slice_in_dim(y_pad, n + m - 1 - d, n, axis=1)
         c = local_cost(xt, y_diag)
         j = d - rows
@@ -175,10 +184,15 @@ def _accumulated_cost(
         else:
             best = combine(prev1[..., :-1], prev1[..., 1:], prev2[..., :-1])
         new = jnp.concatenate([border, jnp.where(valid, c + best, big)], axis=-1)
-        return (prev1, new), None
+        if ends is not None:
+            at_end = jax.lax.dynamic_index_in_dim(new, end_slot, -1, keepdims=False)
+            found = jnp.where(d == end_d, at_end, found)
+        return (prev1, new, found), None
 
-    (_, last), _ = jax.lax.scan(step, (prev2, prev1), jnp.arange(n + m - 1))
-    return last[..., n]
+    found = jnp.zeros(cost_shape, x.dtype)
+    (_, last, found), _ = jax.lax.scan(
+        step, (prev2, prev1, found), jnp.arange(n + m - 1))
+    return last[..., n] if ends is None else found
 
 
 def _abs_cost(xd: jax.Array, yd: jax.Array) -> jax.Array:
@@ -236,10 +250,73 @@ def dtw(x: jax.Array, y: jax.Array) -> jax.Array:
         0.0
     """
     x, y = _pair(x, y, "dtw")
-    k = _scale_exponents(x, y, per_feature=True)
-    per_dim = _accumulated_cost(_times_pow2(x, -k), _times_pow2(y, -k), _abs_cost)
-    per_dim = _times_pow2(per_dim / (x.shape[0] + y.shape[0]), k)
+    per_dim = _per_feature(x, y, None)
     return _refuse_overflow(_nan_unless_finite(jnp.sum(per_dim), x, y), "dtw")
+
+
+def _per_feature(
+    x: jax.Array, y: jax.Array, ends: tuple[jax.Array, jax.Array] | None
+) -> jax.Array:
+    """(F,) normalised DTW cost of each feature of the prepared pair."""
+    k = _scale_exponents(x, y, per_feature=True)
+    per_dim = _accumulated_cost(
+        _times_pow2(x, -k), _times_pow2(y, -k), _abs_cost, ends=ends)
+    total = (x.shape[0] + y.shape[0]) if ends is None else (ends[0] + ends[1])
+    return _times_pow2(per_dim / jnp.asarray(total, per_dim.dtype), k)
+
+
+def _length(length: int | jax.Array | None, full: int, name: str) -> jax.Array:
+    """A valid length as an int32 array, checked where it is concrete."""
+    if length is None:
+        return jnp.asarray(full, jnp.int32)
+    if not is_traced(length):
+        value = int(length)
+        if not 1 <= value <= full:
+            raise ValueError(
+                f"dtw_per_feature: {name} must be in [1, {full}], got {value}")
+    return jnp.asarray(length, jnp.int32)
+
+
+def dtw_per_feature(
+    x: jax.Array,
+    y: jax.Array,
+    x_length: int | jax.Array | None = None,
+    y_length: int | jax.Array | None = None,
+) -> jax.Array:
+    """The per-feature terms of `dtw`, for end-padded trajectories too.
+
+    Feature ``f`` gives the 1-D DTW of ``x[:n, f]`` and ``y[:m, f]`` with local
+    cost ``|x_i - y_j|``, normalised by ``n + m``; `dtw` is their sum. With the
+    valid lengths ``n = x_length`` and ``m = y_length`` (traced values allowed),
+    trajectories of different lengths padded to one shape share one compiled
+    program, so ``jax.vmap`` batches them (the padding is never read, but must be
+    finite: pad with zeros or the last sample).
+
+    Args:
+        x: (N, F) or (N,) first trajectory (padded after sample ``n``).
+        y: (M, F) or (M,) second trajectory (same F).
+        x_length: valid samples of ``x``, in [1, N]; default N.
+        y_length: valid samples of ``y``, in [1, M]; default M.
+
+    Returns:
+        (F,) costs; NaN under ``jit`` / ``vmap`` if ``x`` or ``y`` holds a NaN or
+        an infinity.
+
+    Raises:
+        ValueError: as `dtw`, or a concrete length outside its range.
+
+    Examples:
+        >>> import jax.numpy as jnp
+        >>> x = jnp.array([[0.0, 1.0], [2.0, 1.0], [9.0, 9.0]])  # 1 padding row
+        >>> dtw_per_feature(x, jnp.array([[0.0, 1.0], [2.0, 2.0]]), x_length=2)
+        Array([0.  , 0.25], dtype=float32)
+    """
+    x, y = _pair(x, y, "dtw_per_feature")
+    ends = (_length(x_length, x.shape[0], "x_length"),
+            _length(y_length, y.shape[0], "y_length"))
+    per_dim = _per_feature(x, y, ends)
+    value = _refuse_overflow(_nan_unless_finite(per_dim, x, y), "dtw_per_feature")
+    return value
 
 
 def dtw_multi(x: jax.Array, y: jax.Array) -> jax.Array:

@@ -141,8 +141,8 @@ def check_target(target: pathlib.Path, overwrite: bool) -> None:
         return
     if not overwrite:
         raise FolderError(
-            f"results folder {target} is not empty; replace it with --overwrite "
-            f"(overwrite=True), or choose another folder"
+            f"results folder {target} is not empty; replace it (the command "
+            f"line's --overwrite, Python's overwrite=True) or choose another folder"
         )
     if not (target / MARKER).is_file():
         raise FolderError(

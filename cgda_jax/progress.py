@@ -56,10 +56,11 @@ def _short(v: Any) -> str:
 
 
 class ProgressLine:
-    """Callable progress reporter: ``[label] gen 40 | points 8/11 | worst 0.034 | run 1.2 s``.
+    """Callable progress reporter:
+    ``[label] gen 40 | done 8/11 | met 7/11 | worst 0.034 | run 1.2 s``.
 
-    On a terminal a `tqdm` bar over the goal points (``[label] 8/11 points |###  |,
-    gen 40 | worst 0.034 | run 1.2 s``) is redrawn in place and ended when the run
+    On a terminal a `tqdm` bar over the goal points done (``[label] 8/11 points |###  |,
+    gen 40 | met 7/11 | worst 0.034 | run 1.2 s``) is redrawn in place and ended when the run
     is done; in a Jupyter notebook (``stream`` not given) it is ``tqdm.auto``'s bar.
     Elsewhere (CI logs, files) whole lines are written instead: the first update,
     then at most one every ``interval_s`` seconds, and the last.
@@ -77,8 +78,11 @@ class ProgressLine:
         interval_s: minimum time between two lines when ``stream`` is not a TTY.
     """
 
-    _KEYS = (("points_done", "points"), ("point", "point"), ("best_fitness", "best"),
-             ("worst_error", "worst"))
+    #: info key -> the word shown: ``done`` counts the points whose evolution
+    #: ended, ``met`` those within the tolerance ("done 9/9 | met 0/9": finished,
+    #: none met); ``gen`` is the count the result reports (`cgda_jax.strategies.runner`).
+    _KEYS = (("points_done", "done"), ("points_met", "met"), ("point", "point"),
+             ("best_fitness", "best"), ("worst_error", "worst"))
 
     def __init__(self, label: str, total_points: int | None = None,
                  stream: TextIO | None = None, quiet: bool = False,
@@ -100,14 +104,14 @@ class ProgressLine:
 
     def _text(self, info: dict[str, Any], now: float, bar: bool = False) -> str:
         head = "" if bar else f"[{self.label}] "
-        parts = [f"{head}gen {info.get('generations', '?')}"]
+        parts = [f"{head}gen {_short(info.get('generations', '?'))}"]
         for key, name in self._KEYS:
-            if bar and name in ("points", "point"):
+            if bar and name in ("done", "point"):
                 continue  # the bar shows them
             if key in info:
                 text = _short(info[key])
                 n_points = self.total or info.get("points")
-                if name in ("points", "point") and n_points:
+                if name in ("done", "met", "point") and n_points:
                     text = f"{text}/{n_points}"
                 parts.append(f"{name} {text}")
         total = now - self.t0

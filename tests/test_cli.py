@@ -41,7 +41,14 @@ def test_dry_run_validates_each_experiment(path, capsys, monkeypatch, request):
         monkeypatch.setenv("CGDA_XGNITIVE_DIR", str(xgnitive))
     assert main(["run", str(path), "--dry-run", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "valid" in out and "[strategy]" in out and "results would go to" in out
+    assert "valid" in out and "results would go to" in out
+    # only the keys that apply: a recognition has no [strategy], an execution no
+    # [recognition]; a clean circle no paint keys
+    recognition = 'kind = "recognition"' in out
+    assert ("[strategy]" in out) != recognition
+    assert ("[recognition]" in out) == recognition
+    if 'source = "clean_circle"' in out:
+        assert not any(f"\n{k} = " in out for k in ("goal_points", "stream", "action"))
 
 
 @pytest.mark.parametrize(
@@ -82,14 +89,29 @@ def test_demo_report_starts_with_a_summary_table():
 
     rows = summary_table({
         "rec": {"kind": "recognition", "success": True, "accuracy": 1.0,
-                "features": ["X", "Y", "Z"], "metric": "dtw", "total_time_s": 1.25},
+                "features": ["X", "Y", "Z"], "metric": "dtw", "compute_s": 1.25,
+                "outputs_s": 0.5},
         "clean": {"kind": "execution", "success": False, "strategy": "ie",
                   "max_point_error": 0.031, "tolerance": 0.02, "points": 11,
-                  "generations": 40, "total_time_s": 3.0},
+                  "generations": 40, "compute_s": 3.0, "outputs_s": 2.0},
     })
-    assert rows[0] == "| experiment | result | key figure | time |"
-    assert rows[2] == "| [rec](#rec) | ok | accuracy 100% (3 features, dtw) | 1.2 s |"
+    assert rows[0] == "| experiment | result | key figure | computing | figures, video |"
+    assert rows[2] == ("| [rec](#rec) | ok | accuracy 100% (3 features, dtw) | 1.2 s | "
+                       "0.5 s |")
     assert "**NOT met**" in rows[3] and "max point error 0.031 (tolerance 0.02)" in rows[3]
+
+
+def test_demo_report_times_add_up_and_sections_nest():
+    from cgda_jax.cli.demo import demoted, total_line
+
+    results = {"a": {"compute_s": 2.0, "outputs_s": 1.5},
+               "b": {"compute_s": 3.0, "outputs_s": 1.0}}
+    line = total_line(results, 6.1, True)
+    # the computing times add up below the total; the outputs are said to overlap
+    assert "6.1 s in total: 5.0 s computing" in line and "second thread" in line
+    text = demoted("# a\n\nx\n\n## Feasibility\n\n![p](plots/f.png)\n", "a")
+    assert text.splitlines()[0] == "## a" and "### Feasibility" in text
+    assert "](a/plots/f.png)" in text
 
 
 def test_help_texts_show_examples(capsys):

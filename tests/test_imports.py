@@ -260,8 +260,8 @@ ORDER = {
     "experiment": ("sections", "config", "demo", "locate", "rules", "build", "validate",
                    "compute", "results", "report", "load", "export", "figures", "run",
                    "trials"),
-    "cli": ("output", "list", "plot", "export", "track", "trials", "run", "demo", "app",
-            "__main__"),
+    "cli": ("output", "list", "plot", "export", "track", "segment", "trials", "run",
+            "demo", "app", "__main__"),
 }
 
 

@@ -24,8 +24,8 @@ def test_non_tty_writes_whole_lines_first_and_last_only():
     lines = s.getvalue().splitlines(keepends=True)
     assert "\r" not in s.getvalue()
     assert len(lines) == 2 and all(x.endswith("\n") for x in lines)
-    assert lines[0].startswith("[clean] gen 10 | points 1/5")
-    assert lines[1].startswith("[clean] gen 50 | points 5/5 | worst 0.2")
+    assert lines[0].startswith("[clean] gen 10 | done 1/5")
+    assert lines[1].startswith("[clean] gen 50 | done 5/5 | worst 0.2")
 
 
 def test_non_tty_close_writes_the_last_line_of_an_unfinished_run():

@@ -13,6 +13,7 @@ this ``__init__``):
   bad input, signals, saved tracebacks, library warnings as lines.
 - :mod:`~cgda_jax.cli.list`: ``cgda list``.
 - :mod:`~cgda_jax.cli.plot`: ``cgda plot``.
+- :mod:`~cgda_jax.cli.segment`: ``cgda segment`` (the actions in one recording).
 - :mod:`~cgda_jax.cli.trials`: ``cgda run --trials N`` (and its worker processes).
 - :mod:`~cgda_jax.cli.run`: ``cgda run``.
 - :mod:`~cgda_jax.cli.demo`: ``cgda demo``.

@@ -21,6 +21,7 @@ from cgda_jax.cli.output import (
 )
 from cgda_jax.cli.plot import add_plot_parser, cmd_plot
 from cgda_jax.cli.run import RUN_EXAMPLES, cmd_run
+from cgda_jax.cli.segment import add_segment_parser, cmd_segment
 from cgda_jax.cli.track import add_track_parser, cmd_track
 from cgda_jax.cli.trials import add_trials_arguments, job_member, join_job
 
@@ -41,7 +42,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"cgda {_version()}")
     sub = p.add_subparsers(dest="command", required=True,
-                           metavar="{run,demo,list,plot,export,track}")
+                           metavar="{run,demo,list,plot,export,track,segment}")
     fmt = argparse.RawDescriptionHelpFormatter
     run = sub.add_parser("run", help="run one experiment: a built-in one by name "
                          "(`cgda list`) or a config file (TOML)",
@@ -84,6 +85,7 @@ def _parser() -> argparse.ArgumentParser:
     add_plot_parser(sub, fmt)
     add_export_parser(sub, fmt)
     add_track_parser(sub, fmt)
+    add_segment_parser(sub, fmt)
     for s in (run, demo):
         s.add_argument("--overwrite", action="store_true",
                        help="replace the results folder whole if it holds an earlier "
@@ -102,6 +104,8 @@ def _dispatch(args, signals: Signals) -> int:
             return cmd_list(args)
         if args.command == "track":  # no JAX: no job, no compilation cache
             return cmd_track(args)
+        if args.command == "segment":  # one process, no job
+            return cmd_segment(args)
         join_job(args)  # a multi-process --trials job: before any JAX work
         if not args.no_cache:
             enable_compilation_cache()

@@ -28,8 +28,8 @@ and plots/ (PNGs; execution runs also plots/execution.gif of the robot). It is
 written aside and moved into place when complete: a failed or interrupted run
 leaves the folder as it was. A non-empty --out is refused unless --overwrite; a
 lock refuses a second run into a folder in use.
-Config keys: the [data], [recognition], [robot], [scene], [strategy] and [output]
-tables printed by --dry-run. With --trials N the folder gets trials.json and a
+Config keys: the [data], [recognition], [selection], [robot], [scene], [strategy]
+and [output] tables printed by --dry-run. With --trials N the folder gets trials.json and a
 report.md success-rate table instead, and the exit status is 0 once they are
 written, whatever the rate. Exit status: 0 goal met, 1 goal not met, 2 bad input
 (config, files, results folder not empty, in use or not writable), 3 any other
@@ -67,6 +67,12 @@ def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
              + (f" {result['error_unit']}" if result.get("error_unit") else ""))
     say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
+    if cfg.kind == "execution":
+        from cgda_jax.experiment.report import not_met_hint
+
+        hint = not_met_hint(cfg, result)
+        if hint:
+            say(args, f"[{cfg.name}] hint: {hint}")
     return pending
 
 
@@ -125,7 +131,8 @@ def cmd_run(args) -> int:
     if args.dry_run:
         folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
         print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
-              f"{folder}\n" + dump_config(cfg), end="")
+              f"{folder}\n# the keys that apply to it (a run's config.toml holds them "
+              f"all)\n" + dump_config(cfg, applicable_only=True), end="")
         return EXIT_MET
     if args.trials is not None:
         return run_trials_command(

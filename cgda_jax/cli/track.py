@@ -20,10 +20,12 @@ VIDEO is a video file (anything OpenCV reads), a folder of frames (PNG/JPEG, in
 name order), or a recording folder (rgb/, and depth/, intrinsics.json,
 recording.json when present: what cgda_jax.vision.record writes). For each VIDEO,
 DEMOS/NAME.csv (the format load_csv reads: time, then features with their units in
-the names) and DEMOS/NAME_sheet.png (a contact sheet to check the track by eye).
+the names), DEMOS/NAME_colors.csv (the colour range used in each frame) and
+DEMOS/NAME_sheet.png (a contact sheet to check the track by eye).
 The object is the largest region in the colour range (OpenCV HSV: hue 0-180,
 saturation and value 0-255), or, with --color auto (the default), the first frame's
-most saturated region, followed as its colour changes. A lost object is
+most saturated region, followed as its colour changes, its faces turn into shade and
+the light moves or dims (the range learned again every frame). A lost object is
 interpolated over gaps of up to --max-gap frames; a longer gap refuses the video.
 Exit status: 0 done, 2 bad input (a file that cannot be read, no object in range,
 a gap too long), 3 any other failure.
@@ -118,7 +120,7 @@ def cmd_track(args) -> int:
                             min_area=args.min_area, name=job["name"])
         csv = out / f"{job['name']}.csv"
         save_csv(track.demo, csv)
-        written = [csv]
+        written = [csv, track.write_colors(out / f"{job['name']}_colors.csv")]
         if not args.no_sheet:
             written.append(contact_sheet(job["video"], track,
                                          out / f"{job['name']}_sheet.png"))

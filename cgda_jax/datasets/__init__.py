@@ -18,11 +18,14 @@ from cgda_jax.datasets.synthetic import (
     CLEAN_CENTRE_M as CLEAN_CENTRE_M,
     MARKER_FEATURES as MARKER_FEATURES,
     SPATIAL_FEATURES as SPATIAL_FEATURES,
+    SyntheticSequence as SyntheticSequence,
     clean_circle_demos as clean_circle_demos,
+    distractor_names as distractor_names,
     paint_ramp as paint_ramp,
     select_features as select_features,
     synthetic_actions as synthetic_actions,
     synthetic_arm_actions as synthetic_arm_actions,
+    synthetic_sequence as synthetic_sequence,
 )
 
 __all__ = [
@@ -35,9 +38,11 @@ __all__ = [
     "OBJECT_ACTIONS",
     "OBJECT_FEATURES",
     "SPATIAL_FEATURES",
+    "SyntheticSequence",
     "VALVE_END",
     "VALVE_START",
     "clean_circle_demos",
+    "distractor_names",
     "move_box_demos",
     "object_actions",
     "rotate_valve_demos",
@@ -45,4 +50,5 @@ __all__ = [
     "select_features",
     "synthetic_actions",
     "synthetic_arm_actions",
+    "synthetic_sequence",
 ]

@@ -24,6 +24,8 @@ References:
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -56,17 +58,21 @@ _DURATION_S = {"MOVE": 4.0, "ROTATE": 4.0, "CLEAN": 7.0, "PAINT": 9.0}
 _AREA_PX = 2400.0  # blob area of the marker at the reference depth
 _REF_DEPTH_MM = 880.0
 _HUE_GREEN, _HUE_BLUE = 60.0, 118.0  # marker colour before / after painting
+# tracking noise (standard deviation) of each marker feature, in its unit
+_MARKER_NOISE = np.array([3.0, 3.0, 4.0, 20.0, 1.5, 4.0, 4.0, 1.5])
 _UPPER_ARM_M, _FOREARM_M = 0.30, 0.26
 _GRAVITY = np.array([0.0, 0.0, 1.0])  # the camera looks down: +Z points to the floor
 
 
 @dataclasses.dataclass(frozen=True)
 class _Repetition:
-    """One repetition on the host: sample times (T,), marker (T, 8), arm (T, 12)."""
+    """One repetition on the host: sample times (T,), marker (T, 8), arm (T, 12),
+    progress of the motion (T,) in [0, 1] (0 before it starts, 1 once it ends)."""
 
     times: np.ndarray
     marker: np.ndarray
     arm: np.ndarray
+    progress: np.ndarray
 
 
 def _min_jerk(s: np.ndarray) -> np.ndarray:
@@ -168,11 +174,10 @@ def _repetition(
     saturation = 210.0 - 50.0 * coverage
     value = 190.0 - 95.0 * coverage
     marker = np.column_stack([pos, area, hue, saturation, value, angle])
-    noise = [3.0, 3.0, 4.0, 20.0, 1.5, 4.0, 4.0, 1.5]
-    marker = marker + rng.normal(0.0, noise, size=marker.shape)
+    marker = marker + rng.normal(0.0, _MARKER_NOISE, size=marker.shape)
 
     arm = _arm_points(rng, pos / 1000.0, hand_offset, p)
-    return _Repetition(times=times, marker=marker, arm=arm)
+    return _Repetition(times=times, marker=marker, arm=arm, progress=p)
 
 
 def _arm_points(
@@ -216,9 +221,32 @@ def _generate(n_repetitions: int, seed: int, rate_hz: float) -> dict:
     }
 
 
+#: Irrelevant features of ``synthetic_actions(..., irrelevant=k)``: distractor k's
+#: position [mm], a second object someone else moves about the desk meanwhile.
+DISTRACTOR_AMPLITUDE_MM = 300.0
+
+
+def distractor_names(k: int) -> tuple[str, ...]:
+    """The names of ``k`` irrelevant features (with their unit)."""
+    return tuple(f"distractor_{i + 1} [mm]" for i in range(int(k)))
+
+
+def _distractors(rng: np.random.Generator, times: np.ndarray, k: int) -> np.ndarray:
+    """(T, k) smooth positions unrelated to the action: per column an offset and
+    three sinusoids of random frequency (0.1-0.6 Hz) and phase."""
+    cols = []
+    for _ in range(k):
+        f = rng.uniform(0.1, 0.6, 3)
+        phase = rng.uniform(0.0, 2 * np.pi, 3)
+        amp = rng.uniform(0.3, 1.0, 3) * DISTRACTOR_AMPLITUDE_MM / 3
+        wave = (amp * np.sin(2 * np.pi * f * times[:, None] + phase)).sum(axis=1)
+        cols.append(rng.uniform(-1, 1) * DISTRACTOR_AMPLITUDE_MM + wave)
+    return np.stack(cols, axis=1)
+
+
 def synthetic_actions(
     n_repetitions: int = 7, seed: int = 0, *, rate_hz: float = 30.0,
-    features: str = "marker",
+    features: str = "marker", irrelevant: int = 0,
 ) -> dict[str, list[Demonstration]]:
     """Seeded demonstrations of MOVE, ROTATE, CLEAN and PAINT (paper section 4.1-4.2).
 
@@ -231,6 +259,12 @@ def synthetic_actions(
             hue, saturation, value, angle [deg]; F = 8) or ``"arm"`` for the
             demonstrator's hand tip, wrist, elbow and shoulder X, Y, Z [m] (F = 12).
             Both views of one seed describe the same repetitions.
+        irrelevant: adds this many irrelevant features after those,
+            ``"distractor_k [mm]"`` (`distractor_names`): the position of a second
+            object moved about by someone else, unrelated to the action (an
+            offset up to +-300 mm and slow waves of about that size, drawn anew
+            for every repetition from a generator of its own, so the other
+            features are those of ``irrelevant=0``).
 
     Returns:
         ``{action: [Demonstration, ...]}`` in the order MOVE, ROTATE, CLEAN, PAINT;
@@ -244,13 +278,24 @@ def synthetic_actions(
     """
     if features not in ("marker", "arm"):
         raise ValueError(f"features must be 'marker' or 'arm', got {features!r}")
-    names = MARKER_FEATURES if features == "marker" else ARM_FEATURES
+    if isinstance(irrelevant, bool) or int(irrelevant) != irrelevant or irrelevant < 0:
+        raise ValueError(f"irrelevant must be a whole number >= 0, got {irrelevant!r}")
+    names = (MARKER_FEATURES if features == "marker" else ARM_FEATURES
+             ) + distractor_names(irrelevant)
     reps = _generate(n_repetitions, seed, rate_hz)
+    noise = np.random.default_rng([int(seed), 44])  # its own stream
+
+    def values(r: _Repetition) -> np.ndarray:
+        own = r.marker if features == "marker" else r.arm
+        if not irrelevant:
+            return own
+        return np.concatenate([own, _distractors(noise, r.times, irrelevant)], 1)
+
     return {
         a: [
             Demonstration(
                 times=r.times,
-                features=r.marker if features == "marker" else r.arm,
+                features=values(r),
                 feature_names=names,
                 name=f"{a}-{k + 1}",
             )
@@ -268,6 +313,86 @@ def synthetic_arm_actions(
     Shorthand for ``synthetic_actions(n_repetitions, seed, features="arm")``.
     """
     return synthetic_actions(n_repetitions, seed, rate_hz=rate_hz, features="arm")
+
+
+class SyntheticSequence(NamedTuple):
+    """A recording of several actions in a row and where each one is."""
+
+    recording: Demonstration  # marker features (F = 8), times in seconds from 0
+    truth: list[tuple[str, float, float]]  # (action, start, end) of each motion, s
+
+
+def synthetic_sequence(
+    actions: Sequence[str] | None = None,
+    seed: int = 0,
+    *,
+    pause_s: tuple[float, float] = (0.0, 0.0),
+    rate_hz: float = 30.0,
+) -> SyntheticSequence:
+    """One recording in which several actions follow each other (marker features).
+
+    Each action is a fresh repetition as `synthetic_actions` draws them (its own
+    duration, hesitation, noise), cut to its motion and moved to start where the
+    previous one left the marker (position, angle, colour, area). Between two
+    actions, and before the first and after the last, the marker rests (tracking
+    noise only) for a time drawn from ``pause_s``; ``(0, 0)`` puts the motions
+    back to back.
+
+    Args:
+        actions: the action names in order (of `ACTIONS`, repeats allowed); default
+            2 to 6 actions drawn at random.
+        seed: host random seed.
+        pause_s: (shortest, longest) rest in seconds, drawn uniformly per pause.
+        rate_hz: sampling rate.
+
+    Returns:
+        The recording (named ``"sequence"``) and the true ``(action, start, end)``
+        of each motion in seconds.
+
+    Examples:
+        >>> seq = synthetic_sequence(["MOVE", "CLEAN"], seed=1, pause_s=(0.5, 1.0))
+        >>> [a for a, _, _ in seq.truth], seq.recording.n_features
+        (['MOVE', 'CLEAN'], 8)
+    """
+    if not rate_hz > 0:
+        raise ValueError(f"rate_hz must be positive, got {rate_hz!r}")
+    lo, hi = pause_s
+    if not 0.0 <= lo <= hi:
+        raise ValueError(f"pause_s must be (shortest, longest) with 0 <= shortest "
+                         f"<= longest, got {pause_s!r}")
+    rng = np.random.default_rng(seed)
+    if actions is None:
+        actions = [str(a) for a in rng.choice(ACTIONS, size=rng.integers(2, 7))]
+    actions = list(actions)
+    unknown = [a for a in actions if a not in ACTIONS]
+    if not actions or unknown:
+        raise ValueError(f"actions must name some of {ACTIONS}, got {actions!r}")
+
+    def rest(here: np.ndarray) -> np.ndarray:
+        n = int(round(rng.uniform(lo, hi) * rate_hz))
+        return here + rng.normal(0.0, _MARKER_NOISE, size=(n, here.shape[0]))
+
+    here = None
+    pieces, truth, count = [], [], 0
+    for k, a in enumerate(actions):
+        r = _repetition(rng, a, rate_hz)
+        moving = np.flatnonzero((r.progress > 0.0) & (r.progress < 1.0))
+        first, last = max(moving[0] - 1, 0), min(moving[-1] + 1, len(r.progress) - 1)
+        start_value = r.marker[:first + 1].mean(axis=0)  # at rest before the motion
+        end_value = r.marker[last:].mean(axis=0)  # and after it
+        here = start_value if here is None else here
+        if k == 0 or hi > 0:
+            pieces.append(rest(here))
+            count += len(pieces[-1])
+        pieces.append(r.marker[first:last + 1] - start_value + here)
+        truth.append((a, count / rate_hz, (count + last - first) / rate_hz))
+        count += last - first + 1
+        here = here + end_value - start_value
+    pieces.append(rest(here))
+    marker = np.concatenate(pieces)
+    recording = Demonstration(np.arange(len(marker)) / rate_hz, marker,
+                              MARKER_FEATURES, "sequence")
+    return SyntheticSequence(recording, truth)
 
 
 def select_features(

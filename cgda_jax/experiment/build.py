@@ -29,7 +29,7 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
 
     d = cfg.data
     if d.source in OBJECT_SOURCES:
-        demos = object_demos(cfg)
+        demos = selected_demos(cfg, {cfg.name: object_demos(cfg)})[0][cfg.name]
         gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
         return np.asarray(gen.knots, float) * goal_scale(cfg), demos, gen
     if d.source == "paint_ramp":
@@ -50,6 +50,7 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
         from cgda_jax.data import load_xgnitive
 
         demos = load_xgnitive(resolve_data_dir(cfg), d.action, d.stream, d.columns)
+    demos = selected_demos(cfg, {cfg.name: demos})[0][cfg.name]
     check_interval_count(demos, d.interval_s, d.method)  # before generalize allocates
     gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
     return np.asarray(gen.knots, float) * goal_scale(cfg), demos, gen
@@ -95,15 +96,65 @@ def goal_scale(cfg: ExperimentConfig) -> float | np.ndarray:
 
 def synthetic_demos(cfg: ExperimentConfig) -> dict:
     """The synthetic demonstrations of a recognition run: action -> repetitions."""
-    from cgda_jax.datasets import SPATIAL_FEATURES, select_features, synthetic_actions
+    from cgda_jax.datasets import (
+        SPATIAL_FEATURES,
+        distractor_names,
+        select_features,
+        synthetic_actions,
+    )
 
     d = cfg.data
     demos = synthetic_actions(
-        d.n_repetitions, d.seed, features="arm" if d.features == "arm" else "marker"
+        d.n_repetitions, d.seed, features="arm" if d.features == "arm" else "marker",
+        irrelevant=d.irrelevant,
     )
     if d.features == "spatial":
-        demos = {a: select_features(v, SPATIAL_FEATURES) for a, v in demos.items()}
+        demos = {a: select_features(v, SPATIAL_FEATURES + distractor_names(
+            d.irrelevant)) for a, v in demos.items()}
     return demos
+
+
+def selected_demos(cfg: ExperimentConfig, demos: dict) -> tuple[dict, dict | None]:
+    """Each action's demonstrations (action -> list) after the ``[selection]``
+    section: outlier demonstrations dropped, then (``selection.features``) only
+    the features some action keeps. Returns them and what was selected (None
+    when the section selects nothing), as ``result.json`` stores it: per action
+    its ``demonstrations`` (names, z-scores, kept) and ``features`` (names,
+    summed DTW, z-scores, kept); ``features``: the features kept in the end."""
+    from cgda_jax.select import select_demonstrations, select_features
+
+    s = cfg.selection
+    if not (s.demonstrations or s.features):
+        return demos, None
+    record: dict[str, Any] = {"normalization": s.normalization, "alpha": s.alpha,
+                              "actions": {}}
+    out = {}
+    try:
+        for action, v in demos.items():
+            rec = record["actions"][action] = {}
+            if s.demonstrations:
+                sel = select_demonstrations(v, s.normalization, s.alpha)
+                v = sel.apply(v)
+                rec["demonstrations"] = {
+                    "names": list(sel.names), "zscores": sel.zscores.tolist(),
+                    "selected": sel.selected.tolist()}
+            if s.features:
+                fsel = select_features(v, s.normalization, s.alpha)
+                rec["features"] = {
+                    "names": list(fsel.feature_names),
+                    "distances": fsel.distances.tolist(),
+                    "zscores": fsel.zscores.tolist(),
+                    "selected": fsel.selected.tolist()}
+            out[action] = v
+    except ValueError as err:
+        raise ConfigError(f"section 'selection', action {action!r}: {err}") from None
+    if s.features:
+        names = next(iter(out.values()))[0].feature_names
+        kept = [n for i, n in enumerate(names) if any(
+            r["features"]["selected"][i] for r in record["actions"].values())]
+        record["features"] = kept
+        out = {a: [d.select(kept) for d in v] for a, v in out.items()}
+    return out, record
 
 
 def video_demos(cfg: ExperimentConfig) -> dict:

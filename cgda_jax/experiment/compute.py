@@ -22,6 +22,7 @@ from cgda_jax.experiment.build import (
     feature_labels,
     goal_scale,
     recognition_demos,
+    selected_demos,
 )
 from cgda_jax.experiment.config import ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import strategy_function
@@ -40,11 +41,12 @@ def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
     d, r = cfg.data, cfg.recognition
     t0 = time.perf_counter()
     demos = recognition_demos(cfg)
-    library = ActionLibrary.from_demonstrations(
-        {a: v[: d.n_train] for a, v in demos.items()}, d.interval_s, d.method
-    )
+    train, selection = selected_demos(
+        cfg, {a: v[: d.n_train] for a, v in demos.items()})
+    library = ActionLibrary.from_demonstrations(train, d.interval_s, d.method)
     names = list(library.names)
-    tests = [(a, t) for a, v in demos.items() for t in v[d.n_train:]]
+    kept = library.feature_names
+    tests = [(a, t.select(kept)) for a, v in demos.items() for t in v[d.n_train:]]
     if r.query == "reduced":
         reduced = [generalize([t], d.interval_s, d.method) for _, t in tests]
         queries = list(np.asarray(sample_actions(reduced, r.n_samples)))
@@ -69,11 +71,13 @@ def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
         "success": accuracy == 1.0,
         "wall_time_s": time.perf_counter() - t0,
     }
+    if selection is not None:
+        result["selection"] = selection
     arrays = {"cost_matrix": costs}
     for a in names:
         arrays[f"knot_times_{a}"] = np.asarray(library[a].knot_times)
         arrays[f"knots_{a}"] = np.asarray(library[a].knots)
-        arrays.update(_demo_arrays(demos[a][: d.n_train], f"demo_{a}_"))
+        arrays.update(_demo_arrays(train[a], f"demo_{a}_"))
     np.savez(out / "arrays.npz", **arrays)
     return result, arrays, None
 
@@ -255,6 +259,8 @@ def compute_execution(
                     "feature_labels": labels, "error_unit": error_unit(labels),
                     "build": {"waypoint_s": waypoint_s},
                     "waypoint_s": float(sim.waypoint_s)})
+    if cfg.selection.demonstrations:  # which ones the [selection] kept
+        summary["selected_demonstrations"] = [d.name for d in demos]
     arrays = {k: np.asarray(v) for k, v in res.arrays().items()}
     if gen is not None:  # the generalization and demonstrations, in the goal's units
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)

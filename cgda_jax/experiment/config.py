@@ -25,6 +25,7 @@ from cgda_jax.experiment.sections import (
     RecognitionConfig,
     RobotConfig,
     SceneConfig,
+    SelectionConfig,
     StrategyConfig,
     WorldConfig,
 )
@@ -55,6 +56,7 @@ class ExperimentConfig:
     description: str = ""
     data: DataConfig = dataclasses.field(default_factory=DataConfig)
     recognition: RecognitionConfig = dataclasses.field(default_factory=RecognitionConfig)
+    selection: SelectionConfig = dataclasses.field(default_factory=SelectionConfig)
     robot: RobotConfig = dataclasses.field(default_factory=RobotConfig)
     world: WorldConfig = dataclasses.field(default_factory=WorldConfig)
     scene: SceneConfig = dataclasses.field(default_factory=SceneConfig)
@@ -213,6 +215,60 @@ def load_config(
     return cfg
 
 
-def dump_config(cfg: ExperimentConfig) -> str:
-    """The resolved config as TOML text (loads back to an equal config)."""
-    return tomli_w.dumps(dataclasses.asdict(cfg))
+def dump_config(cfg: ExperimentConfig, applicable_only: bool = False) -> str:
+    """The resolved config as TOML text (loads back to an equal config); with
+    ``applicable_only`` only the keys that apply to this experiment
+    (`applicable_keys`: what ``cgda run --dry-run`` prints)."""
+    table = dataclasses.asdict(cfg)
+    return tomli_w.dumps(applicable_keys(cfg, table) if applicable_only else table)
+
+
+_GENERALIZE = ("interval_s", "method", "scale")
+#: ``[data]`` keys read per ``data.source`` (beside ``source``).
+DATA_KEYS: dict[str, tuple[str, ...]] = {
+    "synthetic": ("features", "n_repetitions", "n_train", "seed", *_GENERALIZE),
+    "clean_circle": ("centre", "diameter", "n_demos", "seed", *_GENERALIZE),
+    "paint_ramp": ("goal_points", "scale"),
+    "xgnitive": ("data_dir", "action", "stream", "columns", *_GENERALIZE),
+    "csv": ("data_dir", "columns", *_GENERALIZE),
+    "video": ("data_dir", "features", "color", "n_train", *_GENERALIZE),
+    "move_box": ("n_demos", "seed", "start", "end", "curve", "object", "duration_s",
+                 *_GENERALIZE),
+    "rotate_valve": ("n_demos", "seed", "start", "end", "object", "duration_s",
+                     *_GENERALIZE),
+}
+#: Dynamic mode's ``[robot]`` keys (left out of a kinematic run's dump).
+DYNAMIC_ROBOT_KEYS = ("physics", "timestep", "reduce", "control")
+
+
+def applicable_keys(cfg: ExperimentConfig, table: dict) -> dict:
+    """``table`` (``asdict(cfg)``) without the keys that do not apply to ``cfg``:
+    ``[data]`` keys of other sources, ``[recognition]`` of an execution (the
+    robot, scene, strategy, feasibility and reality of a recognition), dynamic
+    mode's robot keys in kinematic mode, ``[feasibility]`` with
+    ``strategy.feasibility`` off, a disabled ``[reality]``'s settings, the scene
+    keys its kind does not read."""
+    out = {k: v for k, v in table.items()}
+    keep = DATA_KEYS.get(cfg.data.source)
+    if keep is not None:
+        out["data"] = {k: v for k, v in table["data"].items()
+                       if k == "source" or k in keep}
+    if cfg.kind == "recognition":
+        for section in ("robot", "world", "scene", "strategy", "feasibility",
+                        "reality"):
+            out.pop(section, None)
+        return out
+    out.pop("recognition", None)
+    if cfg.robot.mode != "dynamic":
+        out["robot"] = {k: v for k, v in table["robot"].items()
+                        if k not in DYNAMIC_ROBOT_KEYS}
+    if not cfg.strategy.feasibility:
+        out.pop("feasibility", None)
+    if "reality" in out and not cfg.reality.enabled:
+        out["reality"] = {"enabled": False}
+    scene_keys = {"marker": ("kind",), "paint": ("kind", "params")}.get(cfg.scene.kind)
+    if scene_keys is not None:
+        out["scene"] = {k: v for k, v in table["scene"].items() if k in scene_keys}
+    if not (cfg.world.objects or cfg.world.contact_geoms):
+        out.pop("world", None)
+    return out

@@ -8,6 +8,7 @@ import logging
 import math
 import os
 import pathlib
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,8 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         run.arrays["cost_matrix"], [q.lower() for q in r["truth"]], r["actions"],
         label=f"{metric} cost [{unit or 'mixed units'}]",
         title=f"{run.name}: {metric} cost, test (rows) vs generalized\n"
-              f"{len(labels)} features: {', '.join(r['features'])}",
+              + textwrap.fill(f"{len(labels)} features: {', '.join(r['features'])}",
+                              width=70),
         path=written[0],
     )
     cols = None if cfg.data.features == "marker" else list(range(min(3, len(labels))))
@@ -65,6 +67,26 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
             path=path,
         )
         written.append(path)
+    return written + _selection_figures(run, out)
+
+
+def _selection_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
+    """The z-scores of a ``[selection]`` against alpha, features and
+    demonstrations of each action (none without a selection)."""
+    from cgda_jax.plotting import plot_zscores
+
+    sel = run.result.get("selection")
+    written = []
+    for part, what in (("features", "feature"), ("demonstrations", "demonstration")):
+        panels = {a: (rec[part]["names"], [np.nan if z is None else z
+                                          for z in rec[part]["zscores"]])
+                  for a, rec in (sel or {}).get("actions", {}).items() if part in rec}
+        if panels:
+            written.append(out / f"selection_{part}.png")
+            plot_zscores(
+                panels, sel["alpha"], what=what, path=written[-1],
+                title=f"{run.name}: {what} selection, z-scores of the summed DTW "
+                      f"({sel['normalization']} normalization)")
     return written
 
 
@@ -90,9 +112,15 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         a["point_errors"], r["tolerance"], unit=unit,
         title=f"{what}: error per point vs tolerance", path=path("point_errors.png"),
     )
+    per_point = r["strategy"] in ("ie", "iet")  # OET's rows are its steps
+    points = np.ndim(a["fitness_history"]) == 2
     plotting.plot_fitness(
-        a["fitness_history"], unit=unit,
-        title=f"{what}: best fitness per generation", path=path("fitness.png"),
+        a["fitness_history"], unit=unit, parallel=r["strategy"] == "ie",
+        tolerance=r["tolerance"] if points else None,
+        errors=a["point_errors"] if per_point and points else None,
+        least_motion=points and bool(run.config.strategy.feasibility),
+        title=f"{what}: best fitness per generation ({r['generations']} "
+              "generations)", path=path("fitness.png"),
     )
     demos, gen = run.demonstrations(), run.generalization()
     if demos or gen is not None:  # 3 features: in 3-D (paper Fig. 7)
@@ -131,9 +159,71 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
     return written
 
 
-def _camera(sim) -> dict[str, Any]:
+#: ``[output] camera`` keys: the free camera of the robot's video and frames.
+CAMERA_KEYS = ("lookat", "distance", "azimuth", "elevation")
+
+
+def check_camera(camera: dict) -> dict[str, Any]:
+    """``[output] camera`` checked: ``lookat`` [x, y, z] m, ``distance`` > 0 m,
+    ``azimuth`` and ``elevation`` in degrees (MuJoCo's free camera: azimuth 0 looks
+    along +x, 90 along +y; elevation < 0 looks down); the values given.
+
+    Raises:
+        ConfigError: an unknown key or a bad value, naming the key.
+    """
+    from cgda_jax.experiment.config import ConfigError
+
+    out: dict[str, Any] = {}
+    for key, value in dict(camera or {}).items():
+        where = f"key 'output.camera.{key}'"
+        if key not in CAMERA_KEYS:
+            raise ConfigError(f"{where}: unknown; the camera keys are "
+                              f"{', '.join(CAMERA_KEYS)}")
+        if key == "lookat":
+            v = np.asarray(value, dtype=object)
+            if v.shape != (3,) or not all(isinstance(x, (int, float))
+                                          and not isinstance(x, bool)
+                                          and math.isfinite(x) for x in v):
+                raise ConfigError(f"{where} = {value!r}: expected [x, y, z] in metres")
+            out[key] = np.asarray(value, float)
+            continue
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not math.isfinite(value) or (key == "distance" and value <= 0)):
+            raise ConfigError(f"{where} = {value!r}: expected a finite number"
+                              + (" > 0 (metres)" if key == "distance" else
+                                 " (degrees)"))
+        out[key] = float(value)
+    return out
+
+
+def _arm_points(sim, joints) -> np.ndarray:
+    """World positions of the arm: its first evolved joint's anchor and the marker
+    at the start and at every waypoint (M, 3)."""
+    import mujoco
+
+    robot = sim.robot
+    model = robot.mj_model
+    data = mujoco.MjData(model)
+    data.qpos[:] = np.asarray(robot.qpos0, np.float64)
+    mujoco.mj_kinematics(model, data)
+    points = [data.xanchor[int(robot.joint_ids[0])].copy(),
+              data.site_xpos[robot.site_id].copy()]
+    for q in np.asarray(joints, np.float64):
+        if np.all(np.isfinite(q)):
+            data.qpos[robot.qpos_adr] = np.clip(q, robot.lower, robot.upper)
+            mujoco.mj_kinematics(model, data)
+            points.append(data.site_xpos[robot.site_id].copy())
+    return np.asarray(points)
+
+
+def _camera(sim, goal=None, joints=None, camera: dict | None = None) -> dict[str, Any]:
+    """The video's free camera: ``camera`` (``[output] camera``) over a default
+    that frames the goal and the arm. The marker scene: from in front of the arm,
+    55 degrees to its outer side, looking slightly down at the goal points, the
+    marker's waypoints and the shoulder; the paint wall: the robot and the wall;
+    the object scenes: their goal path and the hand."""
     paint = getattr(sim.scene, "centres", None) is not None
-    camera: dict[str, Any] = {
+    view: dict[str, Any] = {
         "distance": (1.9 if paint else 1.3) * float(sim.robot.mj_model.stat.extent)}
     path = getattr(sim.scene, "goal_path", None)
     if path is not None:  # objects: look at them and the hand, from their side
@@ -141,25 +231,54 @@ def _camera(sim) -> dict[str, Any]:
         points = np.vstack([np.asarray(path, float), hand[None]])
         centre = (2.0 * points[:-1].mean(axis=0) + hand) / 3.0
         spread = float(np.linalg.norm(points - centre, axis=1).max())
-        camera = {"lookat": centre, "elevation": -35.0,
-                  "distance": max(0.6, 3.5 * spread),
-                  "azimuth": math.degrees(math.atan2(-centre[1], -centre[0])) + 30.0}
-    return camera
+        view = {"lookat": centre, "elevation": -35.0,
+                "distance": max(0.6, 3.5 * spread),
+                "azimuth": math.degrees(math.atan2(-centre[1], -centre[0])) + 30.0}
+    elif goal is not None and type(sim.scene).__name__ == "MarkerScene":
+        goal = np.asarray(goal, float)
+        points = np.vstack([goal, _arm_points(sim, joints if joints is not None
+                                              else np.zeros((0, sim.n_dof)))])
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        centre = (lo + hi) / 2
+        spread = float(np.linalg.norm(points - centre, axis=1).max())
+        side = math.copysign(55.0, centre[1]) if abs(centre[1]) > 1e-6 else 55.0
+        view = {"lookat": centre, "elevation": -15.0,
+                "distance": max(0.5, 2.8 * spread),
+                # from in front (the robot faces +x), turned to the arm's side
+                "azimuth": math.degrees(math.atan2(centre[1], centre[0])) + 180.0
+                - side}
+    view.update(check_camera(camera or {}))
+    return view
 
 
 def _captions(run: Run, sim):
-    """Per frame: the point being reached, and for paint the target and painted %."""
+    """Per frame: the point being reached, or reached with its error (paint: the
+    target and the painted %)."""
     goal = np.asarray(run.arrays["goal"], float)
+    errors = np.asarray(run.arrays["point_errors"], float)
     n = len(goal)
     paint = getattr(sim.scene, "centres", None) is not None
+    unit = run.result.get("error_unit")
 
-    def text(k: int, state) -> str:
-        head = "start" if k == 0 else f"point {k} of {n}"
-        if not paint:
-            return f"{run.name}: {head}"
-        painted = 100.0 * float(np.mean(np.asarray(state, bool)))
-        target = "" if k == 0 else f"target {goal[k - 1, 0]:.1f} %, "
-        return f"{run.name}: {head}\n{target}painted {painted:.1f} %"
+    def text(k: int, state, reached: bool = True) -> str:
+        if k == 0:
+            return f"{run.name}: start"
+        if paint:
+            painted = 100.0 * float(np.mean(np.asarray(state, bool)))
+            target = f"target {goal[k - 1, 0]:.2f} %"
+            if reached:
+                return (f"{run.name}: point {k} of {n} reached\n"
+                        f"painted {painted:.2f} % ({target})")
+            return (f"{run.name}: moving to point {k} of {n} ({target})\n"
+                    f"painted so far {painted:.2f} %")
+        if not reached:
+            return f"{run.name}: moving to point {k} of {n}"
+        err = errors[k - 1] if k - 1 < len(errors) else np.nan
+        if not np.isfinite(err):
+            return f"{run.name}: point {k} of {n} reached"
+        shown = (f"{1e3 * err:.1f} mm" if unit == "m" else
+                 f"{err:.3g}{' ' + unit if unit else ''}")
+        return f"{run.name}: point {k} of {n} reached, error {shown}"
 
     return text
 
@@ -210,14 +329,12 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
         fpw = frames_per_waypoint(sim)
         marker = type(sim.scene).__name__ == "MarkerScene"
         goal = np.asarray(run.arrays["goal"], float)
-        camera = _camera(sim)
-        if marker:  # look between the robot and its goal points
-            camera["lookat"] = (np.asarray(sim.robot.mj_model.stat.center)
-                                + goal.mean(axis=0)) / 2
+        camera = _camera(sim, goal if marker else None, joints,
+                         getattr(run.config.output, "camera", None))
         frames = render_frames(
             sim, joints, frames_per_waypoint=fpw, width=size[0], height=size[1],
             goal_points=goal if marker else None, captions=_captions(run, sim),
-            shadows=False, **camera,
+            shadows=False, trace=True, **camera,
         )
         out.mkdir(parents=True, exist_ok=True)
         fps = max(4, 2 * fpw)

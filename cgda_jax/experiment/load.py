@@ -143,6 +143,7 @@ RUN_FIELDS = {
     "kind": "str", "name": "str", "success": "bool", "feature_labels": "list[str]",
     "demo_feature_labels": "list[str]", "plots": "list[str]",
     "total_time_s": "number|null", "wall_time_s": "number|null",
+    "compute_s": "number|null", "outputs_s": "number|null",
 }
 #: An execution's, beside the strategy's own (`cgda_jax.ExecutionResult`'s
 #: ``RESULT_FIELDS``).

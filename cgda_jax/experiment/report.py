@@ -55,6 +55,12 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
         motion["problems"])
     lines = ["## Feasibility", "",
              f"Independent check of the reported joints: **{verdict}**."]
+    free = [j for j in motion["joints"] if lim["velocity"].get(j) is None]
+    if free:  # "-" in the limit column: say what the verdict then covers
+        lines += ["", f"**No speed limit** for {', '.join(free)} (neither the model "
+                  "nor `[robot.limits]` gives one): \"feasible\" here means free of "
+                  "collisions and of moves over the step cap, not within the robot's "
+                  "speeds. Set `[robot.limits]` (e.g. `velocity = 3.0`) to judge them."]
     if optimiser_feasible is not None:
         lines += ["", "The strategy's own check (every move at its collision "
                   f"samples): {'feasible' if optimiser_feasible else 'infeasible'}."]
@@ -79,7 +85,10 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     if dyn:
         head += ["measured speed", "peak effort [N m]", "limit",
                  "tracking at waypoint ends, max [deg]"]
-    head += ["travel [deg]", "largest move [deg]"]
+    # the approach apart: a run whose points all share one posture travels only
+    # there (its later moves are 0)
+    head += ["approach [deg]", "largest move after it [deg]",
+             "travel, approach included [deg]"]
     lines += ["", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
     for j in motion["joints"]:
         row = [j, f"{motion['peak_speed'][j]:.2f}", _limit(lim["velocity"][j]),
@@ -90,8 +99,10 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
             row += [f"{motion['measured_speed'][j]:.2f}",
                     "-" if eff is None else f"{eff:.1f}", _limit(lim["effort"][j]),
                     f"{motion['tracking_error_deg'][j]:.1f}"]
-        row += [f"{motion['travel_deg'][j]:.0f}",
-                f"{motion['largest_step_deg'][j]:.0f}"]
+        approach = (motion.get("approach_deg") or {}).get(j)
+        row += ["-" if approach is None else f"{approach:.0f}",
+                f"{motion['largest_step_deg'][j]:.0f}",
+                f"{motion['travel_deg'][j]:.0f}"]
         lines.append("| " + " | ".join(row) + " |")
     if motion.get("tracking_note"):
         lines += ["", f"**Tracking:** {motion['tracking_note']}."]
@@ -233,6 +244,87 @@ def reality_rows(reality: dict | None, unit: str | None) -> list[str]:
     return rows
 
 
+def generations_text(result: dict, max_generations: int) -> str:
+    """The report's generations: the count the progress line ends on and the fitness
+    plot's axis spans, with what it counts (IE: the slowest point's, its points
+    evolving side by side; IET, OET: summed over the points in run order; restarts
+    and backtracks included) against ``max_generations`` (one try's budget; FTE:
+    the whole run's)."""
+    g, info = int(result["generations"]), result.get("info") or {}
+    per = info.get("point_generations") or info.get("step_generations")
+    tries = info.get("point_tries") or info.get("step_tries") or [info.get("tries", 1)]
+    most = max([int(t) for t in tries if t is not None] + [1])
+    budget = (f"{most} tries of at most {max_generations}" if most > 1
+              else f"at most {max_generations} a try")
+    if result["strategy"] == "ie" and per:
+        return (f"{g} (the slowest point's: the points evolve side by side; "
+                f"{sum(per)} over all {len(per)} points; {budget})")
+    if per:
+        what = "steps" if result["strategy"] == "oet" else "points"
+        return f"{g} (summed over the {len(per)} {what} in run order; {budget})"
+    if result["strategy"] == "fte":  # one budget over all its tries
+        return (f"{g} ({most} tries, " if most > 1 else f"{g} (") + (
+            f"at most {max_generations} in all)")
+    return f"{g} ({budget})"
+
+
+def not_met_hint(cfg: ExperimentConfig, result: dict) -> str | None:
+    """For an execution that missed its tolerance: how many points met it, the
+    nearest approach, and what to try when the goal may be out of reach (the
+    reach check, the workspace); None for a run that met it."""
+    if result.get("kind") == "recognition" or result.get("success"):
+        return None
+    errors = np.asarray([np.inf if e is None else e for e in result["point_errors"]],
+                        float)
+    tol, unit = result["tolerance"], result.get("error_unit")
+    met = int(np.sum(errors < tol))
+    worst = int(np.argmax(errors))
+    text = (f"{met} of {len(errors)} points within the tolerance; the farthest, "
+            f"point {worst + 1}, ends {_with_unit(errors[worst], unit)} away")
+    off = (result.get("info") or {}).get("unreachable_points")
+    if off:
+        return text + (f"; the reach check found {len(off)} point(s) out of the "
+                       "arm's reach (`info.unreachable_points`: nearest approach "
+                       "each): move the goal into the workspace.")
+    if met == 0 or errors[worst] > 10 * tol:
+        reach = ("`--set strategy.options.reach_check=true` samples the arm's "
+                 "workspace first and names each unreachable point with its "
+                 "nearest approach; " if cfg.strategy.name == "ie" else "")
+        return text + (". The goal may be out of the arm's reach: "
+                       f"{reach}move the goal (`data.centre`) in front of the arm "
+                       "or choose other joints (`robot.joints`).")
+    return text + (": more generations, a larger population or "
+                   "`strategy.options.restarts` may close the gap.")
+
+
+def _z(value) -> str:
+    return "-" if value is None or not np.isfinite(value) else f"{value:.2f}"
+
+
+def selection_rows(selection: dict | None) -> list[str]:
+    """The ``[selection]`` of a recognition run: per action the z-scores of its
+    features and demonstrations, a discarded one struck through."""
+    if not selection:
+        return []
+
+    def cells(part: dict) -> str:
+        return ", ".join(
+            f"{n} {_z(z)}" if keep else f"~~{n} {_z(z)}~~"
+            for n, z, keep in zip(part["names"], part["zscores"], part["selected"]))
+
+    lines = ["", f"Selection (normalization {selection['normalization']}, alpha "
+             f"{selection['alpha']:g}; z-scores, discarded struck through):", "",
+             "| action | features | demonstrations |", "|---|---|---|"]
+    for action, rec in selection["actions"].items():
+        feats, dems = rec.get("features"), rec.get("demonstrations")
+        lines.append(f"| {action} | {cells(feats) if feats else 'all'} | "
+                     f"{cells(dems) if dems else 'all'} |")
+    if "features" in selection:
+        lines += ["", "Features kept (by at least one action): "
+                  + ", ".join(selection["features"]) + "."]
+    return lines
+
+
 def report_markdown(cfg: ExperimentConfig, result: dict,
                     plots: list[str] | None = None) -> str:
     """``report.md`` of a run (``plots``: the PNGs to show, default
@@ -255,6 +347,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             cells = [f"**{v:.4g}**" if j == best else f"{v:.4g}" for j, v in enumerate(row)]
             lines.append(f"| {q.lower()} | " + " | ".join(cells) + " |")
         lines += ["", f"Accuracy: {result['accuracy']:.0%}."]
+        lines += selection_rows(result.get("selection"))
     else:
         lines += [
             f"Strategy {result['strategy'].upper()} ({cfg.strategy.algorithm}, population "
@@ -268,7 +361,7 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             f"(tolerance {_with_unit(result['tolerance'], unit)}"
             f"{_aimed(result, unit)}) |",
             f"| final fitness | {_with_unit(result['final_fitness'], unit)} |",
-            f"| generations | {result['generations']} |",
+            f"| generations | {generations_text(result, cfg.strategy.max_generations)} |",
             f"| evaluations | {result['evaluations']} |",
             f"| run time (compiled generations) | {result['wall_time_s']:.2f} s |",
             f"| compile time | {result['compile_time_s']:.2f} s |",
@@ -297,6 +390,9 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
             ]
         lines += export_rows(result.get("export"), unit)
         lines += reality_rows(result.get("reality"), unit)
+        hint = not_met_hint(cfg, result)
+        if hint:
+            lines += ["", f"**Not met.** {hint}"]
         if phys and phys.get("control"):
             lines += [""] + control_lines(phys["control"])
         if result.get("motion"):
@@ -311,6 +407,10 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
         elif render:
             lines += ["", f"Frames not rendered: {render['reason']} (set MUJOCO_GL=egl "
                       "or osmesa; `output.render = false` turns rendering off)."]
+    if result.get("selected_demonstrations"):
+        lines += ["", "Demonstrations kept by the selection (normalization "
+                  f"{cfg.selection.normalization}, alpha {cfg.selection.alpha:g}): "
+                  + ", ".join(result["selected_demonstrations"]) + "."]
     if result.get("feature_labels"):
         lines += ["", "Features: " + ", ".join(result["feature_labels"]) + "."]
     plots = sorted(plots if plots is not None else result.get("plots", []))

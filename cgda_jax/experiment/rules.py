@@ -52,6 +52,7 @@ def validate_config(cfg: ExperimentConfig) -> None:
     _choice(cfg.data.method, ("paper", "xgnitive"), "data.method")
     if not cfg.data.interval_s > 0:
         raise ConfigError(f"key 'data.interval_s' must be > 0, got {cfg.data.interval_s}")
+    _validate_selection(cfg)
     if cfg.kind == "recognition":
         if cfg.data.source not in ("synthetic", "video"):
             raise ConfigError("key 'data.source': recognition runs on 'synthetic' or "
@@ -105,6 +106,25 @@ def validate_config(cfg: ExperimentConfig) -> None:
     resolve_model(cfg.robot.model)
     if cfg.world.objects or cfg.scene.kind == "objects":
         validate_world(cfg)
+
+
+def _validate_selection(cfg: ExperimentConfig) -> None:
+    """``[selection]`` and ``data.irrelevant``."""
+    from cgda_jax.select import NORMALIZATIONS
+
+    s = cfg.selection
+    _choice(s.normalization, NORMALIZATIONS, "selection.normalization")
+    if not math.isfinite(s.alpha):
+        raise ConfigError(f"key 'selection.alpha' must be a finite number, got "
+                          f"{s.alpha}")
+    if s.features and cfg.kind != "recognition":
+        raise ConfigError("key 'selection.features': feature selection is for "
+                          "recognition (an execution goal has the scene's features); "
+                          "'selection.demonstrations' applies to both")
+    if cfg.data.irrelevant < 0 or (cfg.data.irrelevant and not (
+            cfg.kind == "recognition" and cfg.data.source == "synthetic")):
+        raise ConfigError(f"key 'data.irrelevant' must be >= 0 and is for synthetic "
+                          f"recognition data, got {cfg.data.irrelevant}")
 
 
 def _validate_feasibility(cfg: ExperimentConfig) -> None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-__all__ = ["ControlConfig", "DataConfig", "FeasibilityConfig", "OutputConfig", "RealityConfig", "RecognitionConfig", "RobotConfig", "SceneConfig", "StrategyConfig", "WorldConfig"]
+__all__ = ["ControlConfig", "DataConfig", "FeasibilityConfig", "OutputConfig", "RealityConfig", "RecognitionConfig", "RobotConfig", "SceneConfig", "SelectionConfig", "StrategyConfig", "WorldConfig"]
 
 
 @dataclasses.dataclass
@@ -58,6 +58,8 @@ class DataConfig:
         duration_s: move_box / rotate_valve: mean duration of the motion [s]
             (0 = the dataset's 7.4 s; with the pauses and ``interval_s = 1``,
             about 9 goal points).
+        irrelevant: synthetic: this many irrelevant features added
+            (``distractor_k [mm]``, `cgda_jax.datasets.synthetic_actions`).
     """
 
     source: str = "synthetic"
@@ -83,6 +85,7 @@ class DataConfig:
     object: str = ""
     duration_s: float = 0.0
     color: str = "auto"
+    irrelevant: int = 0
 
 
 @dataclasses.dataclass
@@ -97,6 +100,28 @@ class RecognitionConfig:
     metric: str = "dtw"
     query: str = "reduced"
     n_samples: int = 100
+
+
+@dataclasses.dataclass
+class SelectionConfig:
+    """``[selection]``: the CGDA authors' selection (`cgda_jax.select`), applied
+    to each action's demonstrations before generalization.
+
+    ``demonstrations``: drop the outlier demonstrations
+    (`cgda_jax.select_demonstrations`; recognition: of the training ones).
+    ``features`` (recognition only): keep the features that
+    `cgda_jax.select_features` keeps for at least one action (the library needs
+    one feature set; a feature every action discards is dropped), in the
+    generalized actions and the test queries; demonstrations first.
+    ``normalization``: "none", "minmax", "standardized" or "whole-experiment"
+    (`cgda_jax.select.NORMALIZATIONS`); ``alpha``: the z-score above which a
+    feature or demonstration is discarded (the authors' 0.5).
+    """
+
+    features: bool = False
+    demonstrations: bool = False
+    normalization: str = "none"
+    alpha: float = 0.5
 
 
 @dataclasses.dataclass
@@ -271,6 +296,10 @@ class OutputConfig:
     dir: str = "results"
     plots: bool = True
     render: bool = True
+    #: the video's free camera, over a default that frames the goal and the arm:
+    #: ``lookat`` [x, y, z] m, ``distance`` m, ``azimuth``, ``elevation`` deg
+    #: (`cgda_jax.experiment.figures.check_camera`)
+    camera: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 @dataclasses.dataclass

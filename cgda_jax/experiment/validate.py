@@ -118,6 +118,9 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
             raise ConfigError("key 'recognition.n_samples' must be >= 2")
         return
     check_seed(s.seed, "strategy.seed")
+    from cgda_jax.experiment.figures import check_camera
+
+    check_camera(cfg.output.camera)  # names a bad [output] camera key
     if trials is not None and s.seed + trials - 1 > MAX_SEED:
         raise ConfigError(
             f"key 'strategy.seed' with --trials {trials}: the seeds {s.seed} .. "

@@ -12,16 +12,20 @@ paper figure / table              function
 ================================  ===========================================
 Fig. 2, Fig. 7                    :func:`plot_demonstrations`
 Tables 2-4                        :func:`plot_cost_matrix`
+(selection z-scores vs alpha)     :func:`plot_zscores`
 Fig. 4                            :func:`plot_fitness`
 Fig. 5, 6, 10                     :func:`plot_goal_vs_executed`
 Fig. 9                            :func:`plot_time_per_point`
 (point errors vs tolerance)       :func:`plot_point_errors`
 Fig. 8, 11                        :func:`plot_frames`
 (motion against the limits)       :func:`plot_motion`
+(a segmented recording)           :func:`plot_segmentation`
 ================================  ===========================================
 
 Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.evolution`,
-`~cgda_jax.plotting.tables`, `~cgda_jax.plotting.frames`, `~cgda_jax.plotting.units`.
+`~cgda_jax.plotting.tables`, `~cgda_jax.plotting.selection`,
+`~cgda_jax.plotting.segments`, `~cgda_jax.plotting.frames`,
+`~cgda_jax.plotting.units`.
 """
 
 from cgda_jax.plotting import units as units
@@ -37,6 +41,8 @@ from cgda_jax.plotting.evolution import (
 )
 from cgda_jax.plotting.frames import plot_frames as plot_frames
 from cgda_jax.plotting.motion import plot_motion as plot_motion
+from cgda_jax.plotting.segments import plot_segmentation as plot_segmentation
+from cgda_jax.plotting.selection import plot_zscores as plot_zscores
 from cgda_jax.plotting.tables import plot_cost_matrix as plot_cost_matrix
 from cgda_jax.plotting.trajectories import (
     plot_demonstrations as plot_demonstrations,
@@ -53,6 +59,8 @@ __all__ = [
     "plot_motion",
     "plot_goal_vs_executed",
     "plot_point_errors",
+    "plot_segmentation",
     "plot_time_per_point",
+    "plot_zscores",
     "units",
 ]

@@ -36,14 +36,29 @@ def plot_fitness(
     log: bool = True,
     title: str | None = None,
     path: str | os.PathLike | None = None,
+    parallel: bool = False,
+    tolerance: float | None = None,
+    errors=None,
+    least_motion: bool = False,
 ) -> Figure:
     """Best fitness per generation (counted from 1), its minimum marked in red
     (Fig. 4).
 
-    Several evolutions (one per goal point: IE, IET, OET) are drawn one after the
-    other in run order on one generation axis, each in its point's colour (colour
-    bar: the point number, from 1), with thin lines between points, so that even a
-    point solved in its first generation shows as a marker.
+    Several evolutions (one per goal point: IE, IET, OET) are drawn each in its
+    point's colour (colour bar: the point number, from 1): side by side from
+    generation 1 when ``parallel`` (IE: the points evolve together, so the axis
+    ends at the slowest point's generations, the run's count), else one after the
+    other in run order with thin lines between points (IET, OET: the axis spans
+    their summed generations), so that even a point solved in its first generation
+    shows as a marker.
+
+    What is plotted is the fitness the evolution ranked by, not always an error:
+    ``tolerance`` draws the tolerance (dashed), ``least_motion`` (feasibility on)
+    shades the band below it, where a candidate that meets the tolerance is ranked
+    by its joint motion (``tolerance * m / (m + 1)``) instead of its error, and
+    ``errors`` (one per row) marks each point's executed error (the result's) at
+    the end of its evolution. The y axis is logarithmic only where the values
+    span more than a decade (else a linear axis keeps its labels readable).
 
     Args:
         history: (G,) for one evolution, or (P, G) for P evolutions; non-finite
@@ -51,14 +66,19 @@ def plot_fitness(
         labels: unused beyond one evolution (kept for compatibility): points are
             named by the colour bar.
         unit: the fitness' unit (e.g. ``"m"`` for a distance in metres).
-        log: logarithmic y axis (when all values are positive).
+        log: logarithmic y axis (when all values are positive and span a decade).
+        parallel: the P evolutions ran side by side (IE).
+        tolerance: the point tolerance (fitness units), drawn dashed.
+        errors: (P,) each evolution's executed point error, marked with an x.
+        least_motion: shade the band below ``tolerance`` as a motion rank.
     """
     del labels
     h = np.asarray(history, dtype=float)
     h = h[None] if h.ndim == 1 else h
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
-    finite = [h_row[np.isfinite(h_row)] for h_row in h]
-    positive = all(bool(np.all(y > 0)) for y in finite if y.size)
+    shown = [h_row[np.isfinite(h_row)] for h_row in h]
+    handles, names = [], []
+    ends = []  # (x, row) of each evolution's last generation
     if h.shape[0] == 1:
         g = np.flatnonzero(np.isfinite(h[0]))
         y = h[0, g]
@@ -69,8 +89,8 @@ def plot_fitness(
             ax.plot(g[i], y[i], "o", color="red", ms=7,
                     label=f"minimum {y[i]:.4g}{' ' + unit if unit else ''} "
                     f"(generation {g[i]})")
+            ends.append((g[-1], 0))
         ax.set_xlabel("generation")
-        ax.legend(fontsize=8)
     else:
         p = h.shape[0]
         cmap = plt.get_cmap("viridis", p)
@@ -82,6 +102,9 @@ def plot_fitness(
                 continue
             x = start + g + 1  # generations counted from 1
             ax.plot(x, row[g], "-o", color=cmap(k), lw=1.0, ms=2.5)
+            ends.append((x[-1], k))
+            if parallel:
+                continue
             start += int(g[-1]) + 1
             if k < p - 1:
                 ax.axvline(start + 0.5, color="0.85", lw=0.6, zorder=0)
@@ -89,13 +112,43 @@ def plot_fitness(
         bar.set_label(POINT_AXIS, fontsize=8)
         bar.ax.yaxis.set_major_locator(MaxNLocator(integer=True, nbins=8))
         bar.ax.tick_params(labelsize=7)
-        ax.set_xlabel("generation (the points' evolutions in run order)")
-        handles = [Line2D([], [], color="0.3", marker="o", ms=2.5, lw=1.0),
-                   Line2D([], [], color="0.85", lw=0.6)]
-        ax.legend(handles, ["best fitness so far, one evolution per point",
-                            "next point's evolution starts"], fontsize=8)
-    if log and positive:
+        if parallel:
+            ax.set_xlabel("generation (the points evolve side by side)")
+            handles.append(Line2D([], [], color="0.3", marker="o", ms=2.5, lw=1.0))
+            names.append("best fitness so far, one evolution per point")
+        else:
+            ax.set_xlabel("generation (the points' evolutions in run order)")
+            handles += [Line2D([], [], color="0.3", marker="o", ms=2.5, lw=1.0),
+                        Line2D([], [], color="0.85", lw=0.6)]
+            names += ["best fitness so far, one evolution per point",
+                      "next point's evolution starts"]
+    u = f" {unit}" if unit else ""
+    if tolerance is not None and np.isfinite(tolerance):
+        handles.append(ax.axhline(tolerance, color="0.3", ls="--", lw=0.9))
+        names.append(f"tolerance {tolerance:.4g}{u}")
+    if errors is not None:
+        err = np.asarray(errors, dtype=float).ravel()
+        xs = [x for x, k in ends if k < err.size and np.isfinite(err[k])]
+        ys = [err[k] for x, k in ends if k < err.size and np.isfinite(err[k])]
+        if xs:
+            handles.append(ax.plot(xs, ys, "x", color="red", ms=6, mew=1.5)[0])
+            names.append("executed point error (the result's)")
+            shown.append(np.asarray(ys))
+    values = np.concatenate([y for y in shown if y.size] or [np.ones(1)])
+    if log and np.all(values > 0) and values.max() > 10 * values.min():
         ax.set_yscale("log")
+    elif least_motion or np.any(values <= 0):
+        ax.set_ylim(bottom=0.0)
+    if least_motion and tolerance is not None and np.isfinite(tolerance):
+        bottom, top = ax.get_ylim()
+        handles.append(ax.axhspan(bottom, tolerance, color="tab:green", alpha=0.1,
+                                  lw=0))
+        names.append("below: ranked by joint motion, not an error")
+        ax.set_ylim(bottom, top)
+    if h.shape[0] == 1:
+        handles = ax.get_legend_handles_labels()[0] + handles
+        names = ax.get_legend_handles_labels()[1] + names
+    ax.legend(handles, names, fontsize=8)
     integer_axis(ax.xaxis)
     ax.set_ylabel("best fitness" + _unit(unit))
     if title:

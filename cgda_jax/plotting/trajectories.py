@@ -25,6 +25,7 @@ from cgda_jax.plotting._base import (
     select,
 )
 from cgda_jax.plotting._layout import grid_margins, save_grid, title_margins
+from cgda_jax.plotting.units import common_unit
 
 __all__ = ["plot_demonstrations", "plot_goal_vs_executed"]
 
@@ -176,10 +177,12 @@ def plot_goal_vs_executed(
     Args:
         goal: reference feature trajectory (N, F).
         executed: executed features (N, F) (or (M, F): drawn on its own point axis).
-        feature_names: F axis labels, units included (``"X [m]"``).
+        feature_names: F axis labels, units included (``"X [m]"``; a
+            `cgda_jax.Simulator`'s ``feature_labels``).
         tolerance: if given, shades goal +/- tolerance in each panel (the tolerance
             bounds the Euclidean error of a point, hence each feature's error too).
-        tolerance_unit: its unit, for the legend.
+        tolerance_unit: its unit, for the legend (default: the unit the feature
+            names share, ``"m"`` for ``X [m]``, ``Y [m]``, ``Z [m]``).
     """
     g, e = as_curve(goal), as_curve(executed)
     if g.shape[1] != e.shape[1]:
@@ -202,6 +205,7 @@ def plot_goal_vs_executed(
         integer_axis(ax.xaxis)
     handles, texts = axes[0, 0].get_legend_handles_labels()
     if tolerance is not None:
+        tolerance_unit = tolerance_unit or common_unit(names)
         unit = f" {tolerance_unit}" if tolerance_unit else ""
         handles.append(Patch(color=GOAL, alpha=0.15))
         texts.append(f"goal ± tolerance ({tolerance:.4g}{unit})")

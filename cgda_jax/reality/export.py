@@ -58,8 +58,8 @@ import numpy as np
 from cgda_jax.reality.profiles import MOVERS, PROFILES, periods, ruckig_version
 from cgda_jax.sim.timing import PEAK_JERK
 
-__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "simulator_timing",
-           "time_parameterize", "trajectory_of"]
+__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "robot_setup",
+           "simulator_timing", "time_parameterize", "trajectory_of"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -308,5 +308,23 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
         lower=np.asarray(robot.lower, np.float64),
         upper=np.asarray(robot.upper, np.float64), profile=profile)
     traj.info.update({"mode": sim.mode, "waypoint_s": float(sim.waypoint_s),
-                      **(info or {})})
+                      **robot_setup(robot, q0, approach=start is None), **(info or {})})
     return traj
+
+
+def robot_setup(robot, start, *, approach: bool = True) -> dict[str, Any]:
+    """What a controller must do before the trajectory's first point (an exported
+    trajectory's ``info``): ``fixed_joints`` (the joints held at a value during the
+    run, not in ``joint_names``; radians or metres), ``start_posture`` (the evolved
+    joints at sample 0) and ``before_first_point`` (the same in words)."""
+    fixed = {str(k): float(v) for k, v in dict(robot.fixed or {}).items()}
+    posture = dict(zip(robot.joint_names, np.asarray(start, np.float64).tolist()))
+    held = (f"set the fixed joints ({', '.join(f'{k} = {v:.4g}' for k, v in fixed.items())};"
+            " radians or metres) and hold them there throughout, "
+            if fixed else "")
+    where = ("bring the robot to rest at start_posture (sample 0: the first move is "
+             "the approach from there)" if approach else
+             "the robot is where it was last sent (start_posture, sample 0)")
+    return {"fixed_joints": fixed, "start_posture": posture,
+            "before_first_point": f"Before the first point: {held}{where}; the "
+                                  "trajectory commands only joint_names."}

@@ -58,6 +58,7 @@ from jax import Array
 from cgda_jax.sim.executions import Executions
 from cgda_jax.sim.feasibility import scene_obstacles
 from cgda_jax.sim.robot import Robot
+from cgda_jax.sim.scenes import feature_labels
 from cgda_jax.sim.sim_state import (
     MODES,
     SimState,
@@ -146,6 +147,8 @@ class Simulator(Executions):
         self.n_dof = robot.n_dof
         self.n_features = scene.n_features
         self.feature_names = tuple(scene.feature_names)
+        #: the names with their units (``"X [m]"``), for figures
+        self.feature_labels = feature_labels(scene)
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps

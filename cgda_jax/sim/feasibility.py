@@ -49,6 +49,7 @@ joint limits to respect the speed and acceleration limits
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -154,6 +155,9 @@ class Feasibility:
         if not isinstance(limits, JointLimits):
             limits = read_limits(robot.mj_model, robot.joint_names, limits)
         self.limits = limits
+        unlimited = limits.unlimited(effort=physics_contacts)  # dynamic: efforts too
+        if unlimited:
+            logging.getLogger("cgda_jax").warning("%s", unlimited)
         self.penetration = float(penetration)
         self.penalty = float(penalty)
         if int(samples) < 1:

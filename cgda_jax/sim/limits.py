@@ -107,6 +107,28 @@ class JointLimits:
         """Number of joints."""
         return len(self.joint_names)
 
+    def unlimited(self, effort: bool = False) -> str | None:
+        """What a run with these limits does not judge, as one warning line, or
+        None: the joints without a speed limit (and, ``effort``: without an effort
+        limit, which dynamic mode judges), what "feasible" then means and where
+        to set the limits."""
+        kinds = ("velocity", "effort") if effort else ("velocity",)
+        words = {"velocity": "speed", "effort": "effort"}
+        missing = {k: [j for j, v in zip(self.joint_names, getattr(self, k))
+                       if not np.isfinite(v)] for k in kinds}
+        missing = {k: js for k, js in missing.items() if js}
+        if not missing:
+            return None
+        what = "; ".join(f"no {words[k]} limit for {', '.join(js)}"
+                         for k, js in missing.items())
+        return (f"{what} (the model has none and none is set): \"feasible\" then "
+                f"means free of collisions and of moves over the step cap, not "
+                f"within the robot's {' and '.join(words[k] for k in missing)}. Set "
+                f"[robot.limits] (e.g. velocity = 3.0, effort = 30.0; Python: "
+                f"Feasibility(robot, {{\"velocity\": 3.0}})) or give the model "
+                f"<custom><numeric name=\"velocity_limit:JOINT\" data=\"3\"/> and "
+                f"actuatorfrcrange")
+
     def as_dict(self) -> dict:
         """JSON-ready: ``{"joints": [...], "velocity": {joint: value or None}, ...,
         "source": {kind: {joint: str}}}`` (``None``: no limit)."""

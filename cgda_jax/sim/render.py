@@ -212,8 +212,9 @@ def render_frames(
     azimuth: float = 35.0,
     elevation: float = -20.0,
     goal_points=None,
-    captions: Callable[[int, object], str] | None = None,
+    captions: Callable[[int, object, bool], str] | None = None,
     shadows: bool = True,
+    trace: bool = False,
 ) -> Frames:
     """Render the robot executing ``waypoints`` offscreen, in memory.
 
@@ -228,9 +229,15 @@ def render_frames(
             and the wall from behind its right shoulder).
         goal_points: optional (K, 3) world positions drawn as spheres (e.g. the goal
             of the marker scene); the one being reached is highlighted.
-        captions: optional ``captions(point, scene_state) -> str`` written in the
-            image's top left corner (point: 0 at the start, j towards waypoint j).
+        captions: optional ``captions(point, scene_state, reached) -> str`` written
+            in the image's top left corner (point: 0 at the start, j towards
+            waypoint j; ``reached``: the frame ends the move, the waypoint reached).
         shadows: draw the lights' shadows (off: faster, see the module doc).
+        trace: draw the path the marker has executed so far (small red spheres
+            at the simulated sub-steps).
+
+    A model whose headlight is dim (a dark scene) is drawn with at least a
+    moderate headlight (`MIN_HEADLIGHT`); the model is left as it was.
 
     Raises:
         ValueError: waypoints of the wrong shape.
@@ -248,26 +255,51 @@ def render_frames(
 
     postures = list(_postures(sim, waypoints, frames_per_waypoint))
     states = _scene_states(scene, [trail for _, trail, _ in postures])
-    images, points = [], []
+    ks = [k for _, _, k in postures]
+    ends = {len(ks) - 1 - ks[::-1].index(k) for k in set(ks)}  # a move's last frame
+    images, points, path = [], [], []
+    light = model.vis.headlight
+    kept = (light.ambient.copy(), light.diffuse.copy())
+    light.ambient[:] = np.maximum(light.ambient, MIN_HEADLIGHT[0])
+    light.diffuse[:] = np.maximum(light.diffuse, MIN_HEADLIGHT[1])
     renderer = _renderer(model, height, width)
     renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = bool(shadows)
+    if trace:  # the floor would mirror the path: one path, not two
+        renderer.scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
     try:
-        for (qpos, _, k), state in zip(postures, states):
+        for i, ((qpos, trail, k), state) in enumerate(zip(postures, states)):
             data.qpos[:] = qpos
             mujoco.mj_kinematics(model, data)
             renderer.update_scene(data, camera=cam)
             decorations = list(scene.decorations(state))
             if goal_points is not None:
                 decorations += _goal_decorations(goal_points, k)
+            if trace:
+                path += [np.asarray(p, np.float64) for p in np.reshape(trail, (-1, 3))]
+                decorations += _path_decorations(path)
             _add_decorations(renderer.scene, decorations)
             img = renderer.render().copy()
             if captions is not None:
-                img = caption(img, captions(k, state))
+                img = caption(img, captions(k, state, i in ends))
             images.append(img)
             points.append(k)
     finally:
         renderer.close()
+        light.ambient[:], light.diffuse[:] = kept
     return Frames(images, np.asarray(points, int))
+
+
+#: The least headlight (ambient, diffuse) a render uses: a model's dimmer one (a
+#: scene lit only by its own lights, e.g. MuJoCo's humanoid) would draw it dark.
+MIN_HEADLIGHT = (0.35, 0.55)
+
+
+def _path_decorations(path: list[np.ndarray], most: int = 400) -> list:
+    """The executed marker path (K, 3) as small red spheres (at most ``most``, the
+    newest kept, evenly thinned)."""
+    step = max(1, -(-len(path) // most))
+    return [("sphere", np.full(3, 0.005), p, (0.9, 0.15, 0.1, 0.9))
+            for p in path[::-1][::step][::-1]]
 
 
 def render_trajectory(
@@ -284,8 +316,9 @@ def render_trajectory(
     azimuth: float = 35.0,
     elevation: float = -20.0,
     goal_points=None,
-    captions: Callable[[int, object], str] | None = None,
+    captions: Callable[[int, object, bool], str] | None = None,
     shadows: bool = True,
+    trace: bool = False,
 ) -> list[pathlib.Path]:
     """Render the robot executing ``waypoints`` offscreen into a file or folder.
 
@@ -306,6 +339,6 @@ def render_trajectory(
         sim, waypoints, frames_per_waypoint=frames_per_waypoint, width=width,
         height=height, lookat=lookat, distance=distance, azimuth=azimuth,
         elevation=elevation, goal_points=goal_points, captions=captions,
-        shadows=shadows,
+        shadows=shadows, trace=trace,
     )
     return write_video(frames.images, pathlib.Path(out_path).expanduser(), fps)

@@ -42,6 +42,7 @@ __all__ = [
     "MarkerScene",
     "ObjectScene",
     "PaintWall",
+    "feature_labels",
     "front_segment_distance2",
     "segment_distance2",
 ]
@@ -109,6 +110,16 @@ def front_segment_distance2(
     return jnp.where(empty, jnp.inf, d2)
 
 
+def feature_labels(scene) -> tuple[str, ...]:
+    """A scene's feature names with their units, for axis labels (``"X [m]"``,
+    ``"painted [%]"``): its ``feature_units`` where it has them; a name that
+    already carries its unit in brackets (the object scenes') is kept."""
+    units = getattr(scene, "feature_units", None) or (None,) * len(
+        scene.feature_names)
+    return tuple(n if (u is None or str(n).rstrip().endswith("]")) else f"{n} [{u}]"
+                 for n, u in zip(scene.feature_names, units))
+
+
 @dataclass(frozen=True, eq=False)
 class MarkerScene:
     """Features = the marker position (X, Y, Z) in the robot's root frame; F = 3.
@@ -117,6 +128,8 @@ class MarkerScene:
     """
 
     feature_names: tuple[str, ...] = ("X", "Y", "Z")
+    #: the features' units (`feature_labels`): metres in the robot's root frame.
+    feature_units: tuple[str, ...] = ("m", "m", "m")
 
     @property
     def n_features(self) -> int:
@@ -180,6 +193,7 @@ class PaintWall:
     thickness: float = 0.03
     margin: float = 0.05
     feature_names: tuple[str, ...] = field(default=("painted",))
+    feature_units: tuple[str, ...] = field(default=("%",))
 
     def __post_init__(self):
         centres = np.asarray(self.centres, dtype=np.float32)

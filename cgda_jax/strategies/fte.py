@@ -308,7 +308,8 @@ class FTEPlan(PlanBase):
         return s.done
 
     def progress(self, s):
-        return {"best_fitness": np.asarray(s.best_fitness).tolist(),
+        return {"generations": np.asarray(s.generations + s.evo.generation).tolist(),
+                "best_fitness": np.asarray(s.best_fitness).tolist(),
                 "tries": np.asarray(s.tries).tolist()}
 
     def finish(self, s):

@@ -279,8 +279,12 @@ class IEPlan(PlanBase):
         return s.replace(done=met | (evo.done & ~again))
 
     def progress(self, s):
-        return {
+        gens = np.asarray(s.generations + s.evo.generation)
+        return {  # generations: the slowest point's, as the result's
+            "generations": gens.max(axis=-1).tolist(),
             "points_done": np.asarray(s.done).sum(axis=-1).tolist(),
+            "points_met": (np.asarray(s.best_fitness) < self.tolerance
+                           ).sum(axis=-1).tolist(),
             "worst_error": np.asarray(s.best_fitness).max(axis=-1).tolist(),
         }
 

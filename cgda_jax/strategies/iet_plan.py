@@ -257,7 +257,10 @@ class IETPlan(PlanBase):
         return (s.point >= self.n_points) | s.stopped
 
     def progress(self, s):
-        return {"point": np.asarray(s.point).tolist(),
+        running = np.where(np.asarray(self.done(s)), 0, np.asarray(s.evo.generation))
+        return {  # generations: summed over the points, as the result's
+            "generations": (np.asarray(s.point_generations).sum(-1) + running).tolist(),
+            "point": np.asarray(s.point).tolist(),
                 "backtracks": np.asarray(s.backtracks).tolist()}
 
     def finish(self, s):

@@ -302,7 +302,10 @@ class OETPlan(PlanBase):
         return (s.k >= self.n_points - 1) | (s.steps >= self.max_steps) | s.stuck
 
     def progress(self, s):
-        return {"k": np.asarray(s.k).tolist(), "steps": np.asarray(s.steps).tolist()}
+        running = np.where(np.asarray(self.done(s)), 0, np.asarray(s.evo.generation))
+        gens = np.asarray(s.step_generations).sum(-1) + running
+        return {"generations": gens.tolist(),  # summed over the steps, as the result's
+                "k": np.asarray(s.k).tolist(), "steps": np.asarray(s.steps).tolist()}
 
     def finish(self, s):
         out = {"joints": s.joints, "features": s.features, "targets": s.targets,

@@ -5,7 +5,9 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 - ``init(key) -> carry``
 - ``step(carry) -> (carry, metrics)``: one generation; done parts are frozen inside.
 - ``done(carry) -> bool``: nothing left to evolve.
-- ``progress(carry) -> dict``: host figures for ``progress_fn`` (one entry per trial).
+- ``progress(carry) -> dict``: host figures for ``progress_fn`` (one entry per trial),
+  ``generations`` among them: the count its result reports (IE: the slowest point's;
+  IET, OET: summed over points; restarts included), not the chunks driven.
 - ``finish(carry) -> dict``: final arrays (best trajectory, its execution, ...).
 - ``to_result(final, history, timing) -> ExecutionResult`` on host NumPy arrays.
 - ``max_generations_total``: an upper bound on generations (loop guard).

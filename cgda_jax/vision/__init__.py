@@ -6,11 +6,15 @@ Needs OpenCV, the optional ``[vision]`` extra (``pip install 'cgda_jax[vision]'`
 importing this package works without it, a call that needs it says what to install.
 
 * `track_video`: one recording -> `Track` (its ``demo`` a `Demonstration`).
-* `ColorRange`: the object's HSV range (or an automatic pick from the first frame).
+* `ColorRange`: the object's HSV range (or an automatic pick from the first frame,
+  then the colour model `ColorRange.around` learned again every frame, which keeps
+  shaded faces and follows light that moves or dims; `Track.colors` per frame).
 * `Intrinsics`, `load_intrinsics`: the pinhole camera for X, Y, Z in metres.
 * `contact_sheet`: frames with the tracked blob and its trajectory, to check by eye.
 * `render_recording` (`cgda_jax.vision.record`): MuJoCo-rendered RGB-D recordings
-  of scripted MOVE / ROTATE / CLEAN / PAINT demonstrations, with ground truth.
+  of scripted MOVE / ROTATE / CLEAN / PAINT demonstrations, with ground truth;
+  `render_shaded` (`cgda_jax.vision.shaded`): a box or cylinder turning under
+  moving or dimming light, with MuJoCo's segmentation image as the truth.
 
 References:
     Morante et al., "Humanoid Robot Imitation through Continuous Goal-Directed

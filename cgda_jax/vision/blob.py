@@ -1,14 +1,18 @@
 """One frame: find the coloured object and measure it.
 
 The object is the largest 8-connected region of pixels inside an HSV colour range
-(OpenCV's HSV: hue 0-180, saturation and value 0-255). Its measurements:
+(OpenCV's HSV: hue 0-180, saturation and value 0-255), with its holes filled (a
+highlight or a mark inside the object that falls out of the range is still the
+object). Its measurements:
 
-* image position: the region's centroid (u, v) in pixels;
+* image position: the filled region's centroid (u, v) in pixels;
 * area: its pixel count; with depth, its area on the object's surface in m^2 (each
   pixel's footprint on the plane fitted to the region's 3-D points);
-* colour: mean hue (circular), saturation and value over the region's interior
-  (the region eroded by one pixel, so the anti-aliased rim that mixes with the
-  background does not bias them; the whole region if nothing is left);
+* colour: mean hue (circular), saturation and value over the in-range pixels of the
+  region's interior (the region eroded by one pixel, so the anti-aliased rim that
+  mixes with the background does not bias them; the whole region if nothing is
+  left), and ``value_top``, the 90th percentile of their value (the object's lit
+  faces: what the followed range's value floor is a fraction of, `ColorRange.around`);
 * angle: orientation of the region's principal axis from its second central
   moments, in degrees counter-clockwise as seen in the image (-90, 90];
 * with depth: X, Y, Z of the centroid pixel at the median depth of the interior.
@@ -27,8 +31,14 @@ import numpy as np
 from cgda_jax.vision.camera import Intrinsics
 from cgda_jax.vision.cv import cv2
 
-__all__ = ["Blob", "ColorRange", "auto_color", "find", "hsv_image", "in_range",
-           "measure", "measure_near"]
+__all__ = ["VALUE_FLOOR", "VALUE_SPAN", "Blob", "ColorRange", "auto_color", "find",
+           "hsv_image", "in_range", "measure", "measure_near"]
+
+#: the followed range's value floor as a fraction of the lit faces' value
+VALUE_SPAN = 0.2
+#: the darkest value (0-255) a followed range admits: below it an 8-bit camera's
+#: hue is noise, so darker faces are not counted as the object
+VALUE_FLOOR = 20.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,12 +78,16 @@ class ColorRange:
             raise ValueError(f"colour range {text!r}: give both SMIN and VMIN, or neither")
         return cls(lo, hi, *rest)
 
-    def around(self, hue: float, sat: float, val: float, tol: float) -> ColorRange:
-        """A range centred on a measured colour: hue +/- ``tol``, saturation and value
-        at least half the measured ones."""
+    def around(self, hue: float, sat: float, top: float, tol: float) -> ColorRange:
+        """The colour model: a range led by hue around a measured colour. Hue +/-
+        ``tol``; saturation at least half the measured mean ``sat`` (30 at the
+        least); value at least `VALUE_SPAN` times ``top``, the value of the object's
+        lit faces (`Blob.value_top`; `VALUE_FLOOR` at the least): a face in shade,
+        at a third of the lit faces' brightness or less, stays inside (under white
+        light a darker face keeps its hue and saturation, only its value falls)."""
         return ColorRange(
             float((hue - tol) % 180), float((hue + tol) % 180),
-            max(30.0, 0.5 * sat), max(20.0, 0.5 * val),
+            max(30.0, 0.5 * sat), max(VALUE_FLOOR, VALUE_SPAN * top),
         )
 
     def __str__(self) -> str:
@@ -94,6 +108,7 @@ class Blob:
     value: float
     angle_deg: float
     bbox: tuple[int, int, int, int]  # x, y, width, height in pixels
+    value_top: float
     xyz: tuple[float, float, float] | None = None
     area_m2: float | None = None
 
@@ -120,6 +135,15 @@ def _colour(hsv_pixels: np.ndarray) -> tuple[float, float, float]:
     ang = hsv_pixels[:, 0].astype(np.float64) * (np.pi / 90.0)
     hue = np.degrees(np.arctan2(np.sin(ang).mean(), np.cos(ang).mean())) / 2.0
     return float(hue % 180.0), float(hsv_pixels[:, 1].mean()), float(hsv_pixels[:, 2].mean())
+
+
+def _filled(region: np.ndarray) -> np.ndarray:
+    """(h, w) bool ``region`` with its holes (background not 4-connected to the
+    outside) filled."""
+    c = cv2()
+    pad = np.pad(region.view(np.uint8), 1)
+    c.floodFill(pad, None, (0, 0), 2)
+    return pad[1:-1, 1:-1] != 2
 
 
 def _area_m2(us, vs, zs, cam: Intrinsics) -> float:
@@ -162,7 +186,7 @@ def measure(
     c = cv2()
     hsv = hsv_image(bgr) if hsv is None else hsv
     mask = in_range(hsv, rng)
-    n, labels, stats, cents = c.connectedComponentsWithStats(mask, connectivity=8)
+    n, labels, stats, _ = c.connectedComponentsWithStats(mask, connectivity=8)
     if n < 2:
         return None
     k = 1 + int(np.argmax(stats[1:, c.CC_STAT_AREA]))
@@ -172,18 +196,22 @@ def measure(
     height, width = mask.shape
     if x == 0 or y == 0 or x + w == width or y + h == height:
         return None  # touches the border: partly out of view
-    region = labels[y:y + h, x:x + w] == k
-    inner = c.erode(region.astype(np.uint8), np.ones((3, 3), np.uint8),
+    in_range_px = labels[y:y + h, x:x + w] == k
+    region = _filled(in_range_px)
+    inner = c.erode(in_range_px.astype(np.uint8), np.ones((3, 3), np.uint8),
                     borderType=c.BORDER_CONSTANT, borderValue=0).astype(bool)
     if not inner.any():
-        inner = region
-    u, v = float(cents[k, 0]), float(cents[k, 1])
+        inner = in_range_px
     m = c.moments(region.view(np.uint8), binaryImage=True)
+    area = m["m00"]
+    u, v = x + m["m10"] / area, y + m["m01"] / area
     angle = -0.5 * np.degrees(np.arctan2(2.0 * m["mu11"], m["mu20"] - m["mu02"]))
     if angle <= -90.0:
         angle += 180.0
-    hue, sat, val = _colour(hsv[y:y + h, x:x + w][inner])
-    blob = Blob(u, v, float(area), hue, sat, val, float(angle), (x, y, w, h))
+    pixels = hsv[y:y + h, x:x + w][inner]
+    hue, sat, val = _colour(pixels)
+    top = float(np.percentile(pixels[:, 2], 90))
+    blob = Blob(u, v, float(area), hue, sat, val, float(angle), (x, y, w, h), top)
     if depth is None:
         return blob
     if intrinsics is None:
@@ -257,8 +285,9 @@ def auto_color(
 
     Among the 8-connected regions of at least ``min_area`` pixels with saturation
     >= ``sat_floor`` and value >= ``val_floor``, the one with the highest mean
-    saturation; its range is its mean hue +/- ``hue_tol`` with saturation and value
-    at least half its means (`ColorRange.around`).
+    saturation; its range is the colour model around it (`ColorRange.around`: its
+    mean hue +/- ``hue_tol``, saturation at least half its mean, value at least
+    `VALUE_SPAN` of its lit pixels' value).
 
     Raises:
         ValueError: no such region in the frame.
@@ -282,8 +311,10 @@ def auto_color(
             "give its colour range"
         )
     x, y, w, h, _ = (int(s) for s in stats[best])
-    hue, sat, val = _colour(hsv[y:y + h, x:x + w][labels[y:y + h, x:x + w] == best])
-    rng = ColorRange(0, 180).around(hue, sat, val, hue_tol)
+    pixels = hsv[y:y + h, x:x + w][labels[y:y + h, x:x + w] == best]
+    hue, sat, _ = _colour(pixels)
+    rng = ColorRange(0, 180).around(hue, sat, float(np.percentile(pixels[:, 2], 90)),
+                                    hue_tol)
     blob = measure(bgr, rng, min_area=min_area, hsv=hsv)
     if blob is None:
         raise ValueError(f"the most saturated region ({rng}) touches the image border")

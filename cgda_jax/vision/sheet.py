@@ -1,6 +1,7 @@
 """A contact sheet: a grid of a recording's frames with the tracked object's box,
-its trajectory up to that frame and the frame's state drawn on, to check a track
-by eye."""
+its outline (the pixels in the frame's colour range inside the box, as measured),
+its centroid, its trajectory up to that frame and the frame's state drawn on, to
+check a track by eye: a shaded face left out of the outline shows at once."""
 
 from __future__ import annotations
 
@@ -8,12 +9,14 @@ import pathlib
 
 import numpy as np
 
+from cgda_jax.vision.blob import hsv_image, in_range
 from cgda_jax.vision.cv import cv2
 from cgda_jax.vision.frames import iter_frames
 
 __all__ = ["contact_sheet"]
 
 _GREEN, _YELLOW, _RED, _WHITE = (60, 220, 60), (0, 220, 255), (40, 40, 240), (255, 255, 255)
+_CYAN = (255, 255, 0)
 
 
 def contact_sheet(
@@ -28,8 +31,10 @@ def contact_sheet(
     """Write a PNG grid of ``n_frames`` frames spread over the video.
 
     Each thumbnail shows the object's box (green: measured, yellow: interpolated
-    position, red "lost": cut or lost), the image trajectory so far (the ``u_px``,
-    ``v_px`` features) and the frame number and time.
+    position, red "lost": cut or lost), where measured its outline (cyan: the
+    outer contour of the pixels inside the box that are in the frame's colour range,
+    ``track.colors``) and centroid (a cyan cross), the image trajectory so far (the
+    ``u_px``, ``v_px`` features) and the frame number and time.
 
     Args:
         video: the recording that ``track`` (a `cgda_jax.vision.Track`) came from.
@@ -46,7 +51,7 @@ def contact_sheet(
     for k, img in enumerate(iter_frames(video)):
         if k not in wanted:
             continue
-        img = img.copy()
+        frame, img = img, img.copy()
         row = k - track.first
         kept = 0 <= row < len(uv)
         if kept and row > 0:
@@ -54,7 +59,13 @@ def contact_sheet(
             c.polylines(img, [pts], False, _YELLOW, 2, c.LINE_AA)
         if track.found[k]:
             x, y, w, h = (int(v) for v in track.bboxes[k])
+            mask = in_range(hsv_image(frame[y:y + h, x:x + w]), track.colors[k])
+            outline, _ = c.findContours(mask, c.RETR_EXTERNAL, c.CHAIN_APPROX_NONE,
+                                        offset=(x, y))
+            c.drawContours(img, outline, -1, _CYAN, 2, c.LINE_AA)
             c.rectangle(img, (x - 2, y - 2), (x + w + 1, y + h + 1), _GREEN, 2)
+            u, v = uv[row].round().astype(int)
+            c.drawMarker(img, (int(u), int(v)), _CYAN, c.MARKER_CROSS, 12, 2)
             label, colour = "", _GREEN
         elif kept:
             u, v = uv[row].round().astype(int)

@@ -5,10 +5,15 @@ first in a window around its box in the previous frame (`measure_near`), then, w
 it is not found whole there, in the whole frame.
 The colour range is given, or picked automatically from the first frame's most
 saturated region (`auto_color`; `Track.color` says which range was used). With
-``follow_color`` (the default for an automatic pick) the hue window re-centres on
-the object's measured colour after every frame, so an object whose colour changes
-(PAINT) stays tracked; where the colour jumps out of the window between two frames,
-the most saturated region near the last box is picked again, if its area is close to
+``follow_color`` (the default for an automatic pick) the range is learned again from
+the object's pixels after every frame (`ColorRange.around`, the colour model: led by
+hue, the first range's hue width around its mean hue, saturation at least half its
+mean, value at least `VALUE_SPAN` of its lit faces' value), so an object whose
+colour changes (PAINT), whose faces turn into shade as it rotates, or whose light
+moves or dims stays tracked whole; `Track.colors` holds the range of every frame,
+`Track.summary` says the first and last and how low the value floor went. Where the
+colour jumps out of the window between two frames, the most saturated region near
+the last box is picked again, if its area is close to
 the object's recent one (within ``min_area_ratio``).
 
 Lost frames, the stated rule:
@@ -38,7 +43,7 @@ import pathlib
 import numpy as np
 
 from cgda_jax.data import Demonstration
-from cgda_jax.vision.blob import Blob, ColorRange, auto_color, find
+from cgda_jax.vision.blob import VALUE_FLOOR, Blob, ColorRange, auto_color, find
 from cgda_jax.vision.camera import Intrinsics, load_intrinsics
 from cgda_jax.vision.frames import DEPTH_SUFFIXES, iter_frames, list_frames, read_depth
 
@@ -72,6 +77,8 @@ class Track:
         first, last: the first and last frames kept (inclusive).
         n_frames: frames in the video.
         bboxes: (n_frames, 4) int x, y, w, h of the region (-1 where lost).
+        colors: (n_frames,) the colour range each frame was searched with (the
+            followed range changes every frame; `write_colors` saves them).
     """
 
     demo: Demonstration
@@ -83,17 +90,35 @@ class Track:
     last: int
     n_frames: int
     bboxes: np.ndarray
+    colors: tuple[ColorRange, ...]
 
     def summary(self) -> str:
-        """One line: frames, colour range, frames kept, interpolated and cut."""
+        """One line: frames, colour range (first and last where it was followed),
+        frames kept, interpolated and cut."""
         text = (f"{self.n_frames} frames, object {'picked' if self.picked else 'range'} "
-                f"{self.color}; kept frames {self.first}-{self.last}")
+                f"{self.color}")
+        if any(c != self.color for c in self.colors):
+            floors = [c.val_min for c in self.colors]
+            text += (f", followed to {self.colors[self.last]} at frame {self.last} "
+                     f"(value floor {min(floors):.0f}-{max(floors):.0f})")
+        text += f"; kept frames {self.first}-{self.last}"
         if self.interpolated.any():
             text += f", interpolated {int(self.interpolated.sum())} lost frame(s)"
         cut = self.first + (self.n_frames - 1 - self.last)
         if cut:
             text += f", cut {cut} lost frame(s) at the ends"
         return text
+
+    def write_colors(self, path: str | pathlib.Path) -> pathlib.Path:
+        """A CSV of the range used in each frame: ``frame, found, hue_lo, hue_hi,
+        sat_min, val_min`` (OpenCV HSV)."""
+        path = pathlib.Path(path).expanduser()
+        lines = ["frame,found,hue_lo,hue_hi,sat_min,val_min"]
+        lines += [f"{k},{int(f)},{c.hue_lo:.2f},{c.hue_hi:.2f},{c.sat_min:.2f},"
+                  f"{c.val_min:.2f}" for k, (f, c) in enumerate(zip(self.found,
+                                                                      self.colors))]
+        path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        return path
 
 
 def _row(blob: Blob, depth: bool) -> list[float]:
@@ -120,8 +145,9 @@ def _count_error(depth_dir, n_depth: int, n_video: int | None, video) -> ValueEr
 
 
 def _reacquire(bgr, box, recent, ratio, color, kw):
-    """Following a colour that jumped out of its window: the most saturated region
-    in the window around the last box (`auto_color` there), taken when its area is
+    """Following a colour that jumped out of its window, or light that fell below
+    the range's value floor at once: the most saturated region in the window around
+    the last box (`auto_color` there, down to `VALUE_FLOOR`), taken when its area is
     within ``ratio`` .. 1 / ``ratio`` of the recent median. (new range, blob) or None."""
     x, y, w, h = box
     grow = 40 + max(w, h) // 2
@@ -130,6 +156,7 @@ def _reacquire(bgr, box, recent, ratio, color, kw):
     x1, y1 = min(width, x + w + grow), min(height, y + h + grow)
     try:
         rng, _ = auto_color(bgr[y0:y1, x0:x1], min_area=kw["min_area"],
+                            val_floor=VALUE_FLOOR,
                             hue_tol=0.5 * ((color.hue_hi - color.hue_lo) % 180))
     except ValueError:
         return None
@@ -137,6 +164,27 @@ def _reacquire(bgr, box, recent, ratio, color, kw):
     if blob is None or (recent and not ratio * recent <= blob.area_px <= recent / ratio):
         return None
     return rng, blob
+
+
+def _learned(blob: Blob, color: ColorRange) -> ColorRange:
+    """The colour model learned from the object's pixels in this frame, with the
+    hue width of ``color``."""
+    return color.around(blob.hue, blob.saturation, blob.value_top,
+                        0.5 * ((color.hue_hi - color.hue_lo) % 180))
+
+
+def _relearn(bgr, blob, color, box, kw):
+    """Light that fell at once (the learned value or saturation floor below 0.8 of
+    the one searched with): the frame measured again with the learned range, so
+    faces that fell under the old floor are counted in this frame already.
+    (blob, range used)."""
+    new = _learned(blob, color)
+    if new.val_min >= 0.8 * color.val_min and new.sat_min >= 0.8 * color.sat_min:
+        return blob, color
+    again = find(bgr, new, box, **kw)
+    if again is None or again.area_px < blob.area_px:
+        return blob, color
+    return again, new
 
 
 def _fill_gaps(rows: np.ndarray, found: np.ndarray, names, max_gap: int, where: str):
@@ -222,7 +270,7 @@ def track_video(
     if not fps > 0:
         raise ValueError(f"{video}: fps must be positive, got {fps}")
     depth_files = _depth_files(depth) if depth is not None else None
-    rows, found, boxes, areas = [], [], [], []
+    rows, found, boxes, areas, used = [], [], [], [], []
     last_box = None
     first_color = None
     for k, bgr in enumerate(iter_frames(video)):
@@ -257,8 +305,11 @@ def track_video(
             again = _reacquire(bgr, last_box, recent, min_area_ratio, color, kw)
             if again is not None:
                 color, blob = again
+        if blob is not None and follow:
+            blob, color = _relearn(bgr, blob, color, last_box, kw)
         if blob is not None and recent and blob.area_px < min_area_ratio * recent:
             blob = None  # partly occluded
+        used.append(color)
         found.append(blob is not None)
         boxes.append(blob.bbox if blob is not None else (-1, -1, -1, -1))
         rows.append(_row(blob, depth is not None) if blob is not None else None)
@@ -266,8 +317,7 @@ def track_video(
             last_box = blob.bbox
             areas.append(blob.area_px)
             if follow:
-                color = color.around(blob.hue, blob.saturation, blob.value,
-                                     0.5 * ((color.hue_hi - color.hue_lo) % 180))
+                color = _learned(blob, color)
     names = features_for(depth is not None)
     found = np.asarray(found, bool)
     if depth_files is not None and len(depth_files) != len(found):
@@ -286,4 +336,4 @@ def track_video(
         name = video.stem if video.is_file() else video.name
     demo = Demonstration(times[first:last + 1], table[first:last + 1], names, name)
     return Track(demo, first_color, picked, found, interp, first, last, len(found),
-                 np.asarray(boxes, int))
+                 np.asarray(boxes, int), tuple(used))

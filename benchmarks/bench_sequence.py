@@ -1,0 +1,148 @@
+"""Action sequences: segmentation accuracy on synthetic recordings, and a recognized
+two-action sequence executed on TEO.
+
+1. ``segment`` on ``--recordings`` synthetic recordings of 2-6 actions (random order,
+   durations, noise; `cgda_jax.datasets.synthetic_sequence`), back to back and with
+   0.5-2 s pauses, against a library generalized from 6 demonstrations per action:
+   share of actions labelled right, boundary errors as a share of each action's
+   true duration (the motion: from the marker's first to its last move), time per
+   recording (the first call, which compiles, apart). Targets (issue 44): >= 95 %
+   labelled right, every boundary within 10 %.
+2. ``execute_sequence`` on TEO (the clean_ie experiment's robot, scene and
+   feasibility checks): MOVE (a 15 cm stroke down to the top of the clean circle)
+   then CLEAN (the generalized 30 cm circle), each by Individual Evolution, CLEAN's
+   goal starting where MOVE left the marker; success, worst point error, the
+   motion check (feasible) per action, and a figure of goal vs executed.
+
+    python benchmarks/bench_sequence.py [--recordings 10] [--no-teo] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import time
+
+import numpy as np
+from _common import print_table, write_json
+
+from cgda_jax.datasets import clean_circle_demos, synthetic_actions, synthetic_sequence
+from cgda_jax.plotting import plot_segmentation
+from cgda_jax.plotting.units import MARKER_UNITS, with_units
+from cgda_jax.recognize import ActionLibrary
+from cgda_jax.segment import segment
+
+SETTINGS = {"step_s": 0.2, "durations_s": (1.0, 15.0)}
+
+
+def segmentation(n: int, out: pathlib.Path) -> dict:
+    library = ActionLibrary.from_demonstrations(synthetic_actions(6, seed=0))
+    rows, errs, times = [], [], []
+    right = total = 0
+    for pause in ((0.0, 0.0), (0.5, 2.0)):
+        for k in range(n):
+            seq = synthetic_sequence(seed=1000 + k, pause_s=pause)
+            t0 = time.perf_counter()
+            segs = segment(seq.recording, library, **SETTINGS)
+            dt = time.perf_counter() - t0
+            if k > 0 or pause[1] > 0:  # the first call compiles
+                times.append(dt)
+            total += len(seq.truth)
+            if len(segs) != len(seq.truth):
+                rows.append({"pauses": str(pause), "seed": 1000 + k,
+                             "actions": len(seq.truth), "found": len(segs)})
+                continue
+            e = [max(abs(s.start - t0_), abs(s.end - t1)) / (t1 - t0_)
+                 for s, (_, t0_, t1) in zip(segs, seq.truth)]
+            r = sum(s.action == a for s, (a, _, _) in zip(segs, seq.truth))
+            right, errs = right + r, errs + e
+            rows.append({"pauses": str(pause), "seed": 1000 + k,
+                         "actions": len(seq.truth), "found": len(segs), "right": r,
+                         "worst boundary %": round(100 * max(e), 1), "s": round(dt, 2)})
+            if k == 0:
+                plot_segmentation(
+                    seq.recording, segs,
+                    names=with_units(seq.recording.feature_names, MARKER_UNITS),
+                    title=f"synthetic sequence, pauses {pause} s: "
+                    + " ".join(a for a, _, _ in seq.truth),
+                    path=out / f"segments_pause{pause[1]:g}.png")
+    print_table(rows, ["pauses", "seed", "actions", "found", "right",
+                       "worst boundary %", "s"])
+    errs = np.asarray(errs)
+    summary = {
+        "recordings": 2 * n, "actions": total, "labelled_right": right,
+        "labelled_right_share": right / total,
+        "boundary_error_share": {"median": float(np.median(errs)),
+                                 "p90": float(np.percentile(errs, 90)),
+                                 "max": float(errs.max()),
+                                 "within_10pct": float(np.mean(errs <= 0.1))},
+        "seconds_per_recording_median": float(np.median(times)),
+    }
+    print(summary)
+    return summary
+
+
+def teo_sequence(out: pathlib.Path) -> dict:
+    from cgda_jax.builtin import experiment_path
+    from cgda_jax.experiment.build import build_simulator
+    from cgda_jax.experiment.compute import motion_check
+    from cgda_jax.generalize import generalize
+    from cgda_jax.plotting import plot_goal_vs_executed
+    from cgda_jax.segment import execute_sequence
+    from cgda_jax.strategies import run_ie
+
+    from cgda_jax.experiment import load_config
+
+    cfg = load_config(experiment_path("clean_ie"))
+    circle = np.asarray(generalize(clean_circle_demos(), 1.0).knots, float)
+    top = circle[0]
+    move = top + np.linspace(0.15, 0.0, 6)[:, None] * np.array([0.0, 0.0, 1.0])
+    sim = build_simulator(cfg, 1.0, np.vstack([move, circle]))
+    s = cfg.strategy
+    # CLEAN as demonstrated 10 cm away: execute_sequence starts it where MOVE ended
+    goals = [move, circle + np.array([0.0, 0.1, 0.0])]
+    t0 = time.perf_counter()
+    results = execute_sequence(sim, goals, run_ie, algorithm=s.algorithm,
+                               population_size=s.population_size,
+                               tolerance=s.tolerance,
+                               max_generations=s.max_generations, seed=s.seed)
+    wall = time.perf_counter() - t0
+    rows, summary = [], {"wall_s": wall, "actions": []}
+    for name, res in zip(("MOVE", "CLEAN"), results):
+        motion = motion_check(sim, res)
+        feasible = None if motion is None else bool(motion[0].get("feasible"))
+        rows.append({"action": name, "points": len(res.goal), "success": res.success,
+                     "worst error mm": round(1000 * float(res.point_errors.max()), 1),
+                     "feasible": feasible, "compile s": round(res.compile_time_s, 1),
+                     "search s": round(res.wall_time_s, 2)})
+        summary["actions"].append(rows[-1])
+    print_table(rows, list(rows[0]))
+    goal = np.vstack([r.goal for r in results])
+    executed = np.vstack([r.features for r in results])
+    plot_goal_vs_executed(goal, executed, ["X [m]", "Y [m]", "Z [m]"],
+                          tolerance=s.tolerance, tolerance_unit="m",
+                          title="TEO: MOVE (points 1-6) then CLEAN (7-15), IE",
+                          path=out / "teo_move_clean.png")
+    summary["start_matches"] = bool(np.allclose(results[1].goal[0],
+                                                results[0].features[-1]))
+    print(summary)
+    return summary
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--recordings", type=int, default=10,
+                   help="recordings per pause setting")
+    p.add_argument("--no-teo", action="store_true")
+    p.add_argument("--out", default="results/bench_sequence")
+    args = p.parse_args()
+    out = pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    payload = {"segmentation": segmentation(args.recordings, out)}
+    if not args.no_teo:
+        payload["teo"] = teo_sequence(out)
+    write_json("sequence", payload)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,408 @@
+"""Segmentation: one long recording -> the sequence of library actions in it.
+
+The paper (2.2) names recognition's use: "determining tasks as action sequences by
+splitting tasks into smaller and simpler actions". `segment` splits a recording
+in which several library actions follow each other (with or without pauses) into
+``(action, start, end)`` segments by a segmental search:
+
+1. The recording is averaged onto a grid of ``G + 1`` points ``step_s`` apart (box
+   means of the samples within half a step; linear interpolation where a step holds
+   none).
+2. Every candidate segment ``[s, s + L]`` of the grid (``L`` from the shortest to the
+   longest allowed duration) is resampled to ``n_samples`` and compared with every
+   library action by the recognition metric (`cgda_jax.recognize.METRICS`: the
+   paper's DTW by default). Both are taken *relative to their first sample*: an
+   action in a sequence starts where the previous one left the object, not where
+   its demonstrations started. A pause is one more label, ``"rest"``: the
+   object held where the segment started (a constant template). One batched
+   ``vmap`` call gives the (S, L, A + 1) costs.
+3. A dynamic programme over the boundaries (one ``lax.scan`` over the grid) picks
+   the segmentation of least total cost, each segment's cost weighted by its
+   duration (a per-second mismatch), with no two rests in a row.
+
+Rests are dropped from the result; each action segment says its start and end in
+the recording's time unit (seconds) and its cost.
+
+References:
+    Morante et al., "Humanoid Robot Imitation through Continuous Goal-Directed
+    Actions: An Evolutionary Approach", Advanced Robotics 2015, section 2.2.
+    Sakoe, "Two-level DP-matching -- a dynamic programming-based pattern matching
+    algorithm for connected word recognition", IEEE TASSP 1979.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from cgda_jax.data import Demonstration
+from cgda_jax.recognize import METRICS, ActionLibrary
+from cgda_jax.sizes import check_recognition
+
+__all__ = [
+    "REST", "Segment", "best_segmentation", "execute_sequence", "segment",
+    "segment_costs",
+]
+
+#: Label of a pause (the object held still) in `segment_costs` and
+#: `best_segmentation`; never an action name of the result.
+REST = "rest"
+
+#: Default number of grid steps over the whole recording.
+_GRID_STEPS = 200
+#: Candidate starts whose segments are compared in one vectorised step.
+_STARTS_PER_CHUNK = 64
+
+
+class Segment(NamedTuple):
+    """One recognized action of a recording."""
+
+    action: str  # library action name
+    start: float  # seconds, the recording's clock
+    end: float  # seconds
+    cost: float  # the metric's cost of the segment against the action
+
+
+def _grid(recording: Demonstration, step_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(G + 1,) grid times and (G + 1, F) box means of the recording there."""
+    t = recording.times
+    n_steps = max(int(np.floor(recording.duration / step_s + 1e-9)), 1)
+    grid_t = t[0] + step_s * np.arange(n_steps + 1)
+    x = recording.features
+    lo = np.searchsorted(t, grid_t - step_s / 2, side="left")
+    hi = np.searchsorted(t, grid_t + step_s / 2, side="right")
+    csum = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    count = (hi - lo)[:, None]
+    interp = np.stack([np.interp(grid_t, t, x[:, f]) for f in range(x.shape[1])], 1)
+    means = (csum[hi] - csum[lo]) / np.maximum(count, 1)
+    return grid_t, np.where(count > 0, means, interp)
+
+
+def _check_inputs(recording, library, metric, n_samples) -> None:
+    if not isinstance(library, ActionLibrary):
+        raise ValueError(f"segment: library is {type(library).__name__}, not an "
+                         "ActionLibrary")
+    if len(library) == 0:
+        raise ValueError("segment: the action library has no actions")
+    if REST in library.names:
+        raise ValueError(f"segment: {REST!r} names the pauses; rename that action")
+    if not isinstance(recording, Demonstration):
+        raise ValueError(f"segment: the recording is {type(recording).__name__}, not "
+                         "a Demonstration (load it with load_csv or build one)")
+    if recording.feature_names != library.feature_names:
+        raise ValueError(
+            f"segment: recording {recording.name!r} has features "
+            f"{recording.feature_names} but the library has {library.feature_names}")
+    if metric not in METRICS:
+        raise ValueError(f"segment: unknown metric {metric!r}; expected one of "
+                         f"{tuple(METRICS)}")
+    if isinstance(n_samples, bool) or int(n_samples) != n_samples or n_samples < 2:
+        raise ValueError(f"segment: n_samples must be a whole number >= 2, got "
+                         f"{n_samples!r}")
+
+
+def _lengths(duration: float, step_s: float, durations_s) -> tuple[np.ndarray, int]:
+    """Segment lengths in grid steps (1 to the longest: a rest may be short) and the
+    shortest action's."""
+    lo, hi = (4 * step_s, duration) if durations_s is None else durations_s
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0 < lo <= hi):
+        raise ValueError(f"segment: durations_s must be (shortest, longest) seconds "
+                         f"with 0 < shortest <= longest, got {durations_s!r}")
+    first = max(int(np.ceil(lo / step_s - 1e-9)), 1)
+    last = int(np.floor(min(hi, duration) / step_s + 1e-9))
+    if last < first:
+        raise ValueError(f"segment: recording of {duration:.4g} s has no room for an "
+                         f"action of {lo:g} s to {hi:g} s on a grid of {step_s:g} s")
+    return np.arange(1, last + 1), first
+
+
+def segment_costs(
+    recording: Demonstration,
+    library: ActionLibrary,
+    *,
+    metric: str = "dtw",
+    n_samples: int = 16,
+    step_s: float | None = None,
+    durations_s: tuple[float, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray, jax.Array]:
+    """Cost of every candidate segment of the recording as every label.
+
+    Args: as `segment`.
+
+    Returns:
+        ``(grid_times (G + 1,), lengths (L,) in grid steps (1, 2, ... the
+        longest), costs (G, L, A + 1))``: ``costs[s, k, a]`` is the metric's cost
+        of grid points ``s .. s + lengths[k]`` (resampled to ``n_samples``, less
+        its first sample) against action ``a`` (``library.names`` order; the last
+        label is `REST`, a constant template), ``inf`` where the segment runs past
+        the recording's end or is an action shorter than the shortest duration.
+    """
+    _check_inputs(recording, library, metric, n_samples)
+    if step_s is None:
+        step_s = recording.duration / _GRID_STEPS
+    if not (np.isfinite(step_s) and step_s > 0):
+        raise ValueError(f"segment: step_s must be a positive number of seconds, "
+                         f"got {step_s!r}")
+    grid_t, grid_x = _grid(recording, float(step_s))
+    lengths, shortest = _lengths(recording.duration, float(step_s), durations_s)
+    n_starts = grid_t.shape[0] - 1
+    # the work of S x L queries against A + 1 templates, before anything is built
+    check_recognition(n_starts * lengths.shape[0], len(library) + 1, int(n_samples),
+                      recording.n_features, name="step_s", metric=metric)
+    # the grid padded to whole chunks (held at its last value): recordings of
+    # similar lengths share one program
+    padded = -(-n_starts // _STARTS_PER_CHUNK) * _STARTS_PER_CHUNK + 1
+    grid_p = np.concatenate([grid_x, np.repeat(grid_x[-1:], padded - n_starts - 1, 0)])
+    scale = _noise(recording)
+    costs = _segment_costs(METRICS[metric], int(n_samples),
+                           jnp.asarray(grid_p / scale, jnp.float32),
+                           jnp.int32(n_starts + 1),
+                           jnp.asarray(lengths, jnp.int32), jnp.int32(shortest),
+                           _templates(library, int(n_samples)) / scale)
+    return grid_t, lengths, costs[:n_starts]
+
+
+def _noise(recording: Demonstration) -> np.ndarray:
+    """(F,) each feature's scale: its noise (standard deviation) in the recording,
+    from the median absolute second difference of its samples (a smooth motion adds
+    almost nothing there), at least 1e-3 of its range (noise-free features); 1 for a
+    constant feature."""
+    x = recording.features
+    d2 = np.diff(x, n=2, axis=0)
+    sigma = (np.median(np.abs(d2), axis=0) / (0.6745 * np.sqrt(6.0))
+             if d2.shape[0] else np.zeros(x.shape[1]))
+    sigma = np.maximum(sigma, 1e-3 * np.ptp(x, axis=0))
+    return np.where(sigma > 0, sigma, 1.0)
+
+
+def _templates(library: ActionLibrary, n: int) -> jax.Array:
+    """(A, n, F) each action at ``n`` equally spaced normalized times, held at its
+    first and last knot outside them: the linear RBF (paper eq. 1, no polynomial
+    term) extrapolates there along no data, and a segment is compared relative to
+    its first sample."""
+    t = np.linspace(0.0, 1.0, n, dtype=np.float32)
+    return jnp.stack([
+        a(np.clip(t, a.knot_times[0], a.knot_times[-1])) for a in library.values()])
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _segment_costs(metric, n: int, grid_x: jax.Array, n_points: jax.Array,
+                   lengths: jax.Array, shortest: jax.Array,
+                   templates: jax.Array) -> jax.Array:
+    """(P - 1, L, A + 1) costs of the segments of the first ``n_points`` points of
+    the padded grid (P, F) (``inf`` past them, and for actions shorter than
+    ``shortest`` steps); see `segment_costs`."""
+    refs = templates - templates[:, :1]  # each action relative to its start
+    refs = jnp.concatenate([refs, jnp.zeros_like(refs[:1])])  # REST: held still
+    frac = jnp.linspace(0.0, 1.0, n, dtype=grid_x.dtype)
+    points = jnp.arange(grid_x.shape[0], dtype=grid_x.dtype)
+
+    def one(start, length):
+        # the grid points start .. start + length, resampled to n
+        pos = jnp.minimum(start + frac * length, grid_x.shape[0] - 1)
+        seg = jax.vmap(lambda col: jnp.interp(pos, points, col), 1, 1)(grid_x)
+        seg = seg - seg[:1]
+        costs = jax.vmap(metric, in_axes=(None, 0))(seg, refs)
+        costs = jnp.where(length < shortest, costs.at[:-1].set(jnp.inf), costs)
+        return jnp.where(start + length < n_points, costs, jnp.inf)
+
+    per_start = jax.vmap(jax.vmap(one, in_axes=(None, 0)), in_axes=(0, None))
+    # starts in chunks: one chunk's DTWs are one vectorised scan
+    chunks = jnp.arange(grid_x.shape[0] - 1).reshape(-1, _STARTS_PER_CHUNK)
+    costs = jax.lax.map(lambda s: per_start(s, lengths), chunks)
+    return costs.reshape(-1, *costs.shape[2:])
+
+
+def best_segmentation(
+    costs: jax.Array | np.ndarray, lengths: np.ndarray
+) -> tuple[list[tuple[int, int, int]], float]:
+    """The segmentation of least duration-weighted cost (dynamic programming).
+
+    Segments cover the grid from point 0 to point G without gaps; segment ``[s, s +
+    lengths[k]]`` labelled ``a`` costs ``costs[s, k, a] * lengths[k]``; the last
+    label is `REST`, which may not follow a rest.
+
+    Args:
+        costs: (G, L, A + 1) as `segment_costs` returns.
+        lengths: (L,) segment lengths in grid steps, increasing, >= 1.
+
+    Returns:
+        ``([(start, end, label), ...], total)``: grid indices and label indices,
+        in order, and the least total cost (``inf``: no segmentation exists).
+    """
+    costs = jnp.asarray(costs, jnp.float32)
+    lengths = np.asarray(lengths, np.int64)
+    g = costs.shape[0]
+    act, rest, back_act, back_rest = _programme(costs, jnp.asarray(lengths, jnp.int32))
+    act, rest = np.asarray(act), np.asarray(rest)
+    back_act, back_rest = np.asarray(back_act), np.asarray(back_rest)
+    total = float(min(act[g], rest[g]))
+    if not np.isfinite(total):
+        return [], total
+    out = []
+    e, in_rest = g, bool(rest[g] < act[g])
+    while e > 0:
+        if in_rest:
+            k, label = int(back_rest[e]), costs.shape[2] - 1
+        else:
+            k, label = (int(v) for v in back_act[e])
+        s = e - int(lengths[k])
+        out.append((s, e, label))
+        in_rest = False if in_rest else bool(rest[s] < act[s])
+        e = s
+    return out[::-1], total
+
+
+@jax.jit
+def _programme(costs: jax.Array, lengths: jax.Array):
+    """Forward pass of `best_segmentation`: least totals ending in an action
+    (G + 1,) and in a rest (G + 1,), and their choices: (G + 1, 2) (length
+    index, action) and (G + 1,) (length index)."""
+    g, n_len, n_lab = costs.shape
+    weighted = costs * lengths[None, :, None].astype(costs.dtype)
+    inf = jnp.asarray(jnp.inf, costs.dtype)
+    act0 = jnp.full(g + 1, inf).at[0].set(0.0)  # the empty start: anything follows
+    rest0 = jnp.full(g + 1, inf)
+
+    def step(carry, e):
+        act, rest = carry
+        starts = e - lengths
+        ok = starts >= 0
+        s = jnp.maximum(starts, 0)
+        w = weighted[s, jnp.arange(n_len)]  # (L, A + 1)
+        before = jnp.where(ok, jnp.minimum(act[s], rest[s]), inf)
+        via_act = before[:, None] + w[:, :-1]  # (L, A)
+        via_rest = jnp.where(ok, act[s], inf) + w[:, -1]  # (L,)
+        flat = jnp.argmin(via_act)
+        k_rest = jnp.argmin(via_rest)
+        act = act.at[e].set(via_act.reshape(-1)[flat])
+        rest = rest.at[e].set(via_rest[k_rest])
+        choice = jnp.stack([flat // (n_lab - 1), flat % (n_lab - 1)])
+        return (act, rest), (choice, k_rest)
+
+    (act, rest), (choice, k_rest) = jax.lax.scan(
+        step, (act0, rest0), jnp.arange(1, g + 1))
+    back_act = jnp.concatenate([jnp.zeros((1, 2), choice.dtype), choice])
+    back_rest = jnp.concatenate([jnp.zeros((1,), k_rest.dtype), k_rest])
+    return act, rest, back_act, back_rest
+
+
+def segment(
+    recording: Demonstration,
+    library: ActionLibrary,
+    *,
+    metric: str = "dtw",
+    n_samples: int = 16,
+    step_s: float | None = None,
+    durations_s: tuple[float, float] | None = None,
+) -> list[Segment]:
+    """The sequence of library actions in one recording (segmental search).
+
+    Args:
+        recording: the long recording (times in seconds; features named as the
+            library's).
+        library: the actions to look for (at least one).
+        metric: a recognition metric: ``"dtw"`` (paper), ``"dtw_multi"`` or
+            ``"euclidean"``.
+        n_samples: samples of each candidate segment and action compared.
+        step_s: grid step in seconds, the precision of the boundaries (default:
+            the recording's duration / 200).
+        durations_s: (shortest, longest) duration in seconds of an action (default:
+            4 grid steps to the whole recording); a rest lasts one grid step to the
+            longest. A range close to the actions' durations is faster and safer.
+
+    Returns:
+        The recognized actions in time order; pauses between them are left out.
+
+    Raises:
+        ValueError: a recording that is not a Demonstration or whose features
+            differ from the library's, an empty library, a bad metric, sample
+            count, step or duration range, or a recording that no segmentation
+            covers.
+        cgda_jax.sizes.SizeError: too many candidate segments for the memory or
+            the DTW work (a larger step_s or a narrower durations_s fits).
+
+    Examples:
+        >>> import numpy as np
+        >>> t = np.linspace(0.0, 4.0, 81)
+        >>> up = Demonstration(t, np.minimum(t, 2.0), ("x",), "up")
+        >>> lib = ActionLibrary.from_demonstrations({"up": [up]})
+        >>> x = np.r_[np.minimum(t[:41], 2), 2 + np.minimum(t[1:41], 2)]  # up, up
+        >>> segs = segment(Demonstration(t, x, ("x",)), lib, step_s=0.1)
+        >>> [(s.action, round(s.start, 1), round(s.end, 1)) for s in segs]
+        [('up', 0.1, 1.7), ('up', 1.9, 3.7)]
+    """
+    grid_t, lengths, costs = segment_costs(
+        recording, library, metric=metric, n_samples=n_samples, step_s=step_s,
+        durations_s=durations_s)
+    path, total = best_segmentation(costs, lengths)
+    if not np.isfinite(total):
+        step = grid_t[1] - grid_t[0]
+        raise ValueError(
+            f"segment: recording {recording.name!r} ({recording.duration:.4g} s) "
+            f"cannot be split into actions and rests of at most "
+            f"{lengths[-1] * step:.4g} s; allow longer segments (durations_s)")
+    costs = np.asarray(costs)
+    index = {int(v): k for k, v in enumerate(lengths)}
+    return [
+        Segment(library.names[a], float(grid_t[s]), float(grid_t[e]),
+                float(costs[s, index[e - s], a]))
+        for s, e, a in path if a < len(library)
+    ]
+
+
+def execute_sequence(
+    sim: Any,
+    goals: Sequence[Any],
+    run: Callable[..., Any] | Sequence[Callable[..., Any]],
+    **settings: Any,
+) -> list[Any]:
+    """Execute goals one after another, each starting where the previous left the
+    object.
+
+    Goal ``k > 0`` is moved (every point by the same offset) so that its first point
+    is the last feature point that execution ``k - 1`` reached; the first goal is
+    executed as given. A thin composition: each goal is one call of a strategy.
+
+    Args:
+        sim: the simulator every goal is executed on (same features as the goals).
+        goals: K goal feature trajectories (N_k, F), e.g. the knots of the
+            recognized actions (``library[s.action].knots`` for each `Segment`).
+        run: a strategy function (`cgda_jax.strategies.run_ie`, ``run_iet``, ...)
+            called as ``run(sim, goal, **settings)``, or one per goal.
+        **settings: passed to every call (population_size, tolerance, seed, ...).
+
+    Returns:
+        The K `cgda_jax.strategies.ExecutionResult`s in order; result ``k``'s
+        ``goal`` is the moved goal it executed.
+
+    Raises:
+        ValueError: no goals, a goal that is not (N, F) with the simulator's
+            feature count, or a run list of another length.
+    """
+    goals = [np.asarray(g, np.float64) for g in goals]
+    if not goals:
+        raise ValueError("execute_sequence: no goals given")
+    runs = list(run) if isinstance(run, Sequence) else [run] * len(goals)
+    if len(runs) != len(goals):
+        raise ValueError(f"execute_sequence: {len(runs)} strategies for "
+                         f"{len(goals)} goals")
+    n_features = getattr(sim, "n_features", None)
+    for k, g in enumerate(goals):
+        if g.ndim != 2 or g.shape[0] < 1 or (
+                n_features is not None and g.shape[1] != n_features):
+            raise ValueError(f"execute_sequence: goal {k} has shape {g.shape}; "
+                             f"expected (N, {n_features}) for this simulator")
+    results, here = [], None
+    for goal, fn in zip(goals, runs):
+        if here is not None:
+            goal = goal - goal[0] + here
+        result = fn(sim, goal, **settings)
+        results.append(result)
+        here = np.asarray(result.features)[-1]
+    return results
