@@ -76,3 +76,10 @@ def test_tiny_arm_presses_a_set_force(sim):
     np.testing.assert_allclose(feats[1, 3] / 0.01, -15.0, atol=1.0)
     np.testing.assert_allclose(feats[:, :3], goal[:, :3], atol=0.01)
     assert feats[0, 3] / 0.01 > 0  # the first point in the air
+
+
+def test_kinematic_mode_refuses_a_force():
+    robot = Robot.from_world(model_path("tiny_arm.xml"), OBJECTS,
+                             ["yaw", "shoulder", "elbow"], "marker", {})
+    with pytest.raises(ValueError, match="only the physics gives one"):
+        Simulator(robot, ObjectScene(FEATURES))
