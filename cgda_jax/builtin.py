@@ -56,10 +56,16 @@ def model_path(name: str) -> pathlib.Path:
         name: file name, e.g. ``"teo.xml"`` or ``"tiny_arm.xml"``.
 
     Raises:
-        FileNotFoundError: no such built-in model (the message lists the ones there).
+        FileNotFoundError: no such built-in model (the message lists the ones there),
+            or a name that is a path (only the models folder's own files are
+            built-in ones).
     """
     folder = models_dir()
     path = folder / name
+    if pathlib.Path(name).name != name or name in ("", ".", ".."):
+        have = sorted(p.name for p in folder.glob("*.xml"))
+        raise FileNotFoundError(f"no built-in model {name!r}: a built-in model is a "
+                                f"file name of {folder}, not a path; have {have}")
     if not path.is_file():
         have = sorted(p.name for p in folder.glob("*.xml"))
         raise FileNotFoundError(f"no built-in model {name!r} in {folder}; have {have}")

@@ -367,14 +367,16 @@ def soft_dtw(
         Scalar; NaN under ``jit`` / ``vmap`` for non-finite input.
 
     Raises:
-        ValueError: as `dtw`, or gamma <= 0.
+        ValueError: as `dtw`, or gamma <= 0 or outside float32's normal range.
 
     References:
         Cuturi & Blondel, "Soft-DTW: a Differentiable Loss Function for
         Time-Series", ICML 2017.
     """
-    if not float(gamma) > 0:
-        raise ValueError(f"soft_dtw: gamma must be > 0, got {gamma}")
+    tiny = float(jnp.finfo(jnp.float32).tiny)
+    if not tiny <= float(gamma) <= float(jnp.finfo(jnp.float32).max):
+        raise ValueError(f"soft_dtw: gamma must be a float32 number > 0, from {tiny:.3g} "
+                         f"to {float(jnp.finfo(jnp.float32).max):.3g}, got {gamma}")
     x, y = _pair(x, y, "soft_dtw")
     # soft_dtw_gamma(s x, s y) = s * soft_dtw_{gamma / s}(x, y): computed at a scale
     # where no cost overflows (see the module docstring)

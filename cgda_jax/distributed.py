@@ -32,6 +32,8 @@ Environment (read by `initialize`; `launch` sets the first three)::
     CGDA_PROCESS_ID=i            this process, 0 .. N-1
     CGDA_LOCAL_DEVICE_IDS=0,1    optional: the local accelerators this process
                                  uses (e.g. one GPU per process on a GPU node)
+    CGDA_JOIN_TIMEOUT=300        optional: seconds to wait for every process to
+                                 join; then the process ends (status 3, one line)
     CGDA_CLUSTER=auto            instead of the three above: JAX's own detection
                                  (SLURM ``srun``, Open MPI ``mpirun``, Kubernetes,
                                  Cloud TPU); or name one: slurm, ompi, mpi4py, ...
@@ -42,22 +44,26 @@ by `initialize`; on GPU through NCCL, on TPU through the interconnect, unchanged
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import os
 import pickle
 import signal
 import sys
+import threading
 from collections.abc import Sequence
 from typing import Any
 
 from cgda_jax.job import (
     ENV_CLUSTER,
     ENV_COORDINATOR,
+    ENV_JOIN_TIMEOUT,
     ENV_LAUNCHER_PID,
     ENV_LOCAL_DEVICE_IDS,
     ENV_NUM_PROCESSES,
     ENV_PROCESS_ID,
     job_from_env,
+    join_timeout,
 )
 
 __all__ = [
@@ -75,8 +81,43 @@ __all__ = [
     "share",
 ]
 
-def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100,
-               preemption_service: bool = False) -> bool:
+#: Status of a process that ended because its job did not join in time.
+JOIN_FAILED = 3
+
+
+def _watch_join(timeout_s: float, where: str, waiting, on_timeout) -> threading.Event:
+    """A thread that says ``waiting(text)`` after a few seconds and, unless the
+    returned event is set within ``timeout_s``, calls ``on_timeout(line)`` and ends
+    the process (`os._exit`: JAX's own end of the wait aborts it, SIGABRT with a
+    C++ stack)."""
+    done = threading.Event()
+
+    def watch():
+        if not done.wait(min(5.0, timeout_s / 2)) and waiting is not None:
+            waiting(f"waiting for every process of the job to join at {where} (up to "
+                    f"{timeout_s:g} s, {ENV_JOIN_TIMEOUT})")
+        if done.wait(max(0.0, timeout_s - min(5.0, timeout_s / 2))):
+            return
+        with contextlib.suppress(Exception):
+            on_timeout(f"the multi-process job at {where} did not join within "
+                       f"{timeout_s:g} s (a process that never started or cannot "
+                       f"reach it? {ENV_JOIN_TIMEOUT} sets the wait)")
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(JOIN_FAILED)
+
+    threading.Thread(target=watch, name="cgda-join", daemon=True).start()
+    return done
+
+
+def _stderr_line(line: str) -> None:
+    sys.stderr.write(f"cgda_jax: error: {line}\n")
+
+
+def initialize(*, timeout_s: float | None = None, heartbeat_timeout_s: int = 100,
+               preemption_service: bool = False, waiting=None,
+               on_timeout=_stderr_line) -> bool:
     """Join the multi-process job the environment describes (module docstring).
 
     Call it first, before any JAX computation (``jax.distributed.initialize`` must
@@ -85,7 +126,11 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100,
     the parent-death signal), so no worker outlives its job.
 
     Args:
-        timeout_s: how long to wait for every process to connect.
+        timeout_s: how long to wait for every process to connect (default
+            ``$CGDA_JOIN_TIMEOUT``, else 300 s); then ``on_timeout(line)`` is called
+            and the process ends with status `JOIN_FAILED` (3).
+        waiting: called with a line after a few seconds of waiting (None: quiet).
+        on_timeout: says the line (default: on stderr).
         heartbeat_timeout_s: how soon the others notice a process that died.
         preemption_service: keep JAX's preemption service, whose notifier takes
             SIGTERM for itself (it reports "SIGTERM caught" and the process goes
@@ -107,24 +152,28 @@ def initialize(*, timeout_s: int = 300, heartbeat_timeout_s: int = 100,
     job = job_from_env()
     if job is None or jax.distributed.is_initialized():
         return False
+    timeout_s = join_timeout() if timeout_s is None else float(timeout_s)
     follow_launcher()
     if "jax_cpu_collectives_implementation" in jax.config.values:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
     if "jax_enable_preemption_service" in jax.config.values:
         jax.config.update("jax_enable_preemption_service", bool(preemption_service))
+    where = job.get("coordinator_address") or (
+        f"{ENV_CLUSTER}={os.environ.get(ENV_CLUSTER)}")
+    done = _watch_join(timeout_s, where, waiting, on_timeout)
     try:
         jax.distributed.initialize(
-            **job,
-            initialization_timeout=int(timeout_s),
+            **job,  # JAX's own wait ends later: the watch speaks first
+            initialization_timeout=int(timeout_s) + 60,
             heartbeat_timeout_seconds=int(heartbeat_timeout_s),
         )
     except Exception as err:
-        where = job.get("coordinator_address") or (
-            f"{ENV_CLUSTER}={os.environ.get(ENV_CLUSTER)}")
         raise RuntimeError(
             f"could not join the multi-process job ({where}): "
             f"{str(err).strip().splitlines()[0] if str(err).strip() else err!r}"
         ) from err
+    finally:
+        done.set()
     return True
 
 

@@ -8,21 +8,27 @@ A schema maps keys to type names: ``str``, ``int``, ``bool``, ``number`` (int or
 float, not bool), ``null``, ``object``, ``list[T]``, alternatives ``a|b`` (e.g.
 ``number|null``: JSON has no infinity, so a non-finite number is written null).
 Keys the schema does not name are accepted (files written by later versions).
+
+Files written one at a time (not a results folder: `cgda_jax.run_folder`) go through
+`write_aside`: written beside their place and renamed over it, so a full disk or
+an interrupt leaves the earlier file, or none, never a truncated one.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pathlib
-from collections.abc import Iterable, Mapping
+import tempfile
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
 import numpy as np
 
 from cgda_jax.folders import FolderError
 
-__all__ = ["FileMissing", "check_fields", "read_json", "read_npz"]
+__all__ = ["FileMissing", "check_fields", "read_json", "read_npz", "write_aside"]
 
 
 class FileMissing(FolderError, FileNotFoundError):
@@ -151,3 +157,37 @@ def read_npz(path: str | os.PathLike, required: Iterable[str] = ()
         raise FolderError(f"{path}: array{'s' * (len(missing) > 1)} "
                           f"{', '.join(missing)} missing")
     return arrays
+
+
+def write_aside(path: str | os.PathLike, write: Callable[[Any], None],
+                binary: bool = False) -> pathlib.Path:
+    """Write ``path`` whole or not at all: ``write(f)`` fills a temporary file beside
+    it (``.<name>.tmp-XXXX``, same folder, same file system), which is flushed to
+    disk and renamed over ``path`` (atomic); on any failure the temporary file is
+    removed and ``path`` is left as it was.
+
+    Raises:
+        OSError: the write or the rename failed (a full disk: ``ENOSPC`` or
+            ``EFBIG``); whatever ``write`` raised.
+    """
+    path = pathlib.Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb" if binary else "w",
+                       **({} if binary else {"encoding": "utf-8"})) as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        if path.exists():  # keep the earlier file's permissions
+            with contextlib.suppress(OSError):
+                os.chmod(tmp, path.stat().st_mode & 0o7777)
+        else:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return path

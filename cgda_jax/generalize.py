@@ -354,8 +354,9 @@ def generalize(
         >>> generalize([d], interval_s=1.0).knots.shape
         (4, 1)
     """
+    if not isinstance(demos, Demonstration):
+        demos = list(demos)  # a generator is read once
     validate_demonstrations(demos)
-    demos = list(demos)
     if not np.isfinite(interval_s) or interval_s <= 0:
         raise ValueError(f"interval_s must be a positive number, got {interval_s}")
     if method == "paper":

@@ -29,7 +29,32 @@ ENV_LAUNCHER_PID = "CGDA_LAUNCHER_PID"
 ENV_JOB_WORK = "CGDA_JOB_WORK"
 ENV_JOB_FOLDER = "CGDA_JOB_FOLDER"
 
+#: Seconds a process waits for every process of its job to join (default
+#: `JOIN_TIMEOUT_S`); then it ends with one line (`cgda_jax.distributed.initialize`).
+ENV_JOIN_TIMEOUT = "CGDA_JOIN_TIMEOUT"
+JOIN_TIMEOUT_S = 300.0
+
 _EXPLICIT = (ENV_COORDINATOR, ENV_NUM_PROCESSES, ENV_PROCESS_ID)
+
+
+def join_timeout(env: dict[str, str] | None = None) -> float:
+    """`ENV_JOIN_TIMEOUT` in seconds (default `JOIN_TIMEOUT_S`).
+
+    Raises:
+        ValueError: not a number > 0 (named).
+    """
+    env = os.environ if env is None else env
+    text = env.get(ENV_JOIN_TIMEOUT, "").strip()
+    if not text:
+        return JOIN_TIMEOUT_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0 < value < 1e6:
+        raise ValueError(f"{ENV_JOIN_TIMEOUT}={text!r}: use seconds > 0 (default "
+                         f"{JOIN_TIMEOUT_S:g}), less than 1e6")
+    return value
 
 
 def _env_int(name: str, env: dict[str, str]) -> int:

@@ -35,7 +35,31 @@ from cgda_jax.folders import (
     is_empty_dir,
 )
 
-__all__ = ["RunFolder"]
+__all__ = ["RunFolder", "check_free"]
+
+
+def check_free(folder: pathlib.Path) -> None:
+    """Refuse ``folder`` when another run holds its lock, creating nothing (what a
+    ``--dry-run`` checks; the run itself takes the lock).
+
+    Raises:
+        FolderBusy: naming the folder and the holder's pid.
+    """
+    lock = _Lock(folder.parent / hidden_name(folder, "lock"))
+    try:
+        fd = os.open(lock.path, os.O_RDONLY)
+    except OSError:  # no lock file: nobody holds it
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError as err:
+        if err.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            raise FolderBusy(f"results folder {folder} is in use by another run"
+                             f"{lock.holder()}; wait for it to finish or choose "
+                             "another folder") from None
+        raise
+    finally:
+        os.close(fd)
 
 
 class _Lock:

@@ -14,7 +14,9 @@ gives the estimate and the largest value that would fit. The estimates:
 
 - `run_estimate`: an execution run of T trials (``run_trials`` batches them): per
   trial, a generation's candidates (population x points evaluated together) times
-  what one evaluation holds (features, genes, 3 per body of the model), the sampled
+  what one evaluation holds (features, genes, 3 per body of the model) and what its
+  motion check holds (`motion_width`: each collision pair and geom at every sampled
+  posture of the move), the sampled
   postures (``restart_samples`` / ``init_samples``, each with the same width) and
   their distances to every goal point (points x samples x features). Calibrated on
   clean_ie (TEO, 9 points, 4096 samples): 0.97 MB per trial estimated, 1.02 MB
@@ -52,6 +54,7 @@ __all__ = [
     "check_samples",
     "cores",
     "dynamic_width",
+    "motion_width",
     "recognition_estimate",
     "run_estimate",
     "samples_estimate",
@@ -218,6 +221,7 @@ def run_estimate(
     strategy: str = "ie",
     samples: int = 0,
     dynamic_width: int = 0,
+    motion_width: int = 0,
 ) -> Estimate:
     """An execution run of `trials` seeds in one batch (1 for a single run).
 
@@ -233,6 +237,8 @@ def run_estimate(
         samples: postures sampled once per trial (``restart_samples``, FTE's
             ``init_samples``), 0 for none.
         dynamic_width: floats of one candidate's physics state (dynamic mode).
+        motion_width: floats the motion check (`cgda_jax.sim.feasibility`) holds
+            for one waypoint's move (`motion_width`), 0 without one.
     """
     t, p, n, f = int(trials), int(population), int(points), int(features)
     width = f + int(dof) + 3 * int(bodies) + int(dynamic_width)
@@ -244,17 +250,27 @@ def run_estimate(
                     int(samples) * width),
         "distances": (f"{n} points x {samples:,} samples x {f} features",
                       n * int(samples) * f),
+        "motion": (f"{waypoints:,} waypoints' moves x {int(motion_width):,} values of "
+                   "the motion check", waypoints * int(motion_width)),
     }
     part, (name, per_trial) = max(parts.items(), key=lambda kv: kv[1][1])
     total = sum(count for _, count in parts.values())
     label = f"{t:,} trials x " if t != 1 else ""
-    # one run whose sampled postures are too many: their count is what to lower
-    by_samples = t == 1 and part != "generation" and samples > 0
+    # one run: what to lower is the count of sampled postures, or of candidates
+    by_samples = t == 1 and part in ("samples", "distances") and samples > 0
+    scale, value = (("samples", int(samples)) if by_samples
+                    else ("candidates", p) if t == 1 and part == "motion"
+                    else ("trials", t))
     return Estimate(
         what=f"{t:,} trial{'s' * (t != 1)} of {strategy.upper()}",
         largest=t * per_trial, largest_what=f"{label}{name}", part=part,
-        nbytes=_FLOAT * t * total, scale="samples" if by_samples else "trials",
-        scale_value=int(samples) if by_samples else t)
+        nbytes=_FLOAT * t * total, scale=scale, scale_value=value)
+
+
+def motion_width(samples: int, pairs: int, geoms: int, dof: int) -> int:
+    """Floats the motion check holds for one move: at its ``samples + 1`` postures,
+    each pair's distance, each geom's pose (12) and the posture."""
+    return (int(samples) + 1) * (int(pairs) + 12 * int(geoms) + int(dof))
 
 
 def dynamic_width(mj_model) -> int:

@@ -1,5 +1,8 @@
+import contextlib
 import os
 import pathlib
+import resource
+import signal
 
 import pytest
 
@@ -23,3 +26,21 @@ def xgnitive_dir() -> pathlib.Path:
 @pytest.fixture(scope="session")
 def models_dir() -> pathlib.Path:
     return REPO / "models"
+
+
+@pytest.fixture
+def full_disk():
+    """``with full_disk(nbytes):`` writes of this process past ``nbytes`` bytes of a
+    file fail with ``EFBIG`` ("File too large"), as on a full disk (RLIMIT_FSIZE,
+    SIGXFSZ ignored); restored after."""
+    @contextlib.contextmanager
+    def limited(nbytes: int):
+        old_limit = resource.getrlimit(resource.RLIMIT_FSIZE)
+        old_handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, old_limit[1]))
+        try:
+            yield
+        finally:
+            resource.setrlimit(resource.RLIMIT_FSIZE, old_limit)
+            signal.signal(signal.SIGXFSZ, old_handler)
+    return limited

@@ -248,3 +248,41 @@ def test_a_bent_path_would_be_caught():
     bent[:, 0] = np.interp(traj.t - 0.3, traj.t, traj.q[:, 0])
     lagged = type(traj)(**{**traj.__dict__, "q": bent})
     assert replay_trajectory(sim, lagged)[-1, 0] < 100.0
+
+
+# ------------------------------------------------- bad input and full disks (issue 43)
+@pytest.mark.parametrize("fmt", ["json", "csv", "npz"])
+def test_a_full_disk_keeps_the_earlier_file_whole(limited, tmp_path, fmt, full_disk):
+    """A truncated JSON or a 0-byte .npz was left, over a good earlier file."""
+    old, new = tmp_path / f"old.{fmt}", tmp_path / f"new.{fmt}"
+    save_trajectory(limited, old)
+    before = old.read_bytes()
+    assert len(before) > 4096
+    with full_disk(4096):
+        for path in (old, new):
+            with pytest.raises(OSError, match="File too large"):
+                save_trajectory(limited, path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [old.name]  # no .tmp
+    assert old.read_bytes() == before
+    assert load_trajectory(old).n_samples == limited.n_samples
+
+
+@pytest.mark.parametrize("profile", ["min_jerk", "ruckig"])
+@pytest.mark.parametrize("change, words", [
+    ({"hold_s": [1e308] * 6}, ["move 1 of the export", "inf control periods",
+                               "hold 1e+308 s"]),
+    ({"velocity": 1e-30}, ["move 1 of the export", "velocity 1e-30"]),
+    ({"rate": 1e-300}, ["rate must be in [1, 100000] Hz, got 1e-300"]),
+    ({"rate": 1e9}, ["rate must be in [1, 100000] Hz, got 1e+09"]),
+])
+def test_sizes_past_a_million_samples_are_refused_by_their_cause(profile, change,
+                                                                 words):
+    """An OverflowError, a RuckigError or "Maximum allowed size exceeded" (or 6 GB
+    at 1e9 Hz) before."""
+    kwargs = dict(rate=100.0, velocity=V, acceleration=A, hold_s=[0.4] * 6) | change
+    hold = kwargs.pop("hold_s")
+    with pytest.raises(ValueError) as err:
+        time_parameterize(START, WAYPOINTS, [0.6] * 6, hold, profile=profile,
+                          **kwargs)
+    for w in words:
+        assert w in str(err.value)

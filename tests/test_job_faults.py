@@ -165,6 +165,36 @@ def test_a_partial_job_environment_is_an_error_naming_the_variables(
     none_left(tag)
 
 
+def test_a_process_whose_job_never_joins_says_so_and_ends_with_status_3(
+        env, tmp_path, tag):
+    """Process 0 of 2 with nobody to join: silent for 300 s, then SIGABRT (134)
+    with a 14-line C++ stack. Now it says it waits and, after CGDA_JOIN_TIMEOUT
+    seconds, ends with status 3 and one line; nothing is left."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    job = {"CGDA_COORDINATOR": f"127.0.0.1:{port}", "CGDA_NUM_PROCESSES": "2",
+           "CGDA_PROCESS_ID": "0", "CGDA_JOIN_TIMEOUT": "8"}
+    out = tmp_path / "out"
+    t0 = time.monotonic()
+    proc = cgda({**env, **job}, "run", CLEAN, "--trials", "2", "--out", out,
+                *sets(LONG))
+    assert proc.returncode == 3, proc.stderr
+    waiting, _, error = proc.stderr.strip().partition("\n")
+    assert waiting == (f"[job] waiting for every process of the job to join at "
+                       f"127.0.0.1:{port} (up to 8 s, CGDA_JOIN_TIMEOUT)")
+    line = one_line(error, "cgda: error: the multi-process job at 127.0.0.1:")
+    assert "did not join within 8 s" in line
+    assert time.monotonic() - t0 < 8 + 60  # JAX's own wait ends 60 s later
+    assert not out.exists()
+    no_leftovers(out)
+    none_left(tag)
+    bad = cgda({**env, **job, "CGDA_JOIN_TIMEOUT": "soon"}, "run", CLEAN, "--trials",
+               "2", "--out", out)
+    assert bad.returncode == 2 and "CGDA_JOIN_TIMEOUT='soon'" in one_line(
+        bad.stderr, "cgda: error:")
+
+
 @pytest.mark.parametrize("case", ["not-empty", "in-use"])
 def test_the_results_folder_is_checked_before_any_worker_starts(
         case, env, tmp_path, tag):

@@ -1,6 +1,10 @@
 """A results folder back in Python (`cgda_jax.load_run`) and `cgda plot FOLDER`."""
 
+import hashlib
 import json
+import pathlib
+import re
+import shutil
 
 import numpy as np
 import pytest
@@ -120,8 +124,121 @@ def test_cgda_export_writes_the_file_its_report_row_checked(clean_run, tmp_path,
     np.testing.assert_allclose(traj.waypoints, run.arrays["joints"], atol=1e-6)
     assert cli.main(["export", str(folder), "--rate", "0", "--no-cache"]) == \
         cli.EXIT_USAGE
-    assert capsys.readouterr().err.startswith("cgda: error: --rate must be > 0")
+    assert capsys.readouterr().err.startswith("cgda: error: --rate must be in [1, "
+                                              "100000] Hz, got 0")
     out = tmp_path / "clean_ruckig.json"
     assert cli.main(["export", str(folder), "--out", str(out), "--profile", "ruckig",
                      "--no-cache"]) in (cli.EXIT_MET, cli.EXIT_NOT_MET)
     assert cg.load_trajectory(out).info["profile"] == "ruckig"
+
+
+# ------------------------------------------------- bad input and full disks (issue 43)
+def contents(folder) -> dict[str, str]:
+    """Every file under ``folder`` (hidden ones included) and its SHA-256."""
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def one_line(capsys, code: int, status: int, *words: str) -> str:
+    err = capsys.readouterr().err
+    assert code == status, err
+    assert err.count("\n") == 1 and err.startswith("cgda: error:"), err
+    for w in words:
+        assert w in err, err
+    return err
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--out", "{run}/arrays.npz"], ["arrays.npz is a file of the results folder"]),
+    (["--out", "{run}/result.json"], ["result.json is a file of the results folder"]),
+    (["--out", "{tmp}/folder.json"], ["folder.json is a folder; name a file"]),
+    (["--out", "{tmp}/missing/t.json"], ["folder", "missing not found"]),
+    (["--rate", "1e9"], ["--rate must be in [1, 100000] Hz, got 1e+09"]),
+    (["--rate", "1e-300"], ["--rate must be in [1, 100000] Hz, got 1e-300"]),
+    (["--rate", "1e308"], ["--rate must be in", "got 1e+308"]),
+    (["--jerk", "-1"], ["--jerk must be a finite number > 0"]),
+])
+def test_export_refuses_bad_input_before_any_work(clean_run, tmp_path, capsys, args,
+                                                  words):
+    """It overwrote the run's own arrays.npz / result.json (status 0), grew past
+    6 GB at --rate 1e9 and ended in an OverflowError at --rate 1e-300."""
+    _, folder = clean_run
+    (tmp_path / "folder.json").mkdir()
+    before = contents(folder)
+    args = [a.format(run=folder, tmp=tmp_path) for a in args]
+    one_line(capsys, cli.main(["export", str(folder), *args, "--no-cache"]),
+             cli.EXIT_USAGE, *words)
+    assert contents(folder) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder.json"]
+
+
+def test_export_onto_a_full_disk_leaves_the_earlier_file_whole(clean_run, tmp_path,
+                                                               capsys, full_disk):
+    """It left a truncated JSON or a 0-byte .npz, and replaced a good file by a
+    truncated one (each format: test_export's full-disk test)."""
+    run = tmp_path / "run"
+    shutil.copytree(clean_run[1], run)
+    args = ["export", str(run), "--no-check", "--no-cache"]
+    assert cli.main([*args, "--quiet"]) == cli.EXIT_MET  # run/trajectory.json
+    capsys.readouterr()
+    before = contents(tmp_path)
+    with full_disk(20_000):
+        code = cli.main(args)
+    err = one_line(capsys, code, cli.EXIT_FAILURE, "cgda: error: OSError: ",
+                   f"{run / 'trajectory.json'} could not be written (File too large): "
+                   "nothing written, an earlier file there is kept")
+    assert contents(tmp_path) == before  # the earlier file whole, no .tmp left
+    log = re.search(r"traceback in (\S+cgda-error-\S+\.log)\)", err)
+    if log:
+        pathlib.Path(log[1]).unlink(missing_ok=True)
+
+
+def _damaged(folder, tmp_path, what):
+    run = tmp_path / what
+    shutil.copytree(folder, run)
+    arrays = dict(np.load(run / "arrays.npz"))
+    config = (run / "config.toml").read_text()
+    if what == "outside":
+        arrays["joints"][2, 0] = 10.0
+    elif what == "rows":
+        arrays["joints"] = np.concatenate([arrays["joints"], arrays["joints"][:1]])
+    elif what == "velocity":
+        config = config.replace("[robot.limits]\n",
+                                "[robot.limits]\nvelocity = 1e-30\n")
+    elif what == "partial":
+        del arrays["demo1_features"]
+    elif what == "latin1":
+        config = "# caf\xe9\n" + config
+    np.savez(run / "arrays.npz", **arrays)
+    (run / "config.toml").write_bytes(config.encode("latin-1"))
+    return run
+
+
+@pytest.mark.parametrize("what, args, words", [
+    ("outside", [], ["arrays.npz's joints of point 3", "= 10 is outside its range"]),
+    ("rows", [], ["arrays.npz's joints has shape (10, 3)", "(9)"]),
+    ("velocity", ["--profile", "ruckig"], ["move 1 of the export", "3.27e+30 s at 100 "
+                                           "Hz", "velocity 1e-30"]),
+])
+def test_export_of_a_damaged_or_impossible_result_names_the_cause(
+        clean_run, tmp_path, capsys, what, args, words):
+    """Broadcast errors, RuckigError (status 3), "Maximum allowed size exceeded",
+    or joints silently clipped and written (waypoint_s = 1e308 and the minimum-jerk
+    profile: test_export)."""
+    run = _damaged(clean_run[1], tmp_path, what)
+    before = contents(tmp_path)
+    one_line(capsys, cli.main(["export", str(run), "--no-check", "--no-cache", *args]),
+             cli.EXIT_USAGE, *words)
+    assert contents(tmp_path) == before
+
+
+def test_plot_names_the_damaged_file(clean_run, tmp_path, capsys):
+    """It said "cgda: error: demo1_features" and, for a config.toml that is not
+    UTF-8, "'utf-8' codec can't decode byte" without the file."""
+    run = _damaged(clean_run[1], tmp_path, "partial")
+    one_line(capsys, cli.main(["plot", str(run), "--no-render", "--no-cache",
+                               "--out", str(tmp_path / "p")]), cli.EXIT_USAGE,
+             "arrays.npz: array demo1_features missing")
+    run = _damaged(clean_run[1], tmp_path, "latin1")
+    one_line(capsys, cli.main(["plot", str(run), "--no-render", "--no-cache"]),
+             cli.EXIT_USAGE, f"{run / 'config.toml'}: not a UTF-8 text file")

@@ -8,6 +8,7 @@ import os
 import pathlib
 import subprocess
 import sys
+import warnings
 
 import mujoco
 import numpy as np
@@ -199,3 +200,85 @@ def test_cli_refusals_are_one_line(env, args, words):
     assert proc.stderr.count("\n") == 1 and "Traceback" not in proc.stderr
     for w in words:
         assert w in proc.stderr
+
+
+# ------------------------------------------------- caught at --dry-run (issue 43)
+@pytest.mark.parametrize("name, sets, words", [
+    ("clean_ie_dynamic", ["reality.enabled=true", "reality.seed=-1"],
+     ["key 'reality.seed': seed -1 is not in 0 .. 4294967295"]),
+    ("clean_ie", ["robot.limits.velocity=1e300"],
+     ["key 'robot.limits'", "velocity = 1e+300: outside float32's range"]),
+    ("clean_ie", ["data.scale=1e38"],
+     ["key 'data.scale': the goal reaches 5.51e+37", "overflow float32"]),
+])
+def test_what_the_run_would_fail_on_is_refused_by_the_dry_run(capsys, name, sets,
+                                                              words):
+    """reality.seed=-1 failed after 13 s (status 3); velocity 1e300 became inf with a
+    RuntimeWarning; data.scale=1e38 failed blaming the actuator gains."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no RuntimeWarning either
+        err = dry_run_error(capsys, name, *sets)
+    for w in words:
+        assert w in err
+
+
+def test_the_dry_run_refuses_a_folder_another_run_holds(capsys, tmp_path):
+    """It called the folder valid; the run was then refused."""
+    import fcntl
+
+    from cgda_jax.folders import hidden_name
+
+    out = tmp_path / "busy"
+    lock = tmp_path / hidden_name(out, "lock")
+    with open(lock, "w") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        f.write("4242\n")
+        f.flush()
+        err = dry_run_error(capsys, "clean_ie", "--out", str(out))
+    assert f"results folder {out} is in use by another run (pid 4242)" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [lock.name]
+
+
+def test_a_model_set_relative_to_the_cwd_is_saved_so_that_it_resolves(
+        tmp_path, monkeypatch):
+    """--set robot.model="models/x.xml" was saved as given, and `cgda export RUN`
+    / `cgda run RUN/config.toml` looked for it inside the results folder."""
+    from cgda_jax.experiment import dump_config, load_config
+
+    (tmp_path / "models").mkdir()
+    model = model_file(tmp_path / "models", TINY, "x.xml")
+    monkeypatch.chdir(tmp_path)
+    cfg = load_config(EXP / "clean_ie.toml", ['robot.model="models/x.xml"'])
+    assert cfg.robot.model == str(model)
+    saved = tmp_path / "run" / "config.toml"
+    saved.parent.mkdir()
+    saved.write_text(dump_config(cfg))
+    monkeypatch.chdir(REPO)
+    assert load_config(saved).robot.model == str(model)
+    assert load_config(EXP / "clean_ie.toml",
+                       ['robot.model="teo.xml"']).robot.model == "teo.xml"  # built-in
+
+
+def test_api_refusals_name_their_input(tmp_path):
+    """soft_dtw blamed the trajectories' scale for gamma; Simulator(robot, None)
+    raised AttributeError; generalize(generator) "cannot convert float NaN to
+    integer"; model_path("../../../../etc/passwd") returned a path outside."""
+    import jax.numpy as jnp
+
+    from cgda_jax import Demonstration, generalize, soft_dtw
+
+    x = jnp.ones((5, 2))
+    for gamma in (1e-40, float("inf")):
+        with pytest.raises(ValueError, match=r"soft_dtw: gamma must be a float32 "
+                           r"number > 0"):
+            soft_dtw(x, x, gamma=gamma)
+    robot = Robot(mujoco.MjModel.from_xml_string(TINY), JOINTS, "marker")
+    with pytest.raises(TypeError, match="Simulator: scene must be a scene"):
+        Simulator(robot, None)
+    t = np.linspace(0, 4, 41)
+    demo = Demonstration(t, np.sin(t)[:, None], ("s",))
+    assert generalize(d for d in [demo, demo]).knots.shape == (4, 1)
+    with pytest.raises(FileNotFoundError, match="a built-in model is a file name"):
+        model_path("../../../../etc/passwd")
+    with pytest.raises(FileNotFoundError, match="not a path"):
+        model_path("objects/../teo.xml")

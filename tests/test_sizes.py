@@ -4,6 +4,7 @@ is allocated or compiled: in the API, in ``--dry-run`` and in the run."""
 
 import os
 import pathlib
+import re
 import subprocess
 import sys
 import time
@@ -133,10 +134,19 @@ def env(tmp_path_factory):
             "CGDA_JAX_CACHE": str(tmp_path_factory.getbasetemp() / "jaxcache")}
 
 
-def cgda(env, *args):
-    return subprocess.run([sys.executable, "-m", "cgda_jax.cli", *map(str, args)],
-                          env=env, capture_output=True, text=True, timeout=120,
-                          check=False)
+#: Address space of a process whose memory a test bounds (3 GB: a refused size
+#: allocates nothing; JAX and XLA reserve about 1 GB of address space).
+BOUND = 3_000_000_000
+
+
+def cgda(env, *args, bound: int | None = None, timeout: float = 120):
+    """``cgda ARGS`` in a process, its address space within ``bound`` bytes."""
+    cmd = [sys.executable, "-m", "cgda_jax.cli"] if bound is None else [
+        sys.executable, "-c", "import resource, sys; resource.setrlimit(resource."
+        f"RLIMIT_AS, ({bound}, {bound})); from cgda_jax.cli import main; "
+        "sys.exit(main(sys.argv[1:]))"]
+    return subprocess.run([*cmd, *map(str, args)], env=env, capture_output=True,
+                          text=True, timeout=timeout, check=False)
 
 
 def one_error(proc) -> str:
@@ -190,3 +200,64 @@ def test_generalization_and_resampling_sizes_are_refused_by_name():
         action.sample(3 * 10**9)
     with pytest.raises(SizeError, match=r"n: 1,000,000,000 samples x 3 features"):
         resample(np.zeros((5, 3), np.float32), 10**9)
+
+
+# ------------------------------------------ what the checks let through (issue 43)
+@pytest.mark.parametrize("setting, words", [
+    ("strategy.population_size=1000000",
+     ["keys 'strategy.population_size' and 'feasibility.samples'",
+      "9,000,000 waypoints' moves x", "values of the motion check", "32-bit",
+      "candidates fit"]),
+    ("feasibility.samples=100000000",
+     ["keys 'strategy.population_size' and 'feasibility.samples'",
+      "not even 1 candidate fits"]),
+])
+def test_the_motion_check_s_samples_are_in_the_estimate(env, setting, words):
+    """Both passed --dry-run and died after 60 s: "Out of memory allocating
+    463,056,467,600 bytes" (status 3, 16 lines of XLA warnings)."""
+    err = one_error(cgda(env, "run", EXP / "clean_ie.toml", "--dry-run", "--set",
+                         setting, bound=BOUND))
+    for w in words:
+        assert w in err
+
+
+def test_trials_the_refusal_says_fit_are_those_the_estimate_allows(env):
+    """The --trials 100000 refusal said 17,476 fit (the 32-bit limit of the sampled
+    postures alone), and 17,476 trials grew past 8 GB; the motion check's samples
+    now count."""
+    err = one_error(cgda(env, "run", EXP / "clean_ie.toml", "--dry-run", "--trials",
+                         100000, bound=BOUND))
+    fit = int(re.search(r"at most ([\d,]+) trials fit", err)[1].replace(",", ""))
+    assert fit < 17_476
+    assert "values of the motion check" in err
+
+
+def test_the_pair_culling_s_grid_is_bounded_for_many_joints(tmp_path):
+    """30 evolved joints: `cgda run` was killed at 23.6 GB, --dry-run passed 5 GB
+    (a grid of 2**30 postures). 24 joints within 3 GB and a minute now; every pair
+    that does not overlap at start is kept (checking more pairs is safe)."""
+    code = f"""
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, ({BOUND}, {BOUND}))
+import mujoco
+from cgda_jax import Robot
+from cgda_jax.sim.collision import Collider
+from cgda_jax.sim.feasibility import relevant_pairs
+n = 24
+links = "".join(f'<body pos="0 0 0.05"><joint name="j{{i}}" axis="0 {{i % 2}} '
+                f'{{1 - i % 2}}" range="-60 60"/><geom name="g{{i}}" type="capsule" '
+                f'fromto="0 0 0 0 0 0.05" size="0.01"/>' for i in range(n))
+xml = (f'<mujoco><compiler angle="degree"/><worldbody><geom name="floor" '
+       f'type="plane" size="1 1 .1"/>{{links}}<site name="marker"/>'
+       f'{{"</body>" * n}}</worldbody></mujoco>')
+robot = Robot(mujoco.MjModel.from_xml_string(xml), [f"j{{i}}" for i in range(n)],
+              "marker")
+pairs = [("g20", "floor")]
+keep, overlapping = relevant_pairs(Collider(robot, only=pairs), robot)
+print(sorted(keep), sorted(overlapping))
+"""
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True,
+                          text=True, timeout=120, check=False,
+                          env={**os.environ, "JAX_PLATFORMS": "cpu"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "[('g20', 'floor')] []"

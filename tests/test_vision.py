@@ -271,6 +271,53 @@ def test_cgda_track_bad_input_is_one_line(tmp_path, capsys):
     assert "not found in any frame" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("args, words", [
+    (["--fps", "0"], ["fps must be in [0.001, 100000] frames per second, got 0"]),
+    (["--fps", "1e-300"], ["fps must be in", "got 1e-300"]),
+    (["--max-gap", "-1"], ["max_gap must be a whole number of frames >= 0, got -1"]),
+    (["--min-area", "-5"], ["min_area must be a whole number of pixels >= 1, got -5"]),
+])
+def test_cgda_track_refuses_bad_numbers(tmp_path, capsys, args, words):
+    """--fps 0 was ignored (30 fps used), --fps 1e-300 wrote times up to 5.9e301,
+    --max-gap -1 and --min-area -5 were taken."""
+    from cgda_jax.cli import main
+
+    assert main(["track", str(DATA / "move"), "--out", str(tmp_path / "o"),
+                 *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("cgda: error:"), err
+    for w in words:
+        assert w in err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("existing", [False, True])
+def test_cgda_track_writes_every_file_or_none(tmp_path, capsys, existing):
+    """`cgda track good grey --out D` failed on grey (status 2) but left good.csv
+    and its sheet in D."""
+    from cgda_jax.cli import main
+
+    grey = tmp_path / "grey"
+    grey.mkdir()
+    for k in range(4):
+        cv2.imwrite(str(grey / f"{k:03d}.png"), np.full((48, 64, 3), 128, np.uint8))
+    out = tmp_path / "o"
+    if existing:
+        out.mkdir()
+        (out / "old.csv").write_text("kept\n")
+    assert main(["track", str(DATA / "move"), str(grey), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "grey" in err, err
+    if existing:
+        assert [p.name for p in out.iterdir()] == ["old.csv"]
+    else:
+        assert not out.exists()
+    file = tmp_path / "file"
+    file.write_text("x")
+    assert main(["track", str(DATA / "move"), "--out", str(file)]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+
+
 def test_import_without_opencv_names_the_extra():
     import subprocess
     import sys

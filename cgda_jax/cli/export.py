@@ -5,7 +5,7 @@ replay on MuJoCo C.  Argument parsing and messages only; the trajectory is
 
 from __future__ import annotations
 
-from cgda_jax.cli.output import say
+from cgda_jax.cli.output import check_out_file, say
 
 EXPORT_EXAMPLES = """\
 examples:
@@ -25,8 +25,10 @@ trajectory_msgs/JointTrajectory field for field. Unless --no-check the file is
 read back and replayed on MuJoCo C (the run's model, scene and timing) and its
 features judged against the goal. Exit status: 0 written (and the replay met the
 run's tolerance), 1 written but the replay did not meet it (a run that missed its
-goal, or a replay that differs from it), 2 bad input (not an
-execution results folder, NaN joints, bad --rate), 3 any other failure.
+goal, or a replay that differs from it), 2 bad input, known before any work (not an
+execution results folder, NaN joints or joints outside their ranges, --rate outside
+1 Hz to 100 kHz, more than 1,000,000 samples, --out a folder, not writable or a
+file of the run), 3 any other failure (a full disk: the earlier file is kept).
 """
 
 
@@ -60,15 +62,19 @@ def cmd_export(args) -> int:
     """Write the file; 0 when written (and its replay met the tolerance), 1 when
     the replay missed it (errors are raised and reported by `cgda_jax.cli`)."""
     import math
-    import pathlib
 
     from cgda_jax.experiment.export import check_exported, export_trajectory
     from cgda_jax.experiment.load import load_run
     from cgda_jax.experiment.results import expand
+    from cgda_jax.reality.export import RATE_RANGE
     from cgda_jax.reality.files import load_trajectory, save_trajectory
 
-    if not (math.isfinite(args.rate) and args.rate > 0):
-        raise ValueError(f"--rate must be > 0 Hz, got {args.rate}")
+    lo, hi = RATE_RANGE
+    if not lo <= args.rate <= hi:
+        raise ValueError(f"--rate must be in [{lo:g}, {hi:g}] Hz, got {args.rate:g}")
+    if args.jerk is not None and not (math.isfinite(args.jerk) and args.jerk > 0):
+        raise ValueError(f"--jerk must be a finite number > 0 rad/s^3, got "
+                         f"{args.jerk:g}")
     run = load_run(args.folder)
     fmt = args.format
     if args.out:
@@ -79,12 +85,16 @@ def cmd_export(args) -> int:
     else:
         fmt = fmt or "json"
         out = run.folder / f"trajectory.{fmt}"
-    if not pathlib.Path(out).parent.is_dir():
-        raise FileNotFoundError(f"--out: folder {pathlib.Path(out).parent} not found")
+    check_out_file(out, "--out", run.folder,
+                   tuple(f"trajectory.{f}" for f in ("csv", "json", "npz")))
     sim = run.simulator()
     traj = export_trajectory(run, args.rate, jerk=args.jerk, sim=sim,
                              profile=args.profile)
-    save_trajectory(traj, out, fmt)
+    try:
+        save_trajectory(traj, out, fmt)
+    except OSError as err:
+        raise OSError(f"{out} could not be written ({err.strerror or err}): nothing "
+                      "written, an earlier file there is kept") from None
     say(args, f"[{run.name}] {traj.n_samples} samples at {traj.rate:g} Hz, "
         f"{traj.duration:.2f} s, joints {', '.join(traj.joint_names)} -> {out}")
     for s in traj.info["stretched"]:

@@ -231,6 +231,33 @@ def user_error(args, err: Exception) -> bool:
                             SizeError))
 
 
+def check_out_file(path: pathlib.Path, flag: str = "--out",
+                   folder: pathlib.Path | None = None, own: tuple = ()) -> None:
+    """A file a command will write (``cgda export``), checked before any work: not a
+    folder, in a folder that exists and can be written, and not a file of the
+    results folder ``folder`` other than the names ``own`` (those the command
+    itself writes there).
+
+    Raises:
+        FolderError: naming ``flag``, the path and the problem (status 2).
+    """
+    from cgda_jax.folders import FolderError, check_writable
+
+    path = pathlib.Path(path)
+    if path.is_dir():
+        raise FolderError(f"{flag} {path} is a folder; name a file")
+    if not path.parent.is_dir():
+        raise FolderError(f"{flag} {path}: folder {path.parent} not found")
+    if folder is not None and path.exists() and path.name not in own:
+        inside = path.resolve().is_relative_to(pathlib.Path(folder).resolve())
+        if inside:
+            raise FolderError(f"{flag} {path} is a file of the results folder "
+                              f"{folder}; it would be overwritten (name another file)")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise FolderError(f"{flag} {path} cannot be written: permission denied")
+    check_writable(path.parent, f"{flag} {path}: its folder")
+
+
 def say(args, text: str) -> None:
     """``text`` as a line on stderr, unless ``--quiet``."""
     if not args.quiet:

@@ -106,6 +106,7 @@ def _job_size(args) -> tuple[int, bool]:
 
 def cmd_run(args) -> int:
     from cgda_jax.builtin import resolve_config
+    from cgda_jax.run_folder import check_free
     from cgda_jax.experiment import (
         RunFolder,
         check_experiment,
@@ -130,6 +131,7 @@ def cmd_run(args) -> int:
     fresh = args.out is None
     if args.dry_run:
         folder = plan_folder(target, overwrite=args.overwrite, fresh=fresh)
+        check_free(folder)  # a folder another run holds is refused by the run too
         print(f"# {args.config}: valid ({_facts(facts)}); results would go to "
               f"{folder}\n# the keys that apply to it (a run's config.toml holds them "
               f"all)\n" + dump_config(cfg, applicable_only=True), end="")

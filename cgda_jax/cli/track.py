@@ -4,8 +4,11 @@ parsing and messages only; the tracking is `cgda_jax.vision`."""
 from __future__ import annotations
 
 import json
+import os
 import pathlib
+import shutil
 import sys
+import tempfile
 
 from cgda_jax.cli.output import EXIT_FAILURE, EXIT_MET, say
 
@@ -27,8 +30,11 @@ saturation and value 0-255), or, with --color auto (the default), the first fram
 most saturated region, followed as its colour changes, its faces turn into shade and
 the light moves or dims (the range learned again every frame). A lost object is
 interpolated over gaps of up to --max-gap frames; a longer gap refuses the video.
+Every video is tracked before any file is written, and the files are written aside
+and moved in: all of them, or none (a folder made for them is removed again).
 Exit status: 0 done, 2 bad input (a file that cannot be read, no object in range,
-a gap too long), 3 any other failure.
+a gap too long, --fps outside 0.001-100000, --max-gap < 0, --min-area < 1, --out
+a file or not writable), 3 any other failure (a full disk: nothing written).
 """
 
 
@@ -74,7 +80,7 @@ def _recording(path: pathlib.Path, args) -> dict:
         return {"video": path / "rgb", "name": path.name,
                 "depth": depth if depth.is_dir() and not args.no_depth else None,
                 "intrinsics": args.intrinsics or (intr if intr.is_file() else None),
-                "fps": args.fps or fps}
+                "fps": args.fps if args.fps is not None else fps}
     name = path.stem if path.is_file() else path.name
     return {"video": path, "name": name, "depth": None, "intrinsics": args.intrinsics,
             "fps": args.fps}
@@ -106,24 +112,41 @@ def cmd_track(args) -> int:
         print(f"cgda: error: {err}", file=sys.stderr)
         return EXIT_FAILURE
     from cgda_jax.data import save_csv
+    from cgda_jax.folders import check_writable
     from cgda_jax.vision import contact_sheet, track_video
 
     jobs = _jobs(args)
     out = pathlib.Path(args.out).expanduser()
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"--out {out} is a file, not a folder")
+    check_writable(out, f"--out {out}")
+    tracks = [track_video(job["video"], depth=job["depth"],
+                          intrinsics=job["intrinsics"], color=args.color,
+                          fps=job["fps"], max_gap=args.max_gap,
+                          min_area=args.min_area, name=job["name"])
+              for job in jobs]  # every video tracked before any file is written
+    made = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    for job in jobs:
-        track = track_video(job["video"], depth=job["depth"],
-                            intrinsics=job["intrinsics"], color=args.color,
-                            fps=job["fps"], max_gap=args.max_gap,
-                            min_area=args.min_area, name=job["name"])
-        csv = out / f"{job['name']}.csv"
-        save_csv(track.demo, csv)
-        written = [csv, track.write_colors(out / f"{job['name']}_colors.csv")]
-        if not args.no_sheet:
-            written.append(contact_sheet(job["video"], track,
-                                         out / f"{job['name']}_sheet.png"))
-        say(args, f"[track] {job['video']}: {track.summary()} -> "
-            + ", ".join(str(w) for w in written))
+    work = pathlib.Path(tempfile.mkdtemp(prefix=".cgda-track-", dir=out))
+    try:  # all the files, or none: written aside, then moved in
+        lines = []
+        for job, track in zip(jobs, tracks):
+            written = [work / f"{job['name']}.csv"]
+            save_csv(track.demo, written[0])
+            written.append(track.write_colors(work / f"{job['name']}_colors.csv"))
+            if not args.no_sheet:
+                written.append(contact_sheet(job["video"], track,
+                                             work / f"{job['name']}_sheet.png"))
+            lines.append(f"[track] {job['video']}: {track.summary()} -> "
+                         + ", ".join(str(out / w.name) for w in written))
+        for f in sorted(work.iterdir()):
+            os.replace(f, out / f.name)
+    except BaseException:
+        if made:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    for line in lines:
+        say(args, line)
     return EXIT_MET

@@ -40,11 +40,13 @@ from cgda_jax.cli.output import (
     SignalWatcher,
     failure,
     launched_worker,
+    say,
 )
 from cgda_jax.job import (
     ENV_JOB_FOLDER,
     ENV_JOB_WORK,
     job_from_env,
+    join_timeout,
 )
 
 #: How long the launching process holds a worker's line before showing it: what a
@@ -108,7 +110,11 @@ def join_job(args) -> bool:
     from cgda_jax import distributed
 
     job_from_env()  # a half-described job is an error here, not a silent single run
-    joined = distributed.initialize()
+    join_timeout()
+    joined = distributed.initialize(
+        waiting=None if launched_worker() else (
+            lambda text: say(args, f"[job] {text}")),
+        on_timeout=lambda line: print(f"cgda: error: {line}", file=sys.stderr))
     if joined:
         # until the processes' last gather, one that fails alone leaves at once
         # (`leave_job`): JAX's exit would wait for the others, who wait for it

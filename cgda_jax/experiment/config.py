@@ -157,22 +157,30 @@ def _apply_override(cfg: ExperimentConfig, setting: str) -> None:
 PATH_KEYS = (("robot", "model"), ("data", "data_dir"))
 
 
+def _beside(raw: Any, folder: pathlib.Path) -> str | None:
+    """A `PATH_KEYS` value made relative to ``folder``: a relative path there becomes
+    that folder's (absolute) path, except a bare file name that is not there (a
+    built-in model's name); None where it stays as it is."""
+    if not isinstance(raw, str) or not raw:
+        return None
+    p = pathlib.Path(raw).expanduser()
+    if p.is_absolute() or raw.startswith("~"):
+        return None
+    beside = (folder / p).resolve()
+    return str(beside) if beside.exists() or p.name != raw else None
+
+
 def _relative_to(cfg: ExperimentConfig, table: Mapping[str, Any],
                  folder: pathlib.Path) -> None:
-    """The `PATH_KEYS` that ``table`` (a config file's) sets, made relative to the
-    file's ``folder``: a relative path there becomes that folder's (absolute) path,
-    except a bare file name that is not there (a built-in model's name)."""
+    """The `PATH_KEYS` that ``table`` (a config file's, or the ``--set`` ones) sets,
+    made relative to ``folder`` (`_beside`), so that the saved config still
+    resolves from its results folder."""
     for section, key in PATH_KEYS:
         raw = (table.get(section) or {}).get(key) if isinstance(
             table.get(section), Mapping) else None
-        if not isinstance(raw, str) or not raw:
-            continue
-        p = pathlib.Path(raw).expanduser()
-        if p.is_absolute() or raw.startswith("~"):
-            continue
-        beside = (folder / p).resolve()
-        if beside.exists() or p.name != raw:
-            setattr(getattr(cfg, section), key, str(beside))
+        path = _beside(raw, folder)
+        if path is not None:
+            setattr(getattr(cfg, section), key, path)
 
 
 def load_config(
@@ -180,7 +188,8 @@ def load_config(
 ) -> ExperimentConfig:
     """Defaults, then the TOML file at ``path``, then ``key=value`` overrides.
 
-    File and folder names in the file (`PATH_KEYS`) are relative to its folder.
+    File and folder names in the file (`PATH_KEYS`) are relative to its folder,
+    those of an override to the current folder.
 
     Raises:
         ConfigError: unknown key, wrong type, unparsable file (message names the
@@ -193,9 +202,12 @@ def load_config(
         if not path.is_file():
             raise FileNotFoundError(f"config file not found: {path}")
         try:
-            table = tomllib.loads(path.read_text())
+            table = tomllib.loads(path.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as e:
             raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        except UnicodeDecodeError as e:
+            raise ConfigError(f"{path}: not a UTF-8 text file (byte {e.start}: "
+                              f"{e.reason}); a TOML config is UTF-8") from None
         if not table:
             raise ConfigError(f"{path}: the file sets nothing (an empty config); "
                               f"start from a built-in one (`cgda list`, "
@@ -212,6 +224,10 @@ def load_config(
             _apply_override(cfg, setting)
         except ConfigError as e:
             raise ConfigError(f"--set: {e}") from None
+        section, _, key = setting.partition("=")[0].strip().partition(".")
+        if (section, key) in PATH_KEYS:
+            value = getattr(getattr(cfg, section), key)
+            _relative_to(cfg, {section: {key: value}}, pathlib.Path.cwd())
     return cfg
 
 

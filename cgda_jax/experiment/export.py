@@ -27,6 +27,24 @@ def _run(run: Run | str | os.PathLike) -> Run:
     return run
 
 
+def _check_ranges(run: Run, robot) -> None:
+    """The run's joints within the robot's ranges (to float32 rounding): a joint
+    outside is a damaged or hand-edited result, not a posture the run took."""
+    import numpy as np
+
+    joints = np.asarray(run.arrays["joints"], np.float64)
+    lo, hi = np.asarray(robot.lower, np.float64), np.asarray(robot.upper, np.float64)
+    tol = 1e-5 * (1.0 + np.where(np.isfinite(hi - lo), hi - lo, 0.0))
+    out = (joints < lo - tol) | (joints > hi + tol)
+    if out.any():
+        i, j = (int(v) for v in np.argwhere(out)[0])
+        raise ValueError(
+            f"{run.folder}: arrays.npz's joints of point {i + 1}: "
+            f"{robot.joint_names[j]} = {joints[i, j]:.6g} is outside its range "
+            f"[{lo[j]:.6g}, {hi[j]:.6g}] (damaged or edited: not a posture the run "
+            "took)")
+
+
 def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *,
                       jerk=None, sim=None, profile: str = "min_jerk"):
     """The run's best joints as a time-parameterized trajectory at ``rate`` Hz.
@@ -47,12 +65,14 @@ def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *
 
     Raises:
         FolderError: not a results folder; ValueError: a recognition run, or joints
-            that are NaN (a point without a posture: named).
+            that are NaN (a point without a posture: named) or outside their
+            ranges.
     """
     from cgda_jax.reality.export import trajectory_of
 
     run = _run(run)
     sim = sim if sim is not None else run.simulator()
+    _check_ranges(run, sim.robot)
     return trajectory_of(sim, run.arrays["joints"], rate=rate, jerk=jerk,
                          profile=profile,
                          info={"run": str(run.folder), "name": run.name,

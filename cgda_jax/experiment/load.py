@@ -86,6 +86,10 @@ class Run:
             "feature_labels")
         out, k = [], 0
         while f"{prefix}{k}_times" in self.arrays:
+            if f"{prefix}{k}_features" not in self.arrays:
+                raise FolderError(f"{self.folder / 'arrays.npz'}: array "
+                                  f"{prefix}{k}_features missing (beside "
+                                  f"{prefix}{k}_times): damaged or partial")
             feats = self.arrays[f"{prefix}{k}_features"]
             names = labels if labels and len(labels) == feats.shape[1] else [
                 f"f{i}" for i in range(feats.shape[1])]
@@ -202,6 +206,13 @@ def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict
                 f"{folder}: result.json has {result['points']} points and "
                 f"{len(result['point_errors'])} point errors, arrays.npz a goal of "
                 f"{n} points: files of different runs")
+        for key in ("joints", "features"):
+            rows = arrays[key].shape[0] if arrays[key].ndim == 2 else -1
+            if rows != n:
+                raise FolderError(
+                    f"{folder}: arrays.npz's {key} has shape {arrays[key].shape}, "
+                    f"expected one row per goal point ({n}): damaged, or files of "
+                    "different runs")
     else:
         shape = arrays["cost_matrix"].shape
         rows = (len(result.get("queries", result["recognized"])),

@@ -30,6 +30,8 @@ import math
 import re
 from typing import Any
 
+import numpy as np
+
 from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import (
     MAX_INTERVALS,
@@ -48,6 +50,8 @@ from cgda_jax.sizes import (
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
 MAX_SEED = 2**32 - 1
+#: Largest goal value (in its features' units): its square must fit float32 (3.4e38).
+MAX_GOAL_VALUE = 1e18
 #: Goal points (paint ramp length, generalized knots).
 MAX_GOAL_POINTS = 10_000
 #: Candidates per generation.
@@ -118,6 +122,7 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
             raise ConfigError("key 'recognition.n_samples' must be >= 2")
         return
     check_seed(s.seed, "strategy.seed")
+    check_seed(cfg.reality.seed, "reality.seed")
     from cgda_jax.experiment.figures import check_camera
 
     check_camera(cfg.output.camera)  # names a bad [output] camera key
@@ -306,19 +311,25 @@ def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | Non
                     processes: int, local: bool) -> None:
     """What the run will hold at once (`cgda_jax.sizes.run_estimate`) within XLA's
     32-bit sizes and the memory of each process; `processes` against the cores."""
-    from cgda_jax.sizes import dynamic_width
+    from cgda_jax.sizes import dynamic_width, motion_width
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)
     backend = getattr(sim.backend, "name", None)
+    feas = getattr(sim, "feasibility", None)
     n = trials or 1
     share = -(-n // max(processes, 1))  # each process batches its own seeds
     est = run_estimate(
         trials=share, population=s.population_size, points=n_points,
         features=sim.n_features, dof=sim.n_dof, bodies=sim.robot.mj_model.nbody,
         strategy=s.name, samples=samples,
-        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0)
+        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0,
+        motion_width=0 if feas is None else motion_width(
+            feas.samples, 0 if feas.collider is None else feas.collider.n_pairs,
+            0 if feas.collider is None else sim.robot.mj_model.ngeom, sim.n_dof))
     name = ("--trials" if trials and trials > 1
+            else "keys 'strategy.population_size' and 'feasibility.samples'"
+            if est.part == "motion"
             else f"key 'strategy.options.{option}'" if est.part != "generation"
             else "key 'strategy.population_size'")
     try:
@@ -343,6 +354,12 @@ def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
         raise ConfigError(f"key 'data': {err}") from None
     n_points = int(goal.shape[0])
     _at_most(n_points, MAX_GOAL_POINTS, "data", " goal points")
+    top = float(np.max(np.abs(goal))) if goal.size else 0.0
+    if not top <= MAX_GOAL_VALUE:  # squared feature errors must fit float32
+        raise ConfigError(
+            f"key '{'data.scale' if cfg.data.scale != 1 else 'data'}': the goal "
+            f"reaches {top:.3g} (its demonstrations x data.scale = {cfg.data.scale:g}), "
+            f"beyond {MAX_GOAL_VALUE:.0e}: its squared errors would overflow float32")
     _at_most(s.population_size * n_points, MAX_CANDIDATE_POINTS,
              "strategy.population_size", f" x {n_points} goal points")
     sim = _build_simulator(cfg, demos, n_points)

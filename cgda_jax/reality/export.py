@@ -49,17 +49,25 @@ NPZ) are `cgda_jax.reality.files`'.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from cgda_jax.reality.profiles import MOVERS, PROFILES, periods, ruckig_version
+from cgda_jax.reality.profiles import (
+    MAX_PERIODS,
+    MOVERS,
+    PROFILES,
+    periods,
+    ruckig_version,
+)
 from cgda_jax.sim.timing import PEAK_JERK
 
-__all__ = ["PEAK_JERK", "PROFILES", "ExportedTrajectory", "robot_setup",
+__all__ = ["PEAK_JERK", "PROFILES", "RATE_RANGE", "ExportedTrajectory", "robot_setup",
            "simulator_timing", "time_parameterize", "trajectory_of"]
+
+#: Control rates an export takes [Hz] (a robot's controllers run at 1 Hz to 100 kHz).
+RATE_RANGE = (1.0, 100_000.0)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -145,7 +153,7 @@ def time_parameterize(
         move_s: (N,) each move's least duration [s] (> 0), e.g. the run's
             ``[approach_s, move_s, ...]``.
         hold_s: (N,) how long each waypoint is held after its move [s] (>= 0).
-        rate: control rate [Hz] (> 0).
+        rate: control rate [Hz], within `RATE_RANGE`.
         velocity, acceleration, jerk: (DoF,) or scalar limits (> 0; inf / None:
             none, the run's own peak of each move is used).
         joint_names, units: per joint (default ``j0, j1, ...`` and ``"rad"``).
@@ -160,8 +168,9 @@ def time_parameterize(
         The `ExportedTrajectory`.
 
     Raises:
-        ValueError: shapes, non-finite waypoints, bad timing or rate, a limit <= 0,
-            an unknown profile.
+        ValueError: shapes, non-finite waypoints, bad timing or rate (outside
+            `RATE_RANGE`), a limit <= 0, an unknown profile, more than
+            `MAX_PERIODS` samples (the move named).
     """
     if profile not in PROFILES:
         raise ValueError(f"profile must be one of {list(PROFILES)}, got {profile!r}")
@@ -186,8 +195,9 @@ def time_parameterize(
         raise ValueError(f"move times must be > 0 and hold times >= 0 s, got "
                          f"{move_s.tolist()} and {hold_s.tolist()}")
     rate = float(rate)
-    if not (math.isfinite(rate) and rate > 0):
-        raise ValueError(f"rate must be > 0 Hz, got {rate}")
+    if not RATE_RANGE[0] <= rate <= RATE_RANGE[1]:
+        raise ValueError(f"rate must be in [{RATE_RANGE[0]:g}, {RATE_RANGE[1]:g}] Hz, "
+                         f"got {rate:g}")
     lims = {}
     for kind, value in (("velocity", velocity), ("acceleration", acceleration),
                         ("jerk", jerk)):
@@ -210,9 +220,25 @@ def time_parameterize(
         dq = wps[i] - prev
         moving = dq != 0
         t_run = float(move_s[i])
-        move_k = max(1, periods(t_run, rate))
+        try:
+            move_k = max(1, periods(t_run, rate))
+            hold_k = periods(t_run + float(hold_s[i]), rate) - periods(t_run, rate)
+            if moving.any():
+                move_k, s, longer = MOVERS[profile](dq, moving, t_run, move_k, rate,
+                                                    lims)
+        except ValueError as err:
+            raise ValueError(
+                f"move {i + 1} of the export: {err} (its move {t_run:.3g} s, hold "
+                f"{float(hold_s[i]):.3g} s; the robot's least limits: velocity "
+                f"{np.min(lims['velocity']):.3g}, acceleration "
+                f"{np.min(lims['acceleration']):.3g}, jerk {np.min(lims['jerk']):.3g} "
+                "per s)") from None
+        if k + move_k + hold_k > MAX_PERIODS:
+            raise ValueError(f"move {i + 1} of the export: the export so far lasts "
+                             f"{(k + move_k + hold_k) / rate:.3g} s, at {rate:g} Hz "
+                             f"more than {MAX_PERIODS:,} control periods (a lower "
+                             "rate fits)")
         if moving.any():
-            move_k, s, longer = MOVERS[profile](dq, moving, t_run, move_k, rate, lims)
             if longer:
                 stretched.append({"move": i + 1, "run_s": t_run,
                                   "export_s": move_k * dt})
@@ -227,7 +253,6 @@ def time_parameterize(
             qdds.append(np.zeros((move_k, n_dof)))
         k += move_k
         reached.append(k)
-        hold_k = periods(t_run + float(hold_s[i]), rate) - periods(t_run, rate)
         if hold_k > 0:
             qs.append(np.repeat(wps[i][None], hold_k, axis=0))
             qds.append(np.zeros((hold_k, n_dof)))

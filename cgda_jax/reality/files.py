@@ -39,6 +39,7 @@ import pathlib
 
 import numpy as np
 
+from cgda_jax.files import write_aside
 from cgda_jax.reality.export import ExportedTrajectory
 
 __all__ = ["FORMAT", "FORMATS", "from_json_dict", "load_trajectory", "save_trajectory",
@@ -132,15 +133,17 @@ def _header(traj: ExportedTrajectory) -> list[str]:
 def save_trajectory(traj: ExportedTrajectory, path: str | os.PathLike,
                     fmt: str | None = None) -> pathlib.Path:
     """Write ``traj`` to ``path`` as ``fmt`` (csv, json or npz; default: the file's
-    suffix).  Returns the path."""
+    suffix), whole or not at all (`cgda_jax.files.write_aside`: an earlier file
+    there is kept on failure).  Returns the path."""
     path = pathlib.Path(path)
     fmt = (fmt or path.suffix.lstrip(".")).lower()
     if fmt not in FORMATS:
         raise ValueError(f"{path}: format {fmt!r} unknown; expected one of {FORMATS}")
     if fmt == "json":
-        path.write_text(json.dumps(to_json_dict(traj)) + "\n")
+        def write(f):
+            f.write(json.dumps(to_json_dict(traj)) + "\n")
     elif fmt == "npz":
-        with path.open("wb") as f:
+        def write(f):
             np.savez(f, t=traj.t, q=traj.q, qd=traj.qd, qdd=traj.qdd, start=traj.start,
                      waypoints=traj.waypoints, reached_index=traj.reached_index,
                      feature_index=traj.feature_index,
@@ -149,11 +152,14 @@ def save_trajectory(traj: ExportedTrajectory, path: str | os.PathLike,
                      info=np.array(json.dumps(traj.info)),
                      **{f"limit_{k}": traj.limits[k] for k in _LIMITS})
     else:
-        lines = [f"# {k}: {json.dumps(v)}" for k, v in _meta(traj).items()]
-        lines.append(",".join(_header(traj)))
-        table = np.concatenate([traj.t[:, None], traj.q, traj.qd, traj.qdd], axis=1)
-        lines += [",".join(repr(float(x)) for x in row) for row in table]
-        path.write_text("\n".join(lines) + "\n")
+        def write(f):
+            for k, v in _meta(traj).items():
+                f.write(f"# {k}: {json.dumps(v)}\n")
+            f.write(",".join(_header(traj)) + "\n")
+            table = np.concatenate([traj.t[:, None], traj.q, traj.qd, traj.qdd], axis=1)
+            for row in table:
+                f.write(",".join(repr(float(x)) for x in row) + "\n")
+    write_aside(path, write, binary=fmt == "npz")
     return path
 
 

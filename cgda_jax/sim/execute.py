@@ -133,6 +133,12 @@ class Simulator(Executions):
         check_settings(mode=mode, substeps=substeps, waypoint_s=waypoint_s,
                        physics_steps=physics_steps, move_fraction=move_fraction,
                        batch_size=batch_size)
+        if not isinstance(robot, Robot):
+            raise TypeError(f"Simulator: robot must be a Robot, got "
+                            f"{type(robot).__name__}")
+        if scene is None:
+            raise TypeError(f"Simulator: scene must be a scene (e.g. MarkerScene()), "
+                            f"got {type(scene).__name__}")
         self.robot = robot
         self.scene = scene
         self.mode = mode

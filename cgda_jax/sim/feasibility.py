@@ -295,7 +295,11 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     the distance from the moving geom's bounding sphere (centre from MuJoCo C's
     ``mj_kinematics``) to the other geom (exact for a constant geom, its bounding
     sphere for a moving one), less the most the pair can move from a node to any
-    posture of its cell (``pair_reach @ spacing / 2``).
+    posture of its cell (``pair_reach @ spacing / 2``).  A robot of more evolved
+    joints than the grid has postures for 2 nodes a joint (``2**DoF >
+    GRID_POSTURES``, 13 joints and up) keeps every pair that does not overlap at
+    start: checking more pairs is safe, a grid that grows as a power of the joint
+    count is not (2**30 postures would not fit in memory).
 
     Returns:
         (kept pair names, overlapping pair names).
@@ -309,6 +313,8 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
     gid = geom_ids(m)
     obs = {o.name: o for o in obstacles}
+    if 2**robot.n_dof > GRID_POSTURES:  # no grid of 2 nodes a joint fits
+        return [p for p in collider.pair_names if p not in overlapping], overlapping
     lower, upper = np.asarray(robot.lower, float), np.asarray(robot.upper, float)
     n = max(2, round(GRID_POSTURES ** (1.0 / robot.n_dof)))
     axes = [np.linspace(lo, hi, n) for lo, hi in zip(lower, upper)]

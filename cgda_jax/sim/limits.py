@@ -180,6 +180,11 @@ def _check_value(value, where: str) -> float:
     v = float(value)
     if math.isnan(v) or v <= 0:
         raise ValueError(f"{where} = {value!r}: a limit must be > 0 (inf: no limit)")
+    top = float(np.finfo(np.float32).max)
+    if math.isfinite(v) and not float(np.finfo(np.float32).tiny) <= v <= top:
+        raise ValueError(f"{where} = {value!r}: outside float32's range (a limit is "
+                         f"from {float(np.finfo(np.float32).tiny):.3g} to {top:.3g}; "
+                         "inf: no limit)")
     return v
 
 

@@ -47,7 +47,11 @@ from cgda_jax.vision.blob import VALUE_FLOOR, Blob, ColorRange, auto_color, find
 from cgda_jax.vision.camera import Intrinsics, load_intrinsics
 from cgda_jax.vision.frames import DEPTH_SUFFIXES, iter_frames, list_frames, read_depth
 
-__all__ = ["DEPTH_FEATURES", "IMAGE_FEATURES", "Track", "features_for", "track_video"]
+__all__ = ["DEPTH_FEATURES", "FPS_RANGE", "IMAGE_FEATURES", "Track", "features_for",
+           "track_video"]
+
+#: Frame rates a track takes [frames per s]: one frame in 1000 s to 100,000 a second.
+FPS_RANGE = (1e-3, 1e5)
 
 IMAGE_FEATURES = (
     "u_px", "v_px", "area_px", "hue_0_180", "saturation_0_255", "value_0_255",
@@ -266,9 +270,16 @@ def track_video(
     if isinstance(color, str) and not picked:
         color = ColorRange.parse(color)
     follow = picked if follow_color is None else bool(follow_color)
-    fps = float(fps or video_fps(video) or 30.0)
-    if not fps > 0:
-        raise ValueError(f"{video}: fps must be positive, got {fps}")
+    fps = float(fps) if fps is not None else float(video_fps(video) or 30.0)
+    if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise ValueError(f"{video}: fps must be in [{FPS_RANGE[0]:g}, "
+                         f"{FPS_RANGE[1]:g}] frames per second, got {fps:g}")
+    if not (isinstance(max_gap, (int, np.integer)) and max_gap >= 0):
+        raise ValueError(f"max_gap must be a whole number of frames >= 0, got "
+                         f"{max_gap!r}")
+    if not (isinstance(min_area, (int, np.integer)) and min_area >= 1):
+        raise ValueError(f"min_area must be a whole number of pixels >= 1, got "
+                         f"{min_area!r}")
     depth_files = _depth_files(depth) if depth is not None else None
     rows, found, boxes, areas, used = [], [], [], [], []
     last_box = None
