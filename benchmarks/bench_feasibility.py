@@ -3,7 +3,7 @@
 For each execution experiment, R seeds (default 10, in one ``run_trials`` call) run
 twice: with ``strategy.feasibility`` on (the default) and off (the paper's
 unconstrained execution).  Every reported trajectory is then checked independently
-with `cgda_jax.sim.motion.motion_report` (collisions at 4 x the postures, the
+with `cgda_jax.sim.motion_check.motion_report` (collisions at 4 x the postures, the
 commanded speeds and accelerations, in dynamic mode a MuJoCo C replay at timestep / 4:
 measured speeds, actuator forces, contacts).  A trial counts as a **feasible success**
 when the strategy reports success and the independent check finds no problem: no
@@ -38,7 +38,7 @@ from _common import print_table, write_json
 from cgda_jax.builtin import resolve_config
 from cgda_jax.experiment import load_config
 from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
-from cgda_jax.sim.motion import motion_report
+from cgda_jax.sim.motion_check import motion_report
 from cgda_jax.strategies.trials import run_trials
 
 EXPERIMENTS = ["clean_ie", "clean_fte", "paint_iet", "clean_ie_dynamic",

@@ -2,7 +2,7 @@
 
 For each pair type of the feasibility check (box-box, capsule-box, box-cylinder,
 capsule-cylinder, capsule-capsule), N random relative poses of two geoms of TEO-like
-sizes (half of them overlapping or near): ``distance_fns.pair_distance`` with
+sizes (half of them overlapping or near): ``primitive_distances.pair_distance`` with
 ``exact=True`` (the independent check's) and ``exact=False`` (the strategies'
 check), `jax.vmap`-ed over the N poses, against a Python loop over MuJoCo C's
 ``mj_geomDistance`` on the same poses (the peer a user would write). Prints per type
@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 from _common import machine, median_time, print_table, write_json
 
-from cgda_jax.sim import distance_fns as df
+from cgda_jax.sim import primitive_distances as df
 
 #: MuJoCo sizes of the two geoms of each type (TEO's hand box, forearm capsule, a
 #: valve wheel's cylinder).

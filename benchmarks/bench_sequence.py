@@ -29,8 +29,8 @@ from _common import print_table, write_json
 from cgda_jax.datasets import clean_circle_demos, synthetic_actions, synthetic_sequence
 from cgda_jax.plotting import plot_segmentation
 from cgda_jax.plotting.units import MARKER_UNITS, with_units
-from cgda_jax.recognize import ActionLibrary
-from cgda_jax.segment import segment
+from cgda_jax.recognition import ActionLibrary
+from cgda_jax.segmentation import segment
 
 SETTINGS = {"step_s": 0.2, "durations_s": (1.0, 15.0)}
 
@@ -86,9 +86,9 @@ def teo_sequence(out: pathlib.Path) -> dict:
     from cgda_jax.builtin import experiment_path
     from cgda_jax.experiment.build import build_simulator
     from cgda_jax.experiment.compute import motion_check
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
     from cgda_jax.plotting import plot_goal_vs_executed
-    from cgda_jax.segment import execute_sequence
+    from cgda_jax.segmentation import execute_sequence
     from cgda_jax.strategies import run_ie
 
     from cgda_jax.experiment import load_config

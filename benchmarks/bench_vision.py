@@ -44,8 +44,8 @@ from _common import OUT, print_table, report_target, write_json
 from cgda_jax.cli import main as cgda
 from cgda_jax.data import Demonstration, load_csv
 from cgda_jax.datasets.synthetic import ACTIONS
-from cgda_jax.generalize import generalize, sample_actions
-from cgda_jax.recognize import ActionLibrary, cost_matrix
+from cgda_jax.generalization import generalize, sample_actions
+from cgda_jax.recognition import ActionLibrary, cost_matrix
 
 REC = OUT / "vision"
 PAPER = ("X_m", "Y_m", "Z_m", "area_px", "hue_0_180", "saturation_0_255",

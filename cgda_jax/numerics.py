@@ -9,8 +9,11 @@ covariance suffer alike.  `exact_matmuls` asks for full float32 products
 (the ``JAX_DEFAULT_MATMUL_PRECISION`` variable or ``jax.config.update``), which is
 left as it is.  On a CPU it changes nothing: its products are float32 already.
 
-The modules that build cgda_jax's programs call it when imported
-(`cgda_jax.sim.robot`, `cgda_jax.strategies.base`).
+It is called where cgda_jax's programs are built, never on import: when a
+`cgda_jax.Robot` is made (its kinematics, and every simulator, collision check
+and physics built on it) and when a strategy's plan is made
+(`cgda_jax.strategies.base.PlanBase`: CMA-ES's covariance and the fitness).  A
+precision set by the user before either is kept.
 """
 
 from __future__ import annotations

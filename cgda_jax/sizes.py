@@ -19,8 +19,10 @@ gives the estimate and the largest value that would fit. The estimates:
   posture of the move), the sampled
   postures (``restart_samples`` / ``init_samples``, each with the same width) and
   their distances to every goal point (points x samples x features). Calibrated on
-  clean_ie (TEO, 9 points, 4096 samples): 0.97 MB per trial estimated, 1.02 MB
-  measured by XLA (``compiled.memory_analysis()``, temporaries + outputs).
+  XLA's ``compiled.memory_analysis()`` (temporaries + outputs, per trial): clean_ie's
+  init (TEO, 9 points, 4096 samples) 1.02 MB measured; with feasibility on the
+  generation chunk holds the most: clean_ie 15.3 MB measured, 18.0 MB estimated;
+  paint_iet 2.0 / 3.3 MB; iron_ie_xgnitive 33.9 / 54.2 MB (`PAIR_FLOATS`).
 - `recognition_estimate`: Q queries x A actions compared at n samples (the DTW
   diagonals of every pair at once, 8 x F x n per pair) and its work, Q x A x F x n**2
   DTW cells (`MAX_DTW_CELLS`).
@@ -44,6 +46,7 @@ __all__ = [
     "MAX_DTW_CELLS",
     "MAX_KNOTS",
     "MEMORY_FRACTION",
+    "PAIR_FLOATS",
     "Estimate",
     "SizeError",
     "available_memory",
@@ -267,10 +270,22 @@ def run_estimate(
         nbytes=_FLOAT * t * total, scale=scale, scale_value=value)
 
 
+#: Floats the collision check holds per pair and posture: a pair's distance is not
+#: one float but the intermediates of its closed form (a capsule-box pair, say, its
+#: candidate points). Calibrated on XLA's ``compiled.memory_analysis()`` of the
+#: generation chunk (per trial: the difference between 4 and 2 trials, over the
+#: postures a generation checks): clean_ie 1,169 floats a posture with 8 pairs (146
+#: a pair), paint_iet 1,398 with 11 (127), iron_ie_xgnitive 2,596 with 27 (96);
+#: 150 a pair never falls short of these.
+PAIR_FLOATS = 150
+
+
 def motion_width(samples: int, pairs: int, geoms: int, dof: int) -> int:
     """Floats the motion check holds for one move: at its ``samples + 1`` postures,
-    each pair's distance, each geom's pose (12) and the posture."""
-    return (int(samples) + 1) * (int(pairs) + 12 * int(geoms) + int(dof))
+    each pair's distance with its intermediates (`PAIR_FLOATS`), each geom's pose
+    (12) and the posture."""
+    return (int(samples) + 1) * (PAIR_FLOATS * int(pairs) + 12 * int(geoms)
+                                 + int(dof))
 
 
 def dynamic_width(mj_model) -> int:

@@ -9,7 +9,7 @@ import pytest
 
 from cgda_jax import Robot, model_path
 from cgda_jax.sim import box_distances as bd
-from cgda_jax.sim import distance_fns as df
+from cgda_jax.sim import primitive_distances as df
 from cgda_jax.sim.collision import Collider, Obstacle
 
 TWO_BOXES = """<mujoco><worldbody>

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgda_jax import Robot, model_path
-from cgda_jax.sim import distance_fns
+from cgda_jax.sim import primitive_distances
 from cgda_jax.sim.collision import Collider, Obstacle
 
 ARM3 = ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]
@@ -101,7 +101,7 @@ def test_mj_geom_distance_is_negative_in_penetration():
     d = mujoco.MjData(m)
     mujoco.mj_kinematics(m, d)
     ref = mujoco.mj_geomDistance(m, d, 0, 1, 1.0, None)
-    ours = distance_fns.pair_distance(
+    ours = primitive_distances.pair_distance(
         "sphere", "box", jnp.array([0.1, 0, 0]), jnp.eye(3), jnp.zeros(3),
         jnp.array([0.1, 0.1, 0.1]), jnp.eye(3), jnp.array([0.15, 0, 0]))
     assert ref == pytest.approx(-0.05) and float(ours) == pytest.approx(-0.05, abs=1e-6)

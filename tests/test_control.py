@@ -17,7 +17,7 @@ from cgda_jax.experiment.config import ConfigError, load_config
 from cgda_jax.experiment.report import control_lines, motion_lines
 from cgda_jax.sim.control import Control, plan_control
 from cgda_jax.sim.limits import read_limits
-from cgda_jax.sim.motion import tracking_note
+from cgda_jax.sim.motion_check import tracking_note
 
 # A two-link arm pitching about y, horizontal (the heaviest gravity load) at zero.
 ARM = """

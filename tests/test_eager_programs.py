@@ -14,8 +14,8 @@ import pytest
 
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
 from cgda_jax.data import Demonstration
-from cgda_jax.generalize import generalize, rbf_interpolate, sample_actions
-from cgda_jax.recognize import ActionLibrary, cost_matrix
+from cgda_jax.generalization import generalize, rbf_interpolate, sample_actions
+from cgda_jax.recognition import ActionLibrary, cost_matrix
 
 
 def compiled(caplog, fn, *args):

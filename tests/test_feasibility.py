@@ -10,7 +10,7 @@ import cgda_jax as cg
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
 from cgda_jax.sim.feasibility import Feasibility, penalized
 from cgda_jax.sim.limits import read_limits
-from cgda_jax.sim.motion import motion_profile, motion_report
+from cgda_jax.sim.motion_check import motion_profile, motion_report
 
 WALL = {"name": "wall", "type": "box", "pos": (0.3, 0.0, 0.125),
         "size": (0.12, 0.01, 0.125)}

@@ -41,7 +41,7 @@ def test_units_from_names_and_tables():
 
 
 def test_demonstrations_3d_units_legend_and_no_extrapolation(tmp_path):
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
 
     demos = clean_circle_demos(n=3, seed=1)
     gen = generalize(demos, interval_s=1.0)
@@ -63,7 +63,7 @@ def test_demonstrations_3d_units_legend_and_no_extrapolation(tmp_path):
 
 
 def test_demonstrations_panels_stay_between_the_knots(tmp_path):
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
 
     move = synthetic_actions(n_repetitions=3, seed=0)["MOVE"]
     gen = generalize(move, interval_s=1.0)

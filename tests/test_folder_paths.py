@@ -13,7 +13,7 @@ import pytest
 from cgda_jax import load_run
 from cgda_jax.cli import main
 from cgda_jax.experiment import FolderError, RunFolder, dump_config, load_config
-from cgda_jax.experiment.results import plan_folder
+from cgda_jax.results_folder.rules import plan_folder
 from cgda_jax.strategies.result import ExecutionResult
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cgda_jax.data import Demonstration, load_xgnitive
-from cgda_jax.generalize import GeneralizedAction, generalize, rbf_interpolate
+from cgda_jax.generalization import GeneralizedAction, generalize, rbf_interpolate
 
 
 def curve(s):
@@ -158,7 +158,7 @@ def test_xgnitive_method_reproduces_authors_results(
 
 
 def test_rbf_unsorted_knot_times_are_sorted_with_their_knots():
-    from cgda_jax.generalize import rbf_weights
+    from cgda_jax.generalization import rbf_weights
 
     rng = np.random.default_rng(3)
     kt = np.sort(rng.uniform(0, 1, 6)).astype(np.float32)
@@ -178,7 +178,7 @@ def test_rbf_unsorted_knot_times_are_sorted_with_their_knots():
 
 
 def test_rbf_repeated_or_non_finite_knot_times_are_refused():
-    from cgda_jax.generalize import rbf_weights
+    from cgda_jax.generalization import rbf_weights
 
     kt = np.array([0.0, 0.7, 0.3, 0.7], np.float32)
     knots = np.arange(8.0, dtype=np.float32).reshape(4, 2)

@@ -258,7 +258,7 @@ def test_no_import_loop():
 #: The modules of two packages in their import order (their package docstrings).
 ORDER = {
     "experiment": ("sections", "config", "demo", "locate", "rules", "build", "validate",
-                   "compute", "results", "report", "load", "export", "figures", "run",
+                   "compute", "report", "load", "export", "figures", "run",
                    "trials"),
     "cli": ("output", "list", "plot", "export", "track", "segment", "trials", "run",
             "demo", "app", "__main__"),

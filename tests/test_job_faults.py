@@ -20,7 +20,7 @@ import uuid
 
 import pytest
 
-from cgda_jax.run_folder import RunFolder
+from cgda_jax.results_folder.writing import RunFolder
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 CLEAN = REPO / "experiments" / "clean_ie.toml"

@@ -84,7 +84,7 @@ def test_flat_3d_trajectory_keeps_room_for_its_ticks():
 def test_knot_curve_is_the_generalized_action_between_its_knots():
     """Plots draw a GeneralizedAction in NumPy between its first and last knot only:
     equal to the RBF there, nothing extrapolated beyond."""
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
 
     demos = clean_circle_demos(n=3, seed=1)
     for gen in (generalize(demos, interval_s=1.0), generalize(demos, interval_s=0.7)):

@@ -5,7 +5,7 @@ import pytest
 
 from cgda_jax.data import Demonstration
 from cgda_jax.distance import dtw, euclidean
-from cgda_jax.recognize import ActionLibrary, cost_matrix, recognize
+from cgda_jax.recognition import ActionLibrary, cost_matrix, recognize
 
 NAMES = ("x", "y", "z")
 

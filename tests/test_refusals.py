@@ -226,7 +226,7 @@ def test_the_dry_run_refuses_a_folder_another_run_holds(capsys, tmp_path):
     """It called the folder valid; the run was then refused."""
     import fcntl
 
-    from cgda_jax.folders import hidden_name
+    from cgda_jax.results_folder.rules import hidden_name
 
     out = tmp_path / "busy"
     lock = tmp_path / hidden_name(out, "lock")

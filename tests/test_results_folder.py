@@ -383,10 +383,10 @@ def _tiny_demo(monkeypatch, fail_second=False):
     if fail_second:
         real = ex.start_run
 
-        def start_run(cfg, folder, progress_fn=None):
+        def start_run(cfg, folder, progress_fn=None, built=None):
             if cfg.name == "b":  # while a's figures may still be drawing
                 raise KeyboardInterrupt
-            return real(cfg, folder, progress_fn)
+            return real(cfg, folder, progress_fn, built)
 
         monkeypatch.setattr(ex, "start_run", start_run)
 
@@ -434,9 +434,9 @@ def _record_drawing(monkeypatch, fail=None):
             raise RuntimeError("the figure broke")
         return real_finish(self)
 
-    def start_run(cfg, folder, progress_fn=None):
+    def start_run(cfg, folder, progress_fn=None, built=None):
         events.append(("compute", cfg.name, threading.current_thread().name))
-        return real_start(cfg, folder, progress_fn)
+        return real_start(cfg, folder, progress_fn, built)
 
     monkeypatch.setattr(run_mod.Outputs, "finish", finish)
     monkeypatch.setattr("cgda_jax.experiment.start_run", start_run)

@@ -11,8 +11,8 @@ from cgda_jax import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.data import Demonstration
 from cgda_jax.datasets import synthetic_actions, synthetic_sequence
 from cgda_jax.distance import dtw
-from cgda_jax.recognize import ActionLibrary
-from cgda_jax.segment import (
+from cgda_jax.recognition import ActionLibrary
+from cgda_jax.segmentation import (
     REST,
     best_segmentation,
     execute_sequence,

@@ -118,7 +118,7 @@ def test_a_joint_held_by_a_contact_is_reported_with_the_contact(user_folder):
     """The same arm with its turret resting on the pedestal (a modelling slip):
     friction holds the base joint, and the tracking note names the contact."""
     from cgda_jax import MarkerScene, Robot, Simulator
-    from cgda_jax.sim.motion import motion_report
+    from cgda_jax.sim.motion_check import motion_report
 
     xml = (ARM.replace('<body name="turret" pos="0 0 0.12">',
                        '<body name="turret" pos="0 0 0.11">')

@@ -8,7 +8,7 @@ import pytest
 
 from cgda_jax.data import load_xgnitive, load_xgnitive_force, xgnitive_clock_offsets
 from cgda_jax.distance import point_sum
-from cgda_jax.generalize import generalize_streams
+from cgda_jax.generalization import generalize_streams
 
 IRON = "xgnitive_icra2018/iron"
 

@@ -86,11 +86,10 @@ def _done(value) -> Future:
 
 
 def cmd_demo(args) -> int:
-    from cgda_jax.experiment import RunFolder, check_experiment, demo_configs
+    from cgda_jax.experiment import RunFolder, check_and_build, demo_configs
 
     configs = demo_configs(small=args.small)
-    for cfg in configs:
-        check_experiment(cfg)
+    built = [check_and_build(cfg)[1] for cfg in configs]  # each run uses its own
     t0 = time.perf_counter()
     results = {}
     target = pathlib.Path(args.out or "results/demo").expanduser()
@@ -104,8 +103,9 @@ def cmd_demo(args) -> int:
         in_thread = _offscreen_thread_ok()  # (looks for the GL libraries: once)
         try:
             drawn = []
-            for cfg in configs:
-                pending = start_one(cfg, rf.path / cfg.name, out / cfg.name, args)
+            for cfg, objects in zip(configs, built):
+                pending = start_one(cfg, rf.path / cfg.name, out / cfg.name, args,
+                                    objects)
                 drawn.append(pool.submit(pending.finish) if in_thread
                              else _done(pending.finish()))
             for cfg, future in zip(configs, drawn):

@@ -161,7 +161,7 @@ class SignalWatcher:
 
     The thread is woken through `signal.set_wakeup_fd` (the Python handlers left
     do nothing); it abandons the results folder this process holds
-    (``args.run_folder``: `~cgda_jax.run_folder.RunFolder.abandon`), says the one
+    (``args.run_folder``: `~cgda_jax.results_folder.writing.RunFolder.abandon`), says the one
     line unless ``quiet`` (a launched worker: its launcher speaks) and exits with
     130 / 143 through `os._exit`, skipping JAX's exit-time shutdown, which would
     wait for the other processes.
@@ -241,7 +241,7 @@ def check_out_file(path: pathlib.Path, flag: str = "--out",
     Raises:
         FolderError: naming ``flag``, the path and the problem (status 2).
     """
-    from cgda_jax.folders import FolderError, check_writable
+    from cgda_jax.results_folder.rules import FolderError, check_writable
 
     path = pathlib.Path(path)
     if path.is_dir():
@@ -286,7 +286,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     """
     import jax
 
-    from cgda_jax.folders import FolderError, check_writable
+    from cgda_jax.results_folder.rules import FolderError, check_writable
 
     path = path or _cache_dir()
     what = f"compilation cache folder {path} ($CGDA_JAX_CACHE)"

@@ -45,7 +45,7 @@ def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
     from cgda_jax.experiment.figures import draw_figures, render_run
     from cgda_jax.experiment.load import load_run
     from cgda_jax.experiment.report import report_markdown
-    from cgda_jax.experiment.results import check_writable
+    from cgda_jax.results_folder.rules import check_writable
 
     run = load_run(folder)
     own = out is None
@@ -71,7 +71,7 @@ def cmd_plot(args) -> int:
     """Redraw one results folder, or each experiment of a ``cgda demo`` folder;
     0 when done (errors are raised and reported by `cgda_jax.cli`)."""
     from cgda_jax.experiment.load import REQUIRED
-    from cgda_jax.experiment.results import MARKER, expand
+    from cgda_jax.results_folder.rules import MARKER, expand
 
     folder = expand(args.folder)
     out = expand(args.out) if args.out else None

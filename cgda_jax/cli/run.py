@@ -40,12 +40,13 @@ a headless Linux machine when unset).
 """
 
 
-def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args) -> dict:
-    """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``)."""
-    return start_one(cfg, shown, work, args).finish()
+def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None) -> dict:
+    """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``) on
+    ``built``, what its checks built (`~cgda_jax.experiment.check_and_build`)."""
+    return start_one(cfg, shown, work, args, built).finish()
 
 
-def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
+def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None):
     """`_run_one` up to its outputs (`~cgda_jax.experiment.run.Outputs`)."""
     from cgda_jax.experiment import start_run
     from cgda_jax.progress import ProgressLine
@@ -57,7 +58,7 @@ def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args):
     say(args, f"[{cfg.name}] {what} ...")
     work.mkdir(exist_ok=True)
     try:
-        pending = start_run(cfg, work, progress_fn=bar)
+        pending = start_run(cfg, work, progress_fn=bar, built=built)
     finally:
         bar.close()
     result = pending.result
@@ -106,10 +107,10 @@ def _job_size(args) -> tuple[int, bool]:
 
 def cmd_run(args) -> int:
     from cgda_jax.builtin import resolve_config
-    from cgda_jax.run_folder import check_free
+    from cgda_jax.results_folder.writing import check_free
     from cgda_jax.experiment import (
         RunFolder,
-        check_experiment,
+        check_and_build,
         default_folder,
         dump_config,
         load_config,
@@ -125,7 +126,7 @@ def cmd_run(args) -> int:
         check_trials(cfg, args.trials)
     processes, local = _job_size(args)
     # a worker of `--processes P`: its launcher made these checks, on the same files
-    facts = None if os.environ.get(ENV_JOB_WORK) else check_experiment(
+    facts, built = (None, None) if os.environ.get(ENV_JOB_WORK) else check_and_build(
         cfg, trials=args.trials, processes=processes, local=local)
     target = pathlib.Path(args.out).expanduser() if args.out else default_folder(cfg)
     fresh = args.out is None
@@ -139,11 +140,12 @@ def cmd_run(args) -> int:
     if args.trials is not None:
         return run_trials_command(
             cfg, args, lambda: RunFolder(target, overwrite=args.overwrite, fresh=fresh),
-            lambda text: say(args, text), lambda rf: say_chosen(args, cfg.name, rf))
+            lambda text: say(args, text), lambda rf: say_chosen(args, cfg.name, rf),
+            built)
     with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
         args.run_folder = rf
         say_chosen(args, cfg.name, rf)
-        result = _run_one(cfg, rf.path, rf.work, args)
+        result = _run_one(cfg, rf.path, rf.work, args, built)
     if not args.quiet:
         print(rf.path / "report.md")
     return EXIT_MET if result.get("success") else EXIT_NOT_MET

@@ -1,6 +1,6 @@
 """``cgda segment RECORDING --library DIR --out DIR``: the actions in one long
 recording. Argument parsing, files and messages only; the search is
-`cgda_jax.segment`."""
+`cgda_jax.segmentation`."""
 
 from __future__ import annotations
 
@@ -64,7 +64,7 @@ def _durations(text: str | None) -> tuple[float, float] | None:
 
 def _library(folder: pathlib.Path, interval_s: float):
     from cgda_jax.data import load_csv
-    from cgda_jax.recognize import ActionLibrary
+    from cgda_jax.recognition import ActionLibrary
 
     if not folder.is_dir():
         raise NotADirectoryError(f"--library {folder} is not a folder")
@@ -82,7 +82,7 @@ def _library(folder: pathlib.Path, interval_s: float):
 def cmd_segment(args) -> int:
     from cgda_jax.data import load_csv
     from cgda_jax.plotting import plot_segmentation
-    from cgda_jax.segment import segment
+    from cgda_jax.segmentation import segment
 
     durations = _durations(args.durations)
     recording = load_csv(pathlib.Path(args.recording).expanduser())

@@ -112,7 +112,7 @@ def cmd_track(args) -> int:
         print(f"cgda: error: {err}", file=sys.stderr)
         return EXIT_FAILURE
     from cgda_jax.data import save_csv
-    from cgda_jax.folders import check_writable
+    from cgda_jax.results_folder.rules import check_writable
     from cgda_jax.vision import contact_sheet, track_video
 
     jobs = _jobs(args)

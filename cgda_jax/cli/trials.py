@@ -149,7 +149,7 @@ def summary_line(cfg, s: dict, report: pathlib.Path) -> str:
             f"({s['total_time_s']:.1f} s) -> {report}")
 
 
-def run_trials_command(cfg, args, open_folder, say, chosen) -> int:
+def run_trials_command(cfg, args, open_folder, say, chosen, built=None) -> int:
     """``--trials N`` after the config was checked: the folder is taken first (by
     the launching process, or process 0), so a taken folder fails before any work;
     every process runs its seeds, the records are gathered and process 0 writes
@@ -159,6 +159,8 @@ def run_trials_command(cfg, args, open_folder, say, chosen) -> int:
         open_folder: ``open_folder()`` gives the `RunFolder` context manager.
         say: ``say(text)`` prints unless quiet.
         chosen: ``chosen(run_folder)`` says where the results go.
+        built: what the checks built (`~cgda_jax.experiment.check_and_build`;
+            None: each process builds its own).
     """
     from cgda_jax import distributed
     from cgda_jax.experiment.trials import check_trials
@@ -176,7 +178,7 @@ def run_trials_command(cfg, args, open_folder, say, chosen) -> int:
         else:
             work = _take_folder(stack, args, open_folder, chosen, writer)
         t0 = time.perf_counter()
-        records, procs = _run_share(cfg, args, n, say)
+        records, procs = _run_share(cfg, args, n, say, built)
         if not writer:
             return EXIT_MET
         s = write_trials_folder(cfg, records, work, t0, procs)
@@ -217,7 +219,7 @@ def _take_folder(stack, args, open_folder, chosen, writer: bool):
     return work
 
 
-def _run_share(cfg, args, n: int, say) -> tuple[list[dict], int]:
+def _run_share(cfg, args, n: int, say, built=None) -> tuple[list[dict], int]:
     """This process's seeds in one batch, then every process's records. In a job a
     failure on any process is shared at the gather: it is raised where it happened
     and ends the others with its status (`JobFailed`), so no process waits for
@@ -237,7 +239,7 @@ def _run_share(cfg, args, n: int, say) -> tuple[list[dict], int]:
     bar = ProgressLine(cfg.name, quiet=args.quiet)
     err = None
     try:
-        records = trial_records(cfg, mine, bar) if mine else []
+        records = trial_records(cfg, mine, bar, built) if mine else []
     except Exception as e:
         if procs == 1:
             raise
@@ -274,8 +276,8 @@ def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
 def _launch(cfg, args, open_folder, chosen) -> int:
     """Take the folder, start the P workers, move their folder into place once all
     ended well; a failure, a worker's death or an interrupt discards it."""
-    from cgda_jax.files import read_json
-    from cgda_jax.folders import MARKER
+    from cgda_jax.results_folder.reading import read_json
+    from cgda_jax.results_folder.rules import MARKER
     from cgda_jax.launch import start_job, without_option
 
     p = args.processes

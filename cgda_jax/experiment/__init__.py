@@ -34,18 +34,19 @@ another's ``_private`` name:
    compiled program (``--dry-run`` and the start of every run: `check_experiment`).
 8. :mod:`~cgda_jax.experiment.compute`: running: the numbers of a recognition or
    execution run (and the replay on a finer simulator).
-9. :mod:`~cgda_jax.experiment.results`: the results folder (written aside, moved
-   into place when complete, locked, never mixing two runs).
-10. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
-11. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-12. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+9. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
+10. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
+11. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
     (`export_trajectory`, `check_exported`; ``cgda export``).
-13. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
+12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
-14. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
+13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-15. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+14. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
     trials``).
+
+The results folder itself (its rules, writing it aside, reading its files back) is
+`cgda_jax.results_folder`; its names are re-exported here too.
 
 Every name is re-exported here, so ``from cgda_jax.experiment import X`` keeps working.
 """
@@ -101,12 +102,6 @@ from cgda_jax.experiment.report import (
     report_markdown as report_markdown,
     write_json as write_json,
 )
-from cgda_jax.experiment.results import (
-    FolderBusy as FolderBusy,
-    FolderError as FolderError,
-    RunFolder as RunFolder,
-    plan_folder as plan_folder,
-)
 from cgda_jax.experiment.locate import (
     resolve_data_dir as resolve_data_dir,
     resolve_model as resolve_model,
@@ -128,8 +123,15 @@ from cgda_jax.experiment.run import (
 )
 from cgda_jax.experiment.validate import (
     MAX_SEED as MAX_SEED,
+    check_and_build as check_and_build,
     check_experiment as check_experiment,
 )
+from cgda_jax.results_folder.rules import (
+    FolderBusy as FolderBusy,
+    FolderError as FolderError,
+    plan_folder as plan_folder,
+)
+from cgda_jax.results_folder.writing import RunFolder as RunFolder
 
 __all__ = [
     "ConfigError",
@@ -145,6 +147,7 @@ __all__ = [
     "SceneConfig",
     "SelectionConfig",
     "StrategyConfig",
+    "check_and_build",
     "check_experiment",
     "dump_config",
     "load_config",

@@ -4,6 +4,7 @@ by `cgda_jax.experiment.rules.strategy_function`, which checks its options.)"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any
 
@@ -25,7 +26,7 @@ from cgda_jax.experiment.rules import check_interval_count, validate_world
 
 def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     """The goal (N, F) of an execution run, its demonstrations and generalization."""
-    from cgda_jax.generalize import generalize
+    from cgda_jax.generalization import generalize
 
     d = cfg.data
     if d.source in OBJECT_SOURCES:
@@ -59,11 +60,11 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
 def xgnitive_force_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     """The goal of an xgnitive arm stream with wrist-force columns (``data.columns``
     then ``data.force_columns``): each stream generalized on its own clock as the
-    authors did (`cgda_jax.generalize.generalize_streams`; the iron goal is their
+    authors did (`cgda_jax.generalization.generalize_streams`; the iron goal is their
     ``target_iron[9][4]``); the demonstrations returned are the arm with the force
     beside it on the arm's clock (`cgda_jax.data.load_xgnitive_force`)."""
     from cgda_jax.data import load_xgnitive, load_xgnitive_force
-    from cgda_jax.generalize import generalize_streams
+    from cgda_jax.generalization import generalize_streams
 
     d = cfg.data
     root = resolve_data_dir(cfg)
@@ -361,7 +362,7 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
             0 (default 1 s; `run_execution` passes `default_waypoint_s`).
         goal: (N, F) the goal, drawn in renders when ``scene.goal_path`` is on.
     """
-    from cgda_jax.sim.execute import Simulator
+    from cgda_jax.sim.simulator import Simulator
     from cgda_jax.sim.robot import Robot
     from cgda_jax.sim.scenes import MarkerScene, ObjectScene, PaintWall
 
@@ -403,6 +404,36 @@ def build_simulator(cfg: ExperimentConfig, waypoint_s: float | None = None,
         timestep=rc.timestep or None, physics=rc.physics, reduce=rc.reduce,
         control=control, **timing,
     )
+
+
+@dataclasses.dataclass
+class BuiltExecution:
+    """An execution run's objects, built once: by its checks
+    (`cgda_jax.experiment.validate.check_and_build`), then used by the run
+    (`cgda_jax.experiment.compute.compute_execution`,
+    `cgda_jax.experiment.trials.trial_records`).
+
+    Attributes:
+        goal: (N, F) the goal; demos: its demonstrations ([] without);
+        generalization: theirs (None without); waypoint_s: seconds per waypoint
+        from their timing (`default_waypoint_s`); sim: the `Simulator`.
+    """
+
+    goal: np.ndarray
+    demos: list
+    generalization: Any
+    waypoint_s: float
+    sim: Any
+
+
+def build_execution(cfg: ExperimentConfig) -> BuiltExecution:
+    """The goal and the simulator of an execution run, unchecked (a worker of a
+    job whose launcher checked the config; a run checks them with
+    `cgda_jax.experiment.validate.check_and_build`)."""
+    goal, demos, gen = build_goal(cfg)
+    waypoint_s = default_waypoint_s(demos, len(goal))
+    return BuiltExecution(goal, demos, gen, waypoint_s,
+                          build_simulator(cfg, waypoint_s, goal))
 
 
 def build_control(cfg: ExperimentConfig):

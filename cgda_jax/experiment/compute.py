@@ -15,17 +15,16 @@ from typing import Any
 import numpy as np
 
 from cgda_jax.experiment.build import (
-    build_goal,
-    build_simulator,
-    default_waypoint_s,
+    BuiltExecution,
     error_unit,
     feature_labels,
     goal_scale,
     recognition_demos,
     selected_demos,
 )
-from cgda_jax.experiment.config import ConfigError, ExperimentConfig
+from cgda_jax.experiment.config import ExperimentConfig
 from cgda_jax.experiment.rules import strategy_function
+from cgda_jax.experiment.validate import check_and_build
 
 #: What a run computes: the result dict (final but for its outputs' keys), the
 #: arrays (as in ``arrays.npz``) and, for an execution, the simulator.
@@ -35,8 +34,8 @@ Computed = tuple[dict, dict[str, np.ndarray], Any]
 def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
     """Generalize, then recognize the held-out repetitions (paper Tables 2-4);
     ``arrays.npz`` is written into ``out``."""
-    from cgda_jax.generalize import generalize, sample_actions
-    from cgda_jax.recognize import ActionLibrary, cost_matrix
+    from cgda_jax.generalization import generalize, sample_actions
+    from cgda_jax.recognition import ActionLibrary, cost_matrix
 
     d, r = cfg.data, cfg.recognition
     t0 = time.perf_counter()
@@ -233,18 +232,16 @@ def closed_loop_check(sim, goal, strategy, reality) -> dict:
 def compute_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
+    built: BuiltExecution | None = None,
 ) -> Computed:
-    """Build the goal and the simulator, run the strategy and replay its result;
-    ``arrays.npz`` is written into ``out`` (``result.json`` by the caller, from the
-    returned summary)."""
-    goal, demos, gen = build_goal(cfg)
-    waypoint_s = default_waypoint_s(demos, len(goal))
-    sim = build_simulator(cfg, waypoint_s, goal)
-    if goal.shape[1] != sim.n_features:
-        raise ConfigError(
-            f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "
-            f"'{cfg.scene.kind}' scene gives {sim.n_features} {list(sim.feature_names)}"
-        )
+    """Run the strategy on the goal and simulator of ``built`` (those its checks
+    built, `check_and_build`; default: checked and built here) and replay its
+    result; ``arrays.npz`` is written into ``out`` (``result.json`` by the caller,
+    from the returned summary)."""
+    if built is None:
+        built = check_and_build(cfg)[1]
+    goal, demos, gen, sim = built.goal, built.demos, built.generalization, built.sim
+    waypoint_s = built.waypoint_s
     s = cfg.strategy
     res = strategy_function(s.name)(
         sim, goal, algorithm=s.algorithm, population_size=s.population_size,
@@ -266,7 +263,6 @@ def compute_execution(
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)
         arrays["knots"] = np.asarray(gen.knots, np.float64) * goal_scale(cfg)
         arrays.update(_demo_arrays(demos, "demo", goal_scale(cfg)))
-    np.savez(out / "arrays.npz", **arrays)
     if sim.mode == "dynamic":
         summary["physics"] = {
             "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,
@@ -287,18 +283,18 @@ def compute_execution(
     if motion is not None:
         summary["motion"], profile = motion
         arrays.update(profile)
-        np.savez(out / "arrays.npz", **arrays)
+    np.savez(out / "arrays.npz", **arrays)
     return summary, arrays, sim
 
 
 def motion_check(sim, res) -> tuple[dict, dict] | None:
-    """The reported joints checked as a motion (`cgda_jax.sim.motion.motion_report`:
+    """The reported joints checked as a motion (`cgda_jax.sim.motion_check.motion_report`:
     collisions 4 x finer, speeds, accelerations, efforts and tracking in a dynamic
     replay, joint travel) and the commanded profile's arrays (``motion_t``,
     ``motion_q``, ``motion_qd``, ``motion_waypoint_t``) for the figure; None
     when no joints were found."""
     from cgda_jax.logs import warn_once
-    from cgda_jax.sim.motion import motion_profile, motion_report
+    from cgda_jax.sim.motion_check import motion_profile, motion_report
 
     joints = np.asarray(res.joints, np.float64)
     if joints.size == 0 or not np.all(np.isfinite(joints)):

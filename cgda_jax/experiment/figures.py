@@ -15,6 +15,7 @@ import numpy as np
 
 from cgda_jax.experiment.build import error_unit, feature_labels
 from cgda_jax.experiment.load import Run
+from cgda_jax.experiment.rules import check_camera
 
 log = logging.getLogger("cgda_jax")
 
@@ -157,43 +158,6 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
             path=path("motion.png"),
         )
     return written
-
-
-#: ``[output] camera`` keys: the free camera of the robot's video and frames.
-CAMERA_KEYS = ("lookat", "distance", "azimuth", "elevation")
-
-
-def check_camera(camera: dict) -> dict[str, Any]:
-    """``[output] camera`` checked: ``lookat`` [x, y, z] m, ``distance`` > 0 m,
-    ``azimuth`` and ``elevation`` in degrees (MuJoCo's free camera: azimuth 0 looks
-    along +x, 90 along +y; elevation < 0 looks down); the values given.
-
-    Raises:
-        ConfigError: an unknown key or a bad value, naming the key.
-    """
-    from cgda_jax.experiment.config import ConfigError
-
-    out: dict[str, Any] = {}
-    for key, value in dict(camera or {}).items():
-        where = f"key 'output.camera.{key}'"
-        if key not in CAMERA_KEYS:
-            raise ConfigError(f"{where}: unknown; the camera keys are "
-                              f"{', '.join(CAMERA_KEYS)}")
-        if key == "lookat":
-            v = np.asarray(value, dtype=object)
-            if v.shape != (3,) or not all(isinstance(x, (int, float))
-                                          and not isinstance(x, bool)
-                                          and math.isfinite(x) for x in v):
-                raise ConfigError(f"{where} = {value!r}: expected [x, y, z] in metres")
-            out[key] = np.asarray(value, float)
-            continue
-        if (isinstance(value, bool) or not isinstance(value, (int, float))
-                or not math.isfinite(value) or (key == "distance" and value <= 0)):
-            raise ConfigError(f"{where} = {value!r}: expected a finite number"
-                              + (" > 0 (metres)" if key == "distance" else
-                                 " (degrees)"))
-        out[key] = float(value)
-    return out
 
 
 def _arm_points(sim, joints) -> np.ndarray:

@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from cgda_jax.experiment.config import ExperimentConfig, load_config
-from cgda_jax.experiment.results import MARKER, FolderError, expand
-from cgda_jax.files import check_fields, read_json, read_npz
+from cgda_jax.results_folder.rules import MARKER, FolderError, expand
+from cgda_jax.results_folder.reading import check_fields, read_json, read_npz
 
 __all__ = ["Run", "load_run"]
 
@@ -141,7 +141,7 @@ class Run:
         return ExecutionResult.load(self.folder)
 
 
-#: result.json of a run, by kind: key -> type (`cgda_jax.files`); keys it does not
+#: result.json of a run, by kind: key -> type (`cgda_jax.results_folder.reading`); keys it does not
 #: name are accepted. Non-finite numbers are written null.
 RUN_FIELDS = {
     "kind": "str", "name": "str", "success": "bool", "feature_labels": "list[str]",
@@ -223,6 +223,22 @@ def _check_together(folder: pathlib.Path, config: ExperimentConfig, result: dict
                 f"{rows[0]} queries x {rows[1]} actions: files of different runs")
 
 
+def _why_no_config(path: pathlib.Path) -> str:
+    """`ExecutionResult.save`'s reason for writing no config.toml, as a hint."""
+    try:
+        saved = read_json(path)
+    except FolderError:
+        return ""
+    why = saved.get("not_described")
+    if isinstance(why, str):
+        return (f" (saved from Python with a simulator that a config cannot "
+                f"describe: {why})")
+    if "strategy" in saved and "build" not in saved:  # not a `cgda run` one
+        return (" (an ExecutionResult saved without the simulator it ran on: "
+                "nothing says how to build it again)")
+    return ""
+
+
 def load_run(folder: str | os.PathLike) -> Run:
     """Read a results folder written by ``cgda run`` / `run_experiment`.
 
@@ -245,12 +261,21 @@ def load_run(folder: str | os.PathLike) -> Run:
                 if (folder / MARKER).is_file() and any(
                     (p / MARKER).is_file() for p in folder.iterdir() if p.is_dir())
                 else "")
+        if missing == ["config.toml"]:
+            hint = _why_no_config(folder / MARKER) or hint
         raise FolderError(f"{folder} is not a results folder: {', '.join(missing)} "
                           f"missing{hint}")
     result = _read_result(folder / MARKER)
     config = load_config(folder / "config.toml")
     arrays = read_npz(folder / "arrays.npz", REQUIRED_ARRAYS[result["kind"]])
     _check_together(folder, config, result, arrays)
+    if result["kind"] == "execution" and "feature_labels" not in result:
+        from cgda_jax.experiment.build import error_unit, feature_labels
+
+        # saved from Python (`ExecutionResult.save`): labels from the names
+        labels = feature_labels(config, result.get("feature_names") or [
+            f"f{i}" for i in range(arrays["goal"].shape[-1])])
+        result |= {"feature_labels": labels, "error_unit": error_unit(labels)}
     return Run(folder, config, result, arrays)
 
 

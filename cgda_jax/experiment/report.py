@@ -48,7 +48,7 @@ def _limit(value) -> str:
 
 def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
     """The report's feasibility section: the motion against the robot's limits
-    (`cgda_jax.sim.motion.motion_report`)."""
+    (`cgda_jax.sim.motion_check.motion_report`)."""
     lim = motion["limits"]
     col = motion.get("collisions")
     verdict = "feasible" if motion["feasible"] else "NOT feasible: " + "; ".join(
@@ -122,7 +122,7 @@ def _force(lo, hi) -> str:
 
 def control_lines(control: dict) -> list[str]:
     """The report's control section: how dynamic mode drove each held joint
-    (`cgda_jax.sim.control.ControlPlan.as_dict`)."""
+    (`cgda_jax.sim.drives.ControlPlan.as_dict`)."""
     pds = any(d["drive"] != "position" for d in control["joints"])
     gravity = (f"gravity compensation in the PD {'on' if control['gravity'] else 'off'}"
                if pds else "no joint-space PD (every held joint is a position servo "

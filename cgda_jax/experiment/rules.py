@@ -251,7 +251,7 @@ def validate_world(cfg: ExperimentConfig):
 def check_interval_count(demos: Sequence, interval_s: float, method: str = "paper",
                          key: str = "data.interval_s") -> None:
     """The generalization of ``demos`` at ``interval_s`` has at most `MAX_INTERVALS`
-    intervals (checked before `cgda_jax.generalize` allocates them)."""
+    intervals (checked before `cgda_jax.generalization.generalize` allocates them)."""
     if not demos or not math.isfinite(interval_s) or not interval_s > 0:
         return  # generalize names these itself
     durations = np.asarray([float(d.duration) for d in demos])
@@ -377,3 +377,38 @@ def check_strategy_options(s: StrategyConfig) -> None:
         problem = option_problem(key, s.options[key])
         if problem:
             raise ConfigError(f"key 'strategy.options.{key}': {problem}")
+
+
+#: ``[output] camera`` keys: the free camera of the robot's video and frames.
+CAMERA_KEYS = ("lookat", "distance", "azimuth", "elevation")
+
+
+def check_camera(camera: dict) -> dict[str, Any]:
+    """``[output] camera`` checked: ``lookat`` [x, y, z] m, ``distance`` > 0 m,
+    ``azimuth`` and ``elevation`` in degrees (MuJoCo's free camera: azimuth 0 looks
+    along +x, 90 along +y; elevation < 0 looks down); the values given.
+
+    Raises:
+        ConfigError: an unknown key or a bad value, naming the key.
+    """
+    out: dict[str, Any] = {}
+    for key, value in dict(camera or {}).items():
+        where = f"key 'output.camera.{key}'"
+        if key not in CAMERA_KEYS:
+            raise ConfigError(f"{where}: unknown; the camera keys are "
+                              f"{', '.join(CAMERA_KEYS)}")
+        if key == "lookat":
+            v = np.asarray(value, dtype=object)
+            if v.shape != (3,) or not all(isinstance(x, (int, float))
+                                          and not isinstance(x, bool)
+                                          and math.isfinite(x) for x in v):
+                raise ConfigError(f"{where} = {value!r}: expected [x, y, z] in metres")
+            out[key] = np.asarray(value, float)
+            continue
+        if (isinstance(value, bool) or not isinstance(value, (int, float))
+                or not math.isfinite(value) or (key == "distance" and value <= 0)):
+            raise ConfigError(f"{where} = {value!r}: expected a finite number"
+                              + (" > 0 (metres)" if key == "distance" else
+                                 " (degrees)"))
+        out[key] = float(value)
+    return out

@@ -4,7 +4,7 @@ a results folder: ``config.toml``, ``result.json``, ``arrays.npz``, ``plots/*.pn
 back with `cgda_jax.load_run`. The numbers are computed by
 `cgda_jax.experiment.compute` (every execution run also replays its result on a
 finer simulator); the folder itself (temporary folder, lock, move into place)
-belongs to `cgda_jax.experiment.results`.
+belongs to `cgda_jax.results_folder`.
 """
 
 from __future__ import annotations
@@ -16,13 +16,15 @@ from collections.abc import Callable
 
 import numpy as np
 
+from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.compute import compute_execution, compute_recognition
 from cgda_jax.experiment.config import ExperimentConfig, dump_config
 from cgda_jax.experiment.figures import draw_figures, render_run
 from cgda_jax.experiment.load import run_in_memory
 from cgda_jax.experiment.report import report_markdown, write_json
-from cgda_jax.experiment.results import RunFolder, expand
-from cgda_jax.experiment.validate import check_experiment
+from cgda_jax.experiment.validate import check_and_build
+from cgda_jax.results_folder.rules import expand
+from cgda_jax.results_folder.writing import RunFolder
 
 
 def run_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> dict:
@@ -37,7 +39,8 @@ def run_execution(
     cfg: ExperimentConfig, out: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
 ) -> dict:
-    """Build the goal and the simulator, run the strategy, save and plot."""
+    """Check and build the goal and the simulator, run the strategy, save and
+    plot."""
     pending = Outputs(cfg, out, *compute_execution(cfg, out, progress_fn))
     pending.draw()
     return pending.result
@@ -91,16 +94,20 @@ def start_run(
     cfg: ExperimentConfig,
     folder: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
+    built: BuiltExecution | None = None,
 ) -> Outputs:
-    """Run ``cfg`` (already checked) into the existing, empty ``folder`` up to its
-    outputs: ``config.toml`` and ``arrays.npz`` are written, the result is known
-    (``.result``); ``.finish()`` draws and writes the rest."""
+    """Run ``cfg`` into the existing, empty ``folder`` up to its outputs:
+    ``config.toml`` and ``arrays.npz`` are written, the result is known
+    (``.result``); ``.finish()`` draws and writes the rest. An execution runs on
+    ``built``, what its checks built (`check_and_build`; default: checked and
+    built here)."""
     t0 = time.perf_counter()
     (folder / "config.toml").write_text(dump_config(cfg))
     if cfg.kind == "recognition":
         pending = Outputs(cfg, folder, *compute_recognition(cfg, folder))
     else:
-        pending = Outputs(cfg, folder, *compute_execution(cfg, folder, progress_fn))
+        pending = Outputs(cfg, folder, *compute_execution(cfg, folder, progress_fn,
+                                                          built))
     pending.compute_s = time.perf_counter() - t0
     return pending
 
@@ -109,11 +116,12 @@ def write_run(
     cfg: ExperimentConfig,
     folder: pathlib.Path,
     progress_fn: Callable[[dict], None] | None = None,
+    built: BuiltExecution | None = None,
 ) -> dict:
-    """Run ``cfg`` (already checked) and write its results into the existing, empty
-    ``folder``; return the result dict. `run_experiment` and ``cgda`` call it inside
-    a `~cgda_jax.experiment.results.RunFolder`."""
-    return start_run(cfg, folder, progress_fn).finish()
+    """Run ``cfg`` and write its results into the existing, empty ``folder``
+    (`start_run`); return the result dict. `run_experiment` and ``cgda`` call it
+    inside a `~cgda_jax.results_folder.writing.RunFolder`."""
+    return start_run(cfg, folder, progress_fn, built).finish()
 
 
 def default_folder(cfg: ExperimentConfig) -> pathlib.Path:
@@ -131,7 +139,7 @@ def run_experiment(
     """Check and run ``cfg``; write its results folder; return the result dict.
 
     The folder is written aside and moved into place when complete
-    (`~cgda_jax.experiment.results.RunFolder`): a failed or interrupted run leaves
+    (`~cgda_jax.results_folder.writing.RunFolder`): a failed or interrupted run leaves
     it as it was.
 
     Args:
@@ -150,9 +158,9 @@ def run_experiment(
         FolderError: ``out`` is not empty, in use by another run (`FolderBusy`),
             or not writable.
     """
-    check_experiment(cfg)
+    _, built = check_and_build(cfg)
     target = expand(out) if out is not None else default_folder(cfg)
     with RunFolder(target, overwrite=overwrite, fresh=out is None) as rf:
-        result = write_run(cfg, rf.work, progress_fn)
+        result = write_run(cfg, rf.work, progress_fn, built)
     result["folder"] = str(rf.path)
     return result

@@ -298,7 +298,7 @@ class OutputConfig:
     render: bool = True
     #: the video's free camera, over a default that frames the goal and the arm:
     #: ``lookat`` [x, y, z] m, ``distance`` m, ``azimuth``, ``elevation`` deg
-    #: (`cgda_jax.experiment.figures.check_camera`)
+    #: (`cgda_jax.experiment.rules.check_camera`)
     camera: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 

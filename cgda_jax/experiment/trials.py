@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.experiment.build import build_goal, build_simulator, default_waypoint_s
+from cgda_jax.experiment.build import BuiltExecution, build_execution
 from cgda_jax.experiment.config import ConfigError, ExperimentConfig, dump_config
 
 __all__ = ["run_trials_experiment", "summarize", "trial_records", "wilson_interval",
@@ -71,8 +71,11 @@ def trial_records(
     cfg: ExperimentConfig,
     seeds: list[int],
     progress_fn: Callable[[dict], None] | None = None,
+    built: BuiltExecution | None = None,
 ) -> list[dict[str, Any]]:
-    """Runs `cfg`'s strategy once per seed, all seeds in one batched call.
+    """Runs `cfg`'s strategy once per seed, all seeds in one batched call, on the
+    goal and simulator of ``built`` (those its checks built; default: built here
+    unchecked, `build_execution`: a worker of a job its launcher checked).
 
     Returns:
         One dict per seed: ``seed``, ``success``, ``max_point_error``,
@@ -82,13 +85,8 @@ def trial_records(
     """
     from cgda_jax.strategies.trials import run_seeds
 
-    goal, demos, _ = build_goal(cfg)
-    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
-    if goal.shape[1] != sim.n_features:
-        raise ConfigError(
-            f"the goal has {goal.shape[1]} feature(s) {cfg.data.columns} but the "
-            f"'{cfg.scene.kind}' scene gives {sim.n_features} {list(sim.feature_names)}"
-        )
+    built = built if built is not None else build_execution(cfg)
+    goal, sim = built.goal, built.sim
     s = cfg.strategy
     results = run_seeds(
         s.name, sim, goal, list(seeds), algorithm=s.algorithm,
@@ -198,12 +196,12 @@ def run_trials_experiment(
             anything `cgda_jax.experiment.check_experiment` refuses (the seed range,
             the batch's size, ...).
     """
-    from cgda_jax.experiment.validate import check_experiment
+    from cgda_jax.experiment.validate import check_and_build
 
     n = check_trials(cfg, n_trials)
-    check_experiment(cfg, trials=n)  # seeds, sizes, options: before any program
+    _, built = check_and_build(cfg, trials=n)  # seeds, sizes, options: first
     t0 = time.perf_counter()
     seeds = [cfg.strategy.seed + i for i in range(n)]
-    records = trial_records(cfg, seeds, progress_fn)
+    records = trial_records(cfg, seeds, progress_fn, built)
     return write_trials(cfg, records, folder,
                         {"total_time_s": time.perf_counter() - t0})

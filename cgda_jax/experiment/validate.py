@@ -32,9 +32,11 @@ from typing import Any
 
 import numpy as np
 
+from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
 from cgda_jax.experiment.rules import (
     MAX_INTERVALS,
+    check_camera,
     check_interval_count,
     validate_config,
 )
@@ -123,8 +125,6 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
         return
     check_seed(s.seed, "strategy.seed")
     check_seed(cfg.reality.seed, "reality.seed")
-    from cgda_jax.experiment.figures import check_camera
-
     check_camera(cfg.output.camera)  # names a bad [output] camera key
     if trials is not None and s.seed + trials - 1 > MAX_SEED:
         raise ConfigError(
@@ -221,13 +221,13 @@ def _check_physics_steps(cfg: ExperimentConfig, waypoint_s: float) -> None:
         )
 
 
-def _build_simulator(cfg: ExperimentConfig, demos: list, n_points: int):
-    from cgda_jax.experiment.build import build_simulator, default_waypoint_s
+def _build_simulator(cfg: ExperimentConfig, waypoint_s: float, goal: np.ndarray):
+    from cgda_jax.experiment.build import build_simulator
 
     if cfg.robot.mode == "dynamic":
-        _check_physics_steps(cfg, default_waypoint_s(demos, n_points))
+        _check_physics_steps(cfg, waypoint_s)
     try:
-        return build_simulator(cfg, default_waypoint_s(demos, n_points))
+        return build_simulator(cfg, waypoint_s, goal)
     except ConfigError:
         raise
     except KeyError as err:
@@ -341,13 +341,14 @@ def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | Non
 
 
 def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
-                     processes: int = 1, local: bool = True) -> dict[str, Any]:
-    from cgda_jax.experiment.build import build_goal
+                     processes: int = 1, local: bool = True
+                     ) -> tuple[dict[str, Any], BuiltExecution]:
+    from cgda_jax.experiment.build import build_goal, default_waypoint_s
     from cgda_jax.strategies.base import check_config
 
     s = cfg.strategy
     try:
-        goal, demos, _ = build_goal(cfg)
+        goal, demos, gen = build_goal(cfg)
     except ConfigError:
         raise
     except ValueError as err:  # demonstrations or their generalization
@@ -362,7 +363,8 @@ def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
             f"beyond {MAX_GOAL_VALUE:.0e}: its squared errors would overflow float32")
     _at_most(s.population_size * n_points, MAX_CANDIDATE_POINTS,
              "strategy.population_size", f" x {n_points} goal points")
-    sim = _build_simulator(cfg, demos, n_points)
+    waypoint_s = default_waypoint_s(demos, n_points)
+    sim = _build_simulator(cfg, waypoint_s, goal)
     steps = sim.physics_steps if sim.mode == "dynamic" else sim.substeps
     _at_most(s.population_size * n_points * steps, MAX_SIM_STEPS,
              "robot.timestep" if sim.mode == "dynamic" else "robot.substeps",
@@ -383,8 +385,22 @@ def _check_execution(cfg: ExperimentConfig, trials: int | None = None,
     _check_algorithm(cfg, n_genes)
     _check_option_combinations(cfg, sim)
     _check_run_size(cfg, sim, n_points, trials, processes, local)
-    return {"goal_points": n_points, "features": int(goal.shape[1]),
-            "genes": int(n_genes)}
+    return ({"goal_points": n_points, "features": int(goal.shape[1]),
+             "genes": int(n_genes)},
+            BuiltExecution(goal, demos, gen, waypoint_s, sim))
+
+
+def check_and_build(cfg: ExperimentConfig, trials: int | None = None,
+                    processes: int = 1, local: bool = True
+                    ) -> tuple[dict[str, Any], BuiltExecution | None]:
+    """`check_experiment`, and the objects its checks built (an execution's goal
+    and simulator; None for a recognition), which the run then uses: each is
+    built once per run."""
+    validate_config(cfg)
+    _check_static(cfg, trials)
+    if cfg.kind == "recognition":
+        return _check_recognition(cfg), None
+    return _check_execution(cfg, trials, processes, local)
 
 
 def check_experiment(cfg: ExperimentConfig, trials: int | None = None,
@@ -407,8 +423,4 @@ def check_experiment(cfg: ExperimentConfig, trials: int | None = None,
     Raises:
         ConfigError / FileNotFoundError: naming the config key or the file.
     """
-    validate_config(cfg)
-    _check_static(cfg, trials)
-    if cfg.kind == "recognition":
-        return _check_recognition(cfg)
-    return _check_execution(cfg, trials, processes, local)
+    return check_and_build(cfg, trials, processes, local)[0]

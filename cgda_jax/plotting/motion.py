@@ -34,7 +34,7 @@ def plot_motion(
     Args:
         t: (T,) seconds.
         q, qd: (T, DoF) radians and rad/s (the commanded profile,
-            `cgda_jax.sim.motion.motion_profile`).
+            `cgda_jax.sim.motion_check.motion_profile`).
         joint_names: (DoF,) names for the legend.
         lower, upper: (DoF,) joint ranges in radians, drawn dashed on the top panel.
         velocity: (DoF,) speed limits in rad/s (inf: none), drawn dashed at +/- on

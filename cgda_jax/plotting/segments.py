@@ -1,5 +1,5 @@
 """A segmented recording: its features over time, each recognized action shaded and
-labelled (`cgda_jax.segment.segment`)."""
+labelled (`cgda_jax.segmentation.segment`)."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ def plot_segmentation(
 
     Args:
         recording: a Demonstration (``times (T,)`` in seconds, ``features (T, F)``).
-        segments: what `cgda_jax.segment.segment` returns (``action``, ``start``,
+        segments: what `cgda_jax.segmentation.segment` returns (``action``, ``start``,
             ``end`` in seconds).
         names: the F axis labels, units included (``"X [mm]"``); default the
             recording's feature names.

@@ -304,7 +304,7 @@ def trajectory_of(sim, joints, *, rate: float = 100.0, jerk=None,
     limits its motion was judged against (the feasibility's, else the model's).
 
     Args:
-        sim: the `cgda_jax.sim.execute.Simulator` of the run.
+        sim: the `cgda_jax.sim.simulator.Simulator` of the run.
         joints: (N, DoF) waypoints.
         rate: control rate [Hz].
         jerk: optional jerk limits (DoF,) or scalar [rad/s^3]; None: the run's own.

@@ -39,7 +39,7 @@ import pathlib
 
 import numpy as np
 
-from cgda_jax.files import write_aside
+from cgda_jax.results_folder.reading import write_aside
 from cgda_jax.reality.export import ExportedTrajectory
 
 __all__ = ["FORMAT", "FORMATS", "from_json_dict", "load_trajectory", "save_trajectory",
@@ -133,7 +133,7 @@ def _header(traj: ExportedTrajectory) -> list[str]:
 def save_trajectory(traj: ExportedTrajectory, path: str | os.PathLike,
                     fmt: str | None = None) -> pathlib.Path:
     """Write ``traj`` to ``path`` as ``fmt`` (csv, json or npz; default: the file's
-    suffix), whole or not at all (`cgda_jax.files.write_aside`: an earlier file
+    suffix), whole or not at all (`cgda_jax.results_folder.reading.write_aside`: an earlier file
     there is kept on failure).  Returns the path."""
     path = pathlib.Path(path)
     fmt = (fmt or path.suffix.lstrip(".")).lower()

@@ -142,7 +142,7 @@ class MismatchedWorld:
     """The run's scene in MuJoCo C with `Mismatch`'s perturbations: a `Reality`.
 
     Args:
-        sim: a dynamic-mode `cgda_jax.sim.execute.Simulator` (its physics model,
+        sim: a dynamic-mode `cgda_jax.sim.simulator.Simulator` (its physics model,
             scene, robot and start posture).
         mismatch: the perturbations (default: none).
 

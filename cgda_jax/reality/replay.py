@@ -180,7 +180,7 @@ def replay_trajectory(sim, traj: ExportedTrajectory, factor: int = 4) -> np.ndar
     waypoint's feature time (see the module doc).
 
     Args:
-        sim: the run's `cgda_jax.sim.execute.Simulator` (its model, scene, mode).
+        sim: the run's `cgda_jax.sim.simulator.Simulator` (its model, scene, mode).
         traj: the exported trajectory (e.g. read back from its file).
         factor: how much finer than the run the replay steps (dynamic: timestep /
             factor; kinematic: factor x the sub-steps per move).

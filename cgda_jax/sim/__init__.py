@@ -11,7 +11,7 @@ import importlib as _importlib
 _LAZY = {
     "MODES": "cgda_jax.sim.sim_state",
     "SimState": "cgda_jax.sim.sim_state",
-    "Simulator": "cgda_jax.sim.execute",
+    "Simulator": "cgda_jax.sim.simulator",
     "render_trajectory": "cgda_jax.sim.render",
     "FeatureSet": "cgda_jax.sim.features",
     "FeatureSpec": "cgda_jax.sim.features",

@@ -1,7 +1,7 @@
-"""Closed-form distances of boxes, for `cgda_jax.sim.distance_fns` (float32, JAX).
+"""Closed-form distances of boxes, for `cgda_jax.sim.primitive_distances` (float32, JAX).
 
 - `box_sdf`: a box's signed distance at points in its frame (also
-  `distance_fns.sdf_local`'s);
+  `primitive_distances.sdf_local`'s);
 - `segment_box_min`: the smallest signed distance of a box along a segment (a
   capsule's core), exact at 37 candidate points, no iterations;
 - `box_box_sat`: the separating axis theorem for two boxes: minus the penetration

@@ -26,7 +26,7 @@ refused where it would pass; an exact box mesh is checked exactly).  Height fiel
 and SDF geoms are not supported: they are skipped (listed in `Collider.skipped`, with
 a warning), so exclude them or replace them by primitives.
 
-Accuracy (`cgda_jax.sim.distance_fns` has the methods): separated pairs are exact to
+Accuracy (`cgda_jax.sim.primitive_distances` has the methods): separated pairs are exact to
 float32 (< 1e-5 m) for every type pair except those of a cylinder against a box or
 cylinder, which sample the cylinder's side at 32 angles (overestimate by at most
 0.098 x its radius, ~0.005 x in the usual face-to-side case; `Collider.error_bounds`).
@@ -63,7 +63,7 @@ import numpy as np
 from jax import Array
 
 from cgda_jax.sim.chain import body_chain_ops
-from cgda_jax.sim.distance_fns import KINDS, error_bound, pair_distance, swap_needed
+from cgda_jax.sim.primitive_distances import KINDS, error_bound, pair_distance, swap_needed
 from cgda_jax.sim.geoms import (
     GEOM_KINDS,
     Obstacle,

@@ -63,7 +63,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from cgda_jax.sim.drives import build_drives, gravity_sets
+from cgda_jax.sim.drives import ControlPlan, Drive, gravity_sets
 from cgda_jax.sim.pd_gains import (
     check_stability,
     implicit_damping,
@@ -71,8 +71,8 @@ from cgda_jax.sim.pd_gains import (
     stable_kp,
 )
 
-__all__ = ["CONTROL_MODES", "KP_SATURATION", "Control", "ControlPlan", "Drive",
-           "actuator_kind", "check_transmissions", "plan_control"]
+__all__ = ["CONTROL_MODES", "KP_SATURATION", "Control", "actuator_kind",
+           "check_transmissions", "plan_control"]
 
 #: ``Control.mode`` values.
 CONTROL_MODES = ("auto", "pd")
@@ -160,40 +160,6 @@ class Control:
                                  f"the PD (its joints: {list(names)})")
 
 
-@dataclasses.dataclass(frozen=True)
-class Drive:
-    """How one held joint is driven.
-
-    Attributes:
-        joint: its name.
-        kind: "position" (the model's servo) or "pd".
-        actuator: the model's actuator on it ("" when the PD adds one).
-        actuator_kind: "position", "motor", "general" or "" (none).
-        kp, kd: the gains (a position servo: its own).
-        force: (lo, hi) the joint-space force limit [N m or N] (+-inf: none).
-        gravity: the drive compensates gravity.
-        sources: "kp", "kd", "force" -> where each came from.
-        actuator_id: the model's actuator's id (-1: none).
-    """
-
-    joint: str
-    kind: str
-    actuator: str
-    actuator_kind: str
-    kp: float
-    kd: float
-    force: tuple[float, float]
-    gravity: bool
-    sources: Mapping[str, str]
-    actuator_id: int = -1
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"joint": self.joint, "drive": self.kind, "actuator": self.actuator,
-                "actuator_kind": self.actuator_kind, "kp": self.kp, "kd": self.kd,
-                "force_lo": self.force[0], "force_hi": self.force[1],
-                "gravity": self.gravity, "sources": dict(self.sources)}
-
-
 def actuator_kind(m: mujoco.MjModel, a: int) -> str:
     """"position" (fixed gain kp, bias [0, -kp, -kv], no integrator), "motor" (a
     plain torque/force) or "general" (anything else)."""
@@ -237,38 +203,6 @@ def _force_range(m: mujoco.MjModel, jid: int, a: int | None, kind: str):
         lo, hi = max(lo, j_lo), min(hi, j_hi)
         src.append("actuatorfrcrange")
     return (lo, hi), "mjcf " + "+".join(src) if src else "none"
-
-
-@dataclasses.dataclass(frozen=True)
-class ControlPlan:
-    """The drives of the held joints and what they change in the simulated model.
-
-    Attributes:
-        drives: one `Drive` per held joint.
-        control: the `Control` it was planned with.
-        gravity_bodies: names (or ids) of the bodies given ``gravcomp = 1``.
-        gravity_joints: joints whose share of that compensation goes through their
-            actuator; ``unloaded``: those without one (their share is cut to 0).
-    """
-
-    drives: tuple[Drive, ...]
-    control: Control
-    gravity_bodies: tuple[int, ...] = ()
-    gravity_joints: tuple[int, ...] = ()
-    unloaded: tuple[int, ...] = ()
-    delete: tuple[int, ...] = ()  # actuators the PD replaces beyond the first
-
-    def drive(self, joint: str) -> Drive | None:
-        return next((d for d in self.drives if d.joint == joint), None)
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"mode": self.control.mode, "gravity": self.control.gravity,
-                "joints": [d.as_dict() for d in self.drives]}
-
-    def apply(self, spec: mujoco.MjSpec, model: mujoco.MjModel) -> None:
-        """Change ``spec`` (of ``model``, before any joint is welded) so that it
-        steps the planned drives (`cgda_jax.sim.drives.build_drives`)."""
-        build_drives(self, spec, model)
 
 
 def plan_control(m: mujoco.MjModel, qpos: np.ndarray, held: Sequence[str],

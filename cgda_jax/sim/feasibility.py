@@ -21,7 +21,7 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
   5 mm into the board (200 samples each) the bound at 10 samples accepts none,
   while 10 samples with the 2 mm margin accept 51 and let no move deeper than
   5 mm through, of 55,000 random moves (`benchmarks/RESULTS.md`, "Feasible
-  motions").  The independent check of a result (`cgda_jax.sim.motion`) looks
+  motions").  The independent check of a result (`cgda_jax.sim.motion_check`) looks
   at four times as many postures;
 - **no flailing**: no joint changes by more than ``max_step`` (90 degrees) between
   two waypoints (the approach excepted);
@@ -171,6 +171,11 @@ class Feasibility:
                              f"penetration ({penetration:g} m), got {margin}")
         self.margin = float(margin)
         self.certify = bool(certify)
+        # as given (`cgda_jax.sim.description` writes them into a config)
+        self.obstacles = list(obstacles)
+        self.collisions, self.self_collision = bool(collisions), bool(self_collision)
+        self.exclude = tuple(exclude)
+        self.physics_contacts = bool(physics_contacts)
         self.collider = None
         self.overlapping: list[tuple[str, str]] = []
         self.physical: list[tuple[str, str]] = []
@@ -278,8 +283,8 @@ def _obstacle_args(o: Mapping) -> dict:
 
 def _sdf(kind: str, size, R: np.ndarray, p: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Signed distances (K,) from points ``x`` (K, 3) to a geom (world frame ``R``,
-    ``p``): `cgda_jax.sim.distance_fns.sdf_local` in the geom's frame."""
-    from cgda_jax.sim.distance_fns import sdf_local
+    ``p``): `cgda_jax.sim.primitive_distances.sdf_local` in the geom's frame."""
+    from cgda_jax.sim.primitive_distances import sdf_local
 
     loc = jnp.asarray((x - p) @ R, jnp.float32)
     size = jnp.asarray(np.resize(np.asarray(size, np.float32), 3))

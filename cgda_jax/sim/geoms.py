@@ -11,12 +11,12 @@ import mujoco
 import numpy as np
 
 from cgda_jax.sim.chain import body_chain_ops
-from cgda_jax.sim.distance_fns import KINDS
+from cgda_jax.sim.primitive_distances import KINDS
 
 __all__ = ["BOXED", "GEOM_KINDS", "Obstacle", "geom_bound", "geom_ids", "geom_name",
            "geom_radius", "geom_reach", "geom_shape", "quat_mat"]
 
-#: MuJoCo geom type id -> the supported kind name (`distance_fns.KINDS`).
+#: MuJoCo geom type id -> the supported kind name (`primitive_distances.KINDS`).
 GEOM_KINDS = {int(getattr(mujoco.mjtGeom, f"mjGEOM_{k.upper()}")): k for k in KINDS}
 _SIZE_LEN = {"sphere": 1, "capsule": 2, "box": 3, "cylinder": 2, "plane": 0}
 #: Geom types the collision check replaces by their bounding box (MuJoCo's

@@ -116,7 +116,7 @@ def reduced_model(
     model: mujoco.MjModel | None = None,
 ) -> mujoco.MjModel:
     """Compile `spec` with the drives of `control` (a
-    `cgda_jax.sim.control.ControlPlan` for `model`, the spec's compiled model), the
+    `cgda_jax.sim.drives.ControlPlan` for `model`, the spec's compiled model), the
     joints `weld` deleted (and their actuators), a ``framepos`` sensor on
     `marker_site`, the sensors of object `features`
     (`cgda_jax.sim.features.add_sensors`), autoreset off and an optional timestep.
@@ -167,7 +167,7 @@ class Physics:
 
     Attributes:
         model: the simulated ``MjModel``.
-        control: the `cgda_jax.sim.control.ControlPlan` (one `Drive` per held
+        control: the `cgda_jax.sim.drives.ControlPlan` (one `Drive` per held
             joint: the evolved ones, the fixed ones not welded, any other simulated
             joint with an actuator).
         welded: names of the welded (deleted) joints.

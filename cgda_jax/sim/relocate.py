@@ -130,7 +130,7 @@ class ObjectLocator:
 
     @classmethod
     def of(cls, sim) -> ObjectLocator | None:
-        """The locator of a `cgda_jax.sim.execute.Simulator`'s physics; None for a
+        """The locator of a `cgda_jax.sim.simulator.Simulator`'s physics; None for a
         kinematic simulator or one whose scene reads no world features (a marker
         scene: nothing in the model is an object the features place)."""
         phys = getattr(sim, "physics", None)

@@ -84,34 +84,23 @@ def _postures(sim, waypoints: np.ndarray, frames_per_waypoint: int):
     lo, hi = np.asarray(robot.lower), np.asarray(robot.upper)
     genes = np.clip(robot.start_genes, lo, hi)  # where `Simulator.init_state` starts
     if sim.mode == "dynamic":  # MuJoCo C on the simulated model, same reference
+        from cgda_jax.sim.host_replay import replay_steps
+
         phys = sim.physics
         model, data = phys.model, mujoco.MjData(phys.model)
-
-        def ctrl(g):
-            q = phys.qpos0.copy()
-            q[phys.gene_qadr] = g
-            return q[phys.act_qadr]
-
         data.qpos[:] = phys.qpos0
         data.qpos[phys.gene_qadr] = genes
         mujoco.mj_kinematics(model, data)
         yield data.qpos.copy(), data.site_xpos[phys.site_id][None].copy(), 0
-        approach, profile = sim.reference_profiles()  # the first move: the approach
-        prev = ctrl(genes)
-        for j, wp in enumerate(waypoints, start=1):
-            target = ctrl(np.clip(wp, lo, hi))
-            trail = []
-            shares = approach if j == 1 else profile
-            every = max(1, len(shares) // frames_per_waypoint)
-            for k in range(1, len(shares) + 1):
-                data.ctrl[:] = prev + float(shares[k - 1]) * (target - prev)
-                mujoco.mj_step(model, data)
-                mujoco.mj_kinematics(model, data)
-                trail.append(data.site_xpos[phys.site_id].copy())
-                if k % every == 0 or k == len(shares):
-                    yield data.qpos.copy(), np.array(trail), j
-                    trail = []
-            prev = target
+        trail: list = []
+        for st in replay_steps(sim, waypoints):
+            d = st.data
+            mujoco.mj_kinematics(st.model, d)
+            trail.append(d.site_xpos[phys.site_id].copy())
+            every = max(1, st.steps // frames_per_waypoint)
+            if st.step % every == 0 or st.last:
+                yield d.qpos.copy(), np.array(trail), st.move
+                trail = []
         return
     model = robot.mj_model
     data = mujoco.MjData(model)

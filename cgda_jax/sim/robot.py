@@ -45,8 +45,6 @@ from cgda_jax.sim.posture import FIXED_RANGE_TOL, start_posture
 
 __all__ = ["FIXED_RANGE_TOL", "KINEMATICS", "Robot", "model_path"]
 
-exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
-
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 
@@ -97,9 +95,14 @@ class Robot:
         kinematics: "chain" or "mjx" (see `KINEMATICS`).
         object_bodies: the bodies of the world's objects (`from_world`; their
             contacts are the task's, `cgda_jax.sim.mjx_prep`).
+        model_path: the MJCF file it was built from (None: a compiled model);
+            world_objects, contact_geoms: `from_world`'s objects and contact geoms.
     """
 
     object_bodies: tuple[str, ...] = ()
+    model_path: str | None = None
+    world_objects: tuple[dict, ...] = ()
+    contact_geoms: tuple[str, ...] = ()
 
     def __init__(
         self,
@@ -114,6 +117,7 @@ class Robot:
         spec_factory: Callable[[], mujoco.MjSpec] | None = None,
         start: Mapping[str, float] | None = None,
     ):
+        exact_matmuls()  # its programs: full float32 products on GPUs too
         joints = tuple(joints)
         if not joints:
             raise ValueError(f"no joints to evolve given for {source}")
@@ -244,7 +248,7 @@ class Robot:
                 mj_model = factory().compile()
         except ValueError as err:
             raise ValueError(f"cannot load MJCF {path}: {err}") from err
-        return cls(
+        robot = cls(
             mj_model,
             joints,
             marker_site,
@@ -255,6 +259,8 @@ class Robot:
             spec_factory=factory,
             start=start,
         )
+        robot.model_path = str(path.resolve())
+        return robot
 
     @classmethod
     def from_world(
@@ -302,6 +308,9 @@ class Robot:
         own = compose_world(path, [], contact_geoms).compile().nbody  # then objects
         robot.object_bodies = tuple(mj_model.body(b).name
                                     for b in range(own, mj_model.nbody))
+        robot.model_path = str(path.resolve())
+        robot.world_objects = tuple(objects)
+        robot.contact_geoms = contact_geoms
         return robot
 
     def _build_fk(self, kinematics: str) -> Callable[[Array], Array]:
@@ -383,7 +392,8 @@ class Robot:
             spec_factory=self._spec_factory,
             start=self.start,
         )
-        other.object_bodies = self.object_bodies
+        for name in ("object_bodies", "model_path", "world_objects", "contact_geoms"):
+            setattr(other, name, getattr(self, name))
         return other
 
     @property

@@ -1,4 +1,4 @@
-"""What the `cgda_jax.sim.execute.Simulator` carries between waypoints, and the
+"""What the `cgda_jax.sim.simulator.Simulator` carries between waypoints, and the
 checks of what it is given (settings, waypoint arrays), each naming the problem."""
 
 from __future__ import annotations

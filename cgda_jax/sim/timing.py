@@ -1,6 +1,6 @@
 """The timing of a minimum-jerk move and its peaks against joint limits.
 
-The dynamic mode (`cgda_jax.sim.execute`) moves each joint from
+The dynamic mode (`cgda_jax.sim.simulator`) moves each joint from
 ``q0`` to ``q1 = q0 + dq`` along the minimum-jerk profile
 ``s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5``, ``tau = t / T`` in [0, 1], over the move's
 duration ``T`` (``move_fraction * waypoint_s`` there), then holds.  With

@@ -28,6 +28,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sharding import shard_population
+from cgda_jax.sim.description import setup_of
 from cgda_jax.strategies.algorithms import (
     ALGORITHMS as ALGORITHMS,
     algorithm_name as algorithm_name,
@@ -50,8 +51,6 @@ from cgda_jax.strategies.settings import (
     check_stagnation as check_stagnation,
     points_independent as points_independent,
 )
-
-exact_matmuls()  # full float32 products on GPUs too (cgda_jax.numerics)
 
 
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
@@ -94,6 +93,7 @@ class PlanBase:
         stagnation: int | None = None,
         aim: float = 1.0,
     ):
+        exact_matmuls()  # its programs: full float32 products on GPUs too
         self.sim, self.goal = sim, goal
         self.sharding = sharding
         self.n_points = int(goal.shape[0])
@@ -295,7 +295,7 @@ class PlanBase:
 
     def rejudge(self, final: dict) -> dict:
         """A finished trial's host arrays with ``violation`` from the judged
-        rollout (`cgda_jax.sim.execute.Simulator.violation`) where its finish
+        rollout (`cgda_jax.sim.simulator.Simulator.violation`) where its finish
         says the stored one is not the result's (``judged`` False: a run cut
         before its last moves were judged); ``judged`` dropped."""
         final = dict(final)
@@ -363,4 +363,5 @@ class PlanBase:
             final_fitness=float(final_fitness),
             info={**self.info, "trials_in_batch": timing["trials_in_batch"], **info},
             invalid_evaluations=int(invalid_evaluations),
+            setup=setup_of(self.sim),
         )

@@ -202,7 +202,7 @@ def run_oet_closed_loop(
     """OET closed on ``reality`` (see the module doc).
 
     Args:
-        sim: the internal model (a `cgda_jax.sim.execute.Simulator`).
+        sim: the internal model (a `cgda_jax.sim.simulator.Simulator`).
         goal: goal feature trajectory (N, F).
         reality: the `Reality` executed on; its feature and joint names must be
             the simulator's. It is `reset` first.

@@ -57,6 +57,10 @@ class ExecutionResult:
             their joints are NaN, no posture was found).
         invalid_evaluations: evaluations whose fitness was not finite (the simulation
             diverged); they are ranked last and never reported as the best.
+        setup: the simulator it ran on (`cgda_jax.sim.description.setup_of`):
+            ``feature_names`` and ``config`` (the config tables that build it
+            again), or ``not_described`` (why a config cannot); `save` writes
+            them so that the folder opens like a ``cgda run`` one.
     """
 
     strategy: str
@@ -74,6 +78,7 @@ class ExecutionResult:
     final_fitness: float
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
     invalid_evaluations: int = 0
+    setup: dict[str, Any] = dataclasses.field(default_factory=dict, repr=False)
 
     @property
     def points(self) -> int:
@@ -107,15 +112,23 @@ class ExecutionResult:
         """The arrays `save` writes to arrays.npz, by name."""
         return {k: getattr(self, k) for k in _ARRAYS}
 
-    def save(self, directory: str | os.PathLike, *, overwrite: bool = False
-             ) -> pathlib.Path:
-        """Writes ``result.json`` (summary) and ``arrays.npz`` as the folder
-        `directory`, by the rules of ``cgda run``'s results folders
-        (`cgda_jax.run_folder.RunFolder`): written aside and moved into place
+    def save(self, directory: str | os.PathLike, *, overwrite: bool = False,
+             name: str | None = None) -> pathlib.Path:
+        """Writes the folder `directory` as ``cgda run`` writes a results folder:
+        ``result.json`` (`summary`, with ``kind``, ``name`` and the simulator's
+        ``feature_names``), ``arrays.npz`` and ``config.toml`` (the simulator's
+        config, `setup`, with the strategy's settings), so that ``cgda plot``,
+        ``cgda export`` and `cgda_jax.load_run` open it. A simulator that a config
+        cannot describe (`setup`'s ``not_described``) gives no config.toml, and
+        those readers say why. By the rules of ``cgda run``'s results folders
+        (`cgda_jax.results_folder.writing.RunFolder`): written aside and moved into place
         whole, so the folder holds this result or what it held before; a missing
         or empty folder is taken, an existing results folder (one holding a
         result.json) is refused unless ``overwrite``, which replaces it whole
         (no file of the old one is left); a symbolic link is followed.
+
+        Args:
+            name: the run's name (default: the folder's).
 
         Returns:
             The folder written.
@@ -124,25 +137,49 @@ class ExecutionResult:
             FolderError: `directory` is not empty (without ``overwrite``), holds
                 something other than results, is in use or cannot be written.
         """
-        from cgda_jax.run_folder import RunFolder
+        import tomli_w
+
+        from cgda_jax.results_folder.writing import RunFolder
 
         with RunFolder(directory, overwrite=overwrite) as rf:
+            name = name or rf.path.name
+            summary = {**self.summary(), "kind": "execution", "name": name,
+                       **{k: v for k, v in self.setup.items() if k != "config"}}
             (rf.work / "result.json").write_text(
-                json.dumps(self.summary(), indent=2) + "\n")
+                json.dumps(summary, indent=2) + "\n")
             np.savez(rf.work / "arrays.npz", **self.arrays())
+            if "config" in self.setup:
+                (rf.work / "config.toml").write_text(tomli_w.dumps(
+                    self._config(name)))
         return rf.path
+
+    def _config(self, name: str) -> dict[str, Any]:
+        """`setup`'s config tables as a whole execution config named ``name``."""
+        tables = {k: dict(v) for k, v in self.setup["config"].items()}
+        strategy = {"name": self.strategy, "tolerance": float(self.tolerance)}
+        for key, kind in (("algorithm", str), ("population_size", int),
+                          ("max_generations", int), ("seed", int),
+                          ("chunk_size", int)):
+            value = self.info.get(key)
+            if isinstance(value, kind) and not isinstance(value, bool):
+                strategy[key] = value
+        tables["strategy"] = {**strategy, **tables.get("strategy", {})}
+        return {"name": name, "kind": "execution",
+                "description": "saved from Python (ExecutionResult.save): the goal "
+                               "is arrays.npz's, its source not recorded",
+                **tables}
 
     @classmethod
     def load(cls, directory: str | os.PathLike) -> ExecutionResult:
         """Reads a result written by `save` (or an execution run's folder).
 
         Raises:
-            FolderError: a file missing (`~cgda_jax.files.FileMissing`, also a
+            FolderError: a file missing (`~cgda_jax.results_folder.reading.FileMissing`, also a
                 `FileNotFoundError`), damaged or not of its schema (result.json:
                 `RESULT_FIELDS`; arrays.npz: every array of `save`, of consistent
                 shapes); the message names the file.
         """
-        from cgda_jax.files import read_json, read_npz
+        from cgda_jax.results_folder.reading import read_json, read_npz
 
         d = pathlib.Path(directory).expanduser()
         meta = read_json(d / "result.json", RESULT_FIELDS, RESULT_REQUIRED)
@@ -160,17 +197,20 @@ class ExecutionResult:
             final_fitness=_number(meta["final_fitness"]),
             info=info,
             invalid_evaluations=meta.get("invalid_evaluations", 0),
+            setup={k: meta[k] for k in ("feature_names", "not_described")
+                   if k in meta},
             **{k: arrays[k] for k in _ARRAYS},  # a run's folder holds more
         )
 
 
-#: result.json of a saved `ExecutionResult`: key -> type (`cgda_jax.files`).
+#: result.json of a saved `ExecutionResult`: key -> type (`cgda_jax.results_folder.reading`).
 RESULT_FIELDS = {
     "strategy": "str", "points": "int", "success": "bool",
     "tolerance": "number|null", "max_point_error": "number|null",
     "point_errors": "list[number|null]", "final_fitness": "number|null",
     "evaluations": "int", "invalid_evaluations": "int", "generations": "int",
     "wall_time_s": "number", "compile_time_s": "number", "info": "object",
+    "feature_names": "list[str]", "not_described": "str",
 }
 #: The keys `ExecutionResult.load` needs.
 RESULT_REQUIRED = ("strategy", "success", "tolerance", "final_fitness", "evaluations",
@@ -185,7 +225,7 @@ def _number(value: float | None) -> float:
 def _check_shapes(arrays: dict[str, np.ndarray], where: pathlib.Path) -> None:
     """The ranks of `ExecutionResult`'s arrays, and the goal's points against the
     point errors and the features' width."""
-    from cgda_jax.folders import FolderError
+    from cgda_jax.results_folder.rules import FolderError
 
     ranks = {"joints": (2,), "features": (2,), "goal": (2,), "point_errors": (1,),
              "fitness_history": (1, 2)}

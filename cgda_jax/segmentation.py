@@ -10,7 +10,7 @@ in which several library actions follow each other (with or without pauses) into
    none).
 2. Every candidate segment ``[s, s + L]`` of the grid (``L`` from the shortest to the
    longest allowed duration) is resampled to ``n_samples`` and compared with every
-   library action by the recognition metric (`cgda_jax.recognize.METRICS`: the
+   library action by the recognition metric (`cgda_jax.recognition.METRICS`: the
    paper's DTW by default). Both are taken *relative to their first sample*: an
    action in a sequence starts where the previous one left the object, not where
    its demonstrations started. A pause is one more label, ``"rest"``: the
@@ -41,7 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.data import Demonstration
-from cgda_jax.recognize import METRICS, ActionLibrary
+from cgda_jax.recognition import METRICS, ActionLibrary
 from cgda_jax.sizes import check_recognition
 
 __all__ = [

@@ -24,7 +24,7 @@ import numpy as np
 from cgda_jax.checks import check_float32
 from cgda_jax.data import Demonstration
 from cgda_jax.distance import dtw, dtw_multi, euclidean, resample
-from cgda_jax.generalize import GeneralizedAction, generalize, sample_actions
+from cgda_jax.generalization import GeneralizedAction, generalize, sample_actions
 from cgda_jax.sizes import check_recognition
 
 __all__ = ["ActionLibrary", "Recognition", "cost_matrix", "recognize", "METRICS"]

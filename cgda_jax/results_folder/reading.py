@@ -1,7 +1,7 @@
 """Saved files read back, every failure naming the file: `read_json` (a JSON object,
 checked against a schema with `check_fields`) and `read_npz` (every array, those
 required named when missing). A damaged, truncated or hand-edited file is a
-`~cgda_jax.folders.FolderError` that says which file and what is wrong with it,
+`~cgda_jax.results_folder.rules.FolderError` that says which file and what is wrong with it,
 never a ``BadZipFile`` or ``AttributeError`` from deep inside.
 
 A schema maps keys to type names: ``str``, ``int``, ``bool``, ``number`` (int or
@@ -9,7 +9,7 @@ float, not bool), ``null``, ``object``, ``list[T]``, alternatives ``a|b`` (e.g.
 ``number|null``: JSON has no infinity, so a non-finite number is written null).
 Keys the schema does not name are accepted (files written by later versions).
 
-Files written one at a time (not a results folder: `cgda_jax.run_folder`) go through
+Files written one at a time (not a results folder: `cgda_jax.results_folder.writing`) go through
 `write_aside`: written beside their place and renamed over it, so a full disk or
 an interrupt leaves the earlier file, or none, never a truncated one.
 """
@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.folders import FolderError
+from cgda_jax.results_folder.rules import FolderError
 
 __all__ = ["FileMissing", "check_fields", "read_json", "read_npz", "write_aside"]
 

@@ -1,5 +1,5 @@
 """Executing whole waypoint sequences and populations of them with a simulator's
-`step` (`Executions`, the base of `cgda_jax.sim.execute.Simulator`)."""
+`step` (`Executions`, the base of `cgda_jax.sim.simulator.Simulator`)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ __all__ = ["Executions"]
 class Executions:
     """Rollouts and batched executions built on a simulator's one-move `step`.
 
-    The simulator (`cgda_jax.sim.execute.Simulator`) provides ``robot``, ``mode``,
+    The simulator (`cgda_jax.sim.simulator.Simulator`) provides ``robot``, ``mode``,
     ``batch_size``, ``step``, its start state ``_start`` and the jitted
     ``_rollout`` / ``_execute_population`` of the methods here, and counts
     ``n_traces``.

@@ -55,8 +55,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-from cgda_jax.sim.executions import Executions
+from cgda_jax.sim.rollouts import Executions
 from cgda_jax.sim.feasibility import scene_obstacles
+from cgda_jax.sim.host_replay import reference_ctrl
 from cgda_jax.sim.robot import Robot
 from cgda_jax.sim.scenes import feature_labels
 from cgda_jax.sim.sim_state import (
@@ -111,6 +112,7 @@ class Simulator(Executions):
     Attributes:
         n_dof, n_features, feature_names, lower, upper: the robot's and the scene's
             (lower and upper: the (DoF,) joint limits).
+        dynamic_args: ``move_fraction``, ``reduce`` and ``control`` as given.
     """
 
     def __init__(
@@ -158,7 +160,7 @@ class Simulator(Executions):
         self.lower = robot.lower
         self.upper = robot.upper
         self._alphas = np.arange(1, self.substeps + 1, dtype=np.float32) / self.substeps
-        self._dynamic_args = {"move_fraction": move_fraction, "reduce": reduce,
+        self.dynamic_args = {"move_fraction": move_fraction, "reduce": reduce,
                               "control": control}
         # object scenes read the simulated world (`ObjectScene`), others the marker
         self._world_specs = tuple(getattr(scene, "world_features", ()))
@@ -230,7 +232,7 @@ class Simulator(Executions):
         return Simulator(
             self.robot, self.scene, mode="dynamic", physics=physics,
             timestep=self.physics.timestep / factor,
-            physics_steps=self.physics_steps * factor, **self._dynamic_args,
+            physics_steps=self.physics_steps * factor, **self.dynamic_args,
             feasibility=self.feasibility,
         )
 
@@ -343,10 +345,7 @@ class Simulator(Executions):
         """Physics from ``state`` along the min-jerk reference ``profile`` (T,) to
         ``target``: (physics state, scene state, marker (3,), features (F,))."""
         phys = self.physics
-        qpos0 = jnp.asarray(phys.qpos0, jnp.float32)
-        c0 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(state.genes))
-        c1 = phys.ctrl_of(qpos0.at[phys.gene_qadr].set(target))
-        ctrl = c0 + jnp.asarray(profile)[:, None] * (c1 - c0)  # (T, nu)
+        ctrl = reference_ctrl(phys, state.genes, target, profile, jnp)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
         path = sens[:, phys.marker_adr:phys.marker_adr + 3]
         scene_state = scene_along(self.scene, state.scene, self._from(state), path)

@@ -1,8 +1,8 @@
 """A results folder: which one, and whether it can be used (the rules below);
-`cgda_jax.run_folder.RunFolder` locks it, writes it aside and moves it into place.
+`cgda_jax.results_folder.writing.RunFolder` locks it, writes it aside and moves it into place.
 
 Used by every writer of results: ``cgda run`` and `cgda_jax.experiment.run_experiment`
-(through `cgda_jax.experiment.results`, which re-exports these names),
+(`cgda_jax.experiment` re-exports these names),
 ``cgda run --trials N --processes P`` (the launching process holds the folder, its
 workers write into the temporary one) and `cgda_jax.ExecutionResult.save`.
 
@@ -47,7 +47,7 @@ _MAX_FRESH = 1000
 
 class FolderError(ValueError):
     """The results folder cannot be used (not empty, not a folder, not writable, a
-    dangling link), or a file in it cannot be read back (`cgda_jax.files`)."""
+    dangling link), or a file in it cannot be read back (`cgda_jax.results_folder.reading`)."""
 
 
 class FolderBusy(FolderError):

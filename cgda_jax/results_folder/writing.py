@@ -1,5 +1,5 @@
 """`RunFolder`: one run's results folder, locked, written aside and moved into place
-when complete (the rules: `cgda_jax.folders`).
+when complete (the rules: `cgda_jax.results_folder.rules`).
 
 A lock file beside the folder (``.<name>.lock``, ``flock``: released by the kernel
 even when the process is killed) stops two runs sharing a folder; the run writes
@@ -22,7 +22,7 @@ import shutil
 import signal
 import threading
 
-from cgda_jax.folders import (
+from cgda_jax.results_folder.rules import (
     FolderBusy,
     FolderError,
     candidates,

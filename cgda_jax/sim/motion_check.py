@@ -62,7 +62,7 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
     the waypoint's time (``sim.waypoint_s``) is up.
 
     Args:
-        sim: the `cgda_jax.sim.execute.Simulator`.
+        sim: the `cgda_jax.sim.simulator.Simulator`.
         joints: (N, DoF) waypoints.
         samples: samples per move.
     """
@@ -133,51 +133,40 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
 
 
 def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarray]:
-    """MuJoCo C replay of the commanded reference at ``timestep / factor``: the
-    evolved joints' measured speeds (T, DoF), their actuator forces at the joint
-    (T, DoF; ``qfrc_actuator``, a PD's gravity compensation included), and at each
-    waypoint's end the error from its target and the force (N, DoF)."""
+    """MuJoCo C replay of the commanded reference at ``timestep / factor``
+    (`cgda_jax.sim.host_replay.replay_steps`): the evolved joints' measured speeds
+    (T, DoF), their actuator forces at the joint (T, DoF; ``qfrc_actuator``, a PD's
+    gravity compensation included), and at each waypoint's end the error from its
+    target and the force (N, DoF)."""
     import mujoco
 
     from cgda_jax.sim.geoms import geom_name
+    from cgda_jax.sim.host_replay import replay_steps
 
-    fine = sim.finer(factor) if factor > 1 else sim
-    phys = fine.physics
-    m = phys.model
-    d = mujoco.MjData(m)
-    qpos0 = np.asarray(phys.qpos0, np.float64)
-    d.qpos[:] = qpos0
-    d.qpos[phys.gene_qadr] = sim.robot.start_genes
-    mujoco.mj_forward(m, d)
-    jt = mujoco.mjtObj.mjOBJ_JOINT
-    jids = [mujoco.mj_name2id(m, jt, n) for n in sim.robot.joint_names]
-    gene_dof = np.array([m.jnt_dofadr[j] for j in jids])
-    moving = np.zeros(m.nbody, bool)  # bodies the evolved joints move
-    for j in jids:
-        moving[m.jnt_bodyid[j]] = True
-    for b in range(1, m.nbody):  # parents come first
-        moving[b] |= moving[m.body_parentid[b]]
-    robot_geom = moving[m.geom_bodyid]
-    deepest = (np.inf, -1, -1)
-    profiles = fine.reference_profiles()
-    prev = np.asarray(sim.robot.start_genes, np.float64)
     speeds, forces, ends, end_forces = [], [], [], []
-    for i, w in enumerate(np.asarray(joints, np.float64)):
-        profile = profiles[min(i, 1)]
-        target = np.clip(w, sim.robot.lower, sim.robot.upper)
-        c0 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, prev))
-        c1 = phys.ctrl_of(_with(qpos0, phys.gene_qadr, target))
-        for a in profile:
-            d.ctrl[:] = c0 + a * (c1 - c0)
-            mujoco.mj_step(m, d)
-            for c in d.contact[:d.ncon]:  # the physics' own contacts of the arm
-                if (robot_geom[c.geom1] or robot_geom[c.geom2]) and c.dist < deepest[0]:
-                    deepest = (float(c.dist), int(c.geom1), int(c.geom2))
-            speeds.append(d.qvel[gene_dof].copy())
-            forces.append(d.qfrc_actuator[gene_dof].copy())
-        ends.append(d.qpos[phys.gene_qadr] - target)
-        end_forces.append(forces[-1])
-        prev = target
+    deepest = (np.inf, -1, -1)
+    m = gene_dof = robot_geom = None
+    for st in replay_steps(sim, joints, factor):
+        d = st.data
+        if m is None:  # the first step: the model's evolved dofs and arm geoms
+            m = st.model
+            jt = mujoco.mjtObj.mjOBJ_JOINT
+            jids = [mujoco.mj_name2id(m, jt, n) for n in sim.robot.joint_names]
+            gene_dof = np.array([m.jnt_dofadr[j] for j in jids])
+            moving = np.zeros(m.nbody, bool)  # bodies the evolved joints move
+            for j in jids:
+                moving[m.jnt_bodyid[j]] = True
+            for b in range(1, m.nbody):  # parents come first
+                moving[b] |= moving[m.body_parentid[b]]
+            robot_geom = moving[m.geom_bodyid]
+        for c in d.contact[:d.ncon]:  # the physics' own contacts of the arm
+            if (robot_geom[c.geom1] or robot_geom[c.geom2]) and c.dist < deepest[0]:
+                deepest = (float(c.dist), int(c.geom1), int(c.geom2))
+        speeds.append(d.qvel[gene_dof].copy())
+        forces.append(d.qfrc_actuator[gene_dof].copy())
+        if st.last:
+            ends.append(d.qpos[st.physics.gene_qadr] - st.target)
+            end_forces.append(forces[-1])
     contact = None
     if deepest[1] >= 0:
         pair = [geom_name(m, g) for g in deepest[1:]]
@@ -197,7 +186,7 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
     contact); None when every joint reaches its commands.
 
     Args:
-        sim: the dynamic `cgda_jax.sim.execute.Simulator`.
+        sim: the dynamic `cgda_jax.sim.simulator.Simulator`.
         tracking: (N, DoF) |error| at each waypoint's end.
         end_force: (N, DoF) the joint's actuator force there.
         contact: the replay's deepest contact of the arm (``{"pair", "deepest_m"}``),
@@ -249,17 +238,11 @@ def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
             "The evolved waypoints are commands, not the postures reached")
 
 
-def _with(qpos0: np.ndarray, adr: np.ndarray, values: np.ndarray) -> np.ndarray:
-    q = qpos0.copy()
-    q[adr] = values
-    return q
-
-
 def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
     """The motion of ``joints`` (N, DoF) checked as a roboticist would.
 
     Args:
-        sim: the `cgda_jax.sim.execute.Simulator` the result was found with.
+        sim: the `cgda_jax.sim.simulator.Simulator` the result was found with.
         joints: (N, DoF) the reported waypoints (radians / metres).
         factor: how much finer than the simulator the check looks (collision
             postures per move; dynamic replay timestep).
