@@ -22,7 +22,7 @@ import numpy as np
 from _common import experiment_trials, print_table, report_target, write_json
 
 from cgda_jax.experiment.compute import export_check, replay_check
-from cgda_jax.sim.motion import motion_report
+from cgda_jax.sim.motion_check import motion_report
 
 NAME = "iron_force_xgnitive"
 FORCE_WEIGHT = 1 / 300  # the scene's scale on iron/ft.fz

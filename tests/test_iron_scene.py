@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from cgda_jax.sim.execute import Simulator
+from cgda_jax.sim.simulator import Simulator
 from cgda_jax.sim.robot import Robot, model_path
 from cgda_jax.sim.scenes import ObjectScene
 from cgda_jax.sim.world import compile_world
