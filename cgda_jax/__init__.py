@@ -22,10 +22,12 @@ __version__ = "0.1.0"
 _EXPORTS: dict[str, tuple[str, ...]] = {
     # core: data, generalization, distances, recognition
     "cgda_jax.data": ("Demonstration", "load_csv", "load_npz", "load_xgnitive",
-                      "save_csv", "save_npz", "validate_demonstrations"),
+                      "load_xgnitive_force", "save_csv", "save_npz",
+                      "validate_demonstrations", "xgnitive_clock_offsets"),
     "cgda_jax.distance": ("dtw", "dtw_multi", "dtw_per_feature", "euclidean",
-                          "resample", "soft_dtw"),
-    "cgda_jax.generalization": ("GeneralizedAction", "generalize", "rbf_interpolate"),
+                          "point_sum", "resample", "soft_dtw"),
+    "cgda_jax.generalization": ("GeneralizedAction", "generalize",
+                                "generalize_streams", "rbf_interpolate"),
     "cgda_jax.recognition": ("ActionLibrary", "Recognition", "cost_matrix",
                              "recognize"),
     "cgda_jax.segmentation": ("Segment", "execute_sequence", "segment"),

@@ -33,6 +33,8 @@ __all__ = [
     "load_npz",
     "save_npz",
     "load_xgnitive",
+    "load_xgnitive_force",
+    "xgnitive_clock_offsets",
     "XGNITIVE_COLUMNS",
 ]
 
@@ -374,7 +376,8 @@ def load_xgnitive(
     """Load the xgnitive ICRA 2018 TEO demonstrations of one action and stream.
 
     Times are made relative to each file's own first sample (this removes the jr3
-    clock offset of about 609 s against the other streams).
+    clock offset of about 609 s against the other streams; `load_xgnitive_force`
+    puts the jr3 beside the arm on one clock).
 
     Args:
         root: the xgnitive data folder (holding ``xgnitive_icra2018``) or that
@@ -392,15 +395,27 @@ def load_xgnitive(
     Returns:
         One Demonstration per repetition, named ``"{action}/{stream}/{file}"``.
     """
-    if action not in _ACTIONS:
-        raise ValueError(f"unknown action {action!r}; expected one of {_ACTIONS}")
-    if stream not in XGNITIVE_COLUMNS:
-        raise ValueError(
-            f"unknown stream {stream!r}; expected one of {tuple(XGNITIVE_COLUMNS)}"
-        )
+    _check_stream(action, stream)
     all_cols = XGNITIVE_COLUMNS[stream]
     columns = list(all_cols[2:] if columns is None else columns)
     idx = [_column_index(all_cols, c, f"xgnitive stream {stream!r}") for c in columns]
+    demos = []
+    for path, table in _xgnitive_tables(root, action, stream, reduced, repetitions):
+        times = table[:, 1] - table[0, 1]
+        demos.append(
+            _from_table(
+                path, times, table[:, idx], columns,
+                f"{action}/{stream}/{path.name}", first_line=1,
+            )
+        )
+    return demos
+
+
+def _xgnitive_tables(root: PathLike, action: str, stream: str, reduced: bool,
+                     repetitions: Sequence[int] | None
+                     ) -> list[tuple[pathlib.Path, np.ndarray]]:
+    """(path, table with every codebook column) of each repetition, in order."""
+    all_cols = XGNITIVE_COLUMNS[stream]
     folder = _xgnitive_dir(_path(root), action, stream)
     pattern = re.compile(r"reduced-data-(\d+)\.csv" if reduced else r"data-(\d+)\.log")
     found = {
@@ -412,7 +427,7 @@ def load_xgnitive(
         repetitions = sorted(found)
         if not repetitions:
             raise FileNotFoundError(f"no {pattern.pattern} files in {folder}")
-    demos = []
+    out = []
     for rep in repetitions:
         if rep not in found:
             raise FileNotFoundError(
@@ -426,11 +441,102 @@ def load_xgnitive(
                 f"{path}: {table.shape[1]} columns, expected {len(all_cols)} "
                 f"{all_cols}"
             )
-        times = table[:, 1] - table[0, 1]
-        demos.append(
-            _from_table(
-                path, times, table[:, idx], columns,
-                f"{action}/{stream}/{path.name}", first_line=1,
-            )
+        out.append((path, table))
+    return out
+
+
+def _check_stream(action: str, stream: str) -> None:
+    if action not in _ACTIONS:
+        raise ValueError(f"unknown action {action!r}; expected one of {_ACTIONS}")
+    if stream not in XGNITIVE_COLUMNS:
+        raise ValueError(
+            f"unknown stream {stream!r}; expected one of {tuple(XGNITIVE_COLUMNS)}"
         )
+
+
+def xgnitive_clock_offsets(
+    root: PathLike,
+    action: str = "iron",
+    stream: str = "jr3",
+    reference: str = "teo/rightArm",
+    *,
+    reduced: bool = True,
+    repetitions: Sequence[int] | None = None,
+) -> np.ndarray:
+    """Seconds to ADD to ``stream``'s timestamps to put them on ``reference``'s clock.
+
+    The jr3 force/torque stream was logged by a host whose clock ran about 609 s
+    behind the one that logged the arm and screen streams (codebook: 608.5-609.1 s);
+    every stream of a demonstration was connected within about 0.1 s of the others
+    (the yarpdatadumper ``info.log`` files), so the offset of a repetition is the
+    difference of the streams' first timestamps, ``t0(reference) - t0(stream)``
+    (positive for the jr3: its clock is behind).  Over a whole demonstration the
+    last timestamps of the full logs differ by the same amount within 0.04 s.
+
+    Returns:
+        (R,) offsets [s], one per repetition (sorted repetition numbers, or
+        ``repetitions``).
+    """
+    _check_stream(action, stream)
+    _check_stream(action, reference)
+    ref = _xgnitive_tables(root, action, reference, reduced, repetitions)
+    reps = repetitions or [int(re.search(r"(\d+)", p.name).group(1)) for p, _ in ref]
+    own = _xgnitive_tables(root, action, stream, reduced, reps)
+    return np.array([r[0, 1] - o[0, 1] for (_, r), (_, o) in zip(ref, own)])
+
+
+def load_xgnitive_force(
+    root: PathLike,
+    action: str = "iron",
+    columns: Sequence[str] = ("X", "Y", "Z"),
+    force_columns: Sequence[str] = ("Fz",),
+    *,
+    stream: str = "teo/rightArm",
+    reduced: bool = True,
+    repetitions: Sequence[int] | None = None,
+) -> list[Demonstration]:
+    """An arm stream with the wrist force/torque (jr3) columns beside it, on the
+    arm's clock.
+
+    Each jr3 timestamp is moved onto the arm's clock with `xgnitive_clock_offsets`
+    (added: ``t_arm = t_jr3 + offset``, offset about +609 s), and the jr3 columns are
+    interpolated linearly at the arm's sample times (the streams run at about the
+    same rate, 50 Hz, or 5 Hz reduced).  Times start at the arm's first sample.
+
+    Sign and frame (as logged; the codebook): F [N] and T [N m] in the jr3's own
+    frame at TEO's right wrist, between the forearm and the hand holding the iron.
+    With the iron held still in the air the logged Fz is 0 to +9 N (the sensor is
+    not zeroed between demonstrations); pressing the iron on the board drives Fz
+    negative (to about -70 N at the hardest push).  In MuJoCo terms: the force the
+    forearm exerts on the hand-and-iron beyond the sensor along the sensor's z axis,
+    the axis pointing from the iron towards the forearm (`cgda_jax.sim.features`,
+    quantity ``fz``: a hanging tool reads +m g, pressing reads less).
+
+    Args:
+        root: the xgnitive data folder.
+        action: ``"iron"`` (the only action whose jr3 stream matters) or ``"paint"``.
+        columns: arm columns (``XGNITIVE_COLUMNS[stream]``).
+        force_columns: jr3 columns (``Fx`` ... ``Tz``).
+        stream: the arm stream (``"teo/rightArm"``).
+        reduced, repetitions: as `load_xgnitive`.
+
+    Returns:
+        One Demonstration per repetition with features ``columns + force_columns``.
+    """
+    _check_stream(action, stream)
+    arm_cols, f_cols = XGNITIVE_COLUMNS[stream], XGNITIVE_COLUMNS["jr3"]
+    a_idx = [_column_index(arm_cols, c, f"xgnitive stream {stream!r}") for c in columns]
+    f_idx = [_column_index(f_cols, c, "xgnitive stream 'jr3'") for c in force_columns]
+    arm = _xgnitive_tables(root, action, stream, reduced, repetitions)
+    reps = repetitions or [int(re.search(r"(\d+)", p.name).group(1)) for p, _ in arm]
+    force = _xgnitive_tables(root, action, "jr3", reduced, reps)
+    demos = []
+    for (path, a), (_, f) in zip(arm, force):
+        offset = a[0, 1] - f[0, 1]
+        t_force = f[:, 1] + offset
+        values = np.column_stack([np.interp(a[:, 1], t_force, f[:, k]) for k in f_idx])
+        demos.append(_from_table(
+            path, a[:, 1] - a[0, 1], np.column_stack([a[:, a_idx], values]),
+            [*columns, *force_columns], f"{action}/{stream}+jr3/{path.name}",
+            first_line=1))
     return demos

@@ -48,7 +48,8 @@ import jax.numpy as jnp
 from cgda_jax.checks import check_finite, is_traced
 from cgda_jax.sizes import check_elements
 
-__all__ = ["dtw", "dtw_multi", "dtw_per_feature", "euclidean", "resample", "soft_dtw"]
+__all__ = ["dtw", "dtw_multi", "dtw_per_feature", "euclidean", "point_sum", "resample",
+           "soft_dtw"]
 
 # A large finite value for "unreachable" cells: inf would turn into NaN under grad.
 # The inputs are scaled to magnitudes below 2 first (`_scale_exponents`), so every
@@ -448,3 +449,43 @@ def euclidean(x: jax.Array, y: jax.Array, n_samples: int | None = None) -> jax.A
     diff = resample(_times_pow2(x, -k), n) - resample(_times_pow2(y, -k), n)
     value = _times_pow2(jnp.sqrt(jnp.sum(diff**2)), k)
     return _refuse_overflow(_nan_unless_finite(value, x, y), "euclidean")
+
+
+def point_sum(
+    x: jax.Array,
+    y: jax.Array,
+    weights: jax.Array | None = None,
+    n_samples: int | None = None,
+) -> jax.Array:
+    """Sum over time of the weighted Euclidean distance between matching points.
+
+    ``sum_t sqrt(sum_f (w_f (x_tf - y_tf))^2)`` after resampling both trajectories
+    (as `euclidean`) to ``n_samples`` normalised times.  With weights
+    ``(1, 1, 1, 1/300)`` over (X [m], Y [m], Z [m], Fz [N]) and equal lengths it is
+    the CGDA authors' iron fitness, ``sum sqrt(dX^2 + dY^2 + dZ^2 + (dFz/300)^2)``
+    (xgnitive ``programs/cgdaExecution/CgdaIronFitnessFunction.cpp``).
+
+    Args:
+        x: (N, F) or (N,) first trajectory.
+        y: (M, F) or (M,) second trajectory.
+        weights: (F,) per-feature weights (default all 1), finite and >= 0.
+        n_samples: common number of samples; default ``max(N, M)``.
+
+    Returns:
+        Scalar distance; NaN under ``jit`` / ``vmap`` for non-finite input.
+
+    Raises:
+        ValueError: as `dtw`; weights of the wrong shape.
+    """
+    x, y = _pair(x, y, "point_sum")
+    if weights is not None:
+        w = jnp.asarray(weights, x.dtype)
+        if w.shape != (x.shape[1],):
+            raise ValueError(f"point_sum: weights has shape {w.shape}, expected "
+                             f"({x.shape[1]},) (one per feature)")
+        x, y = x * w, y * w
+    n = max(x.shape[0], y.shape[0]) if n_samples is None else int(n_samples)
+    k = _scale_exponents(x, y, per_feature=False)
+    diff = resample(_times_pow2(x, -k), n) - resample(_times_pow2(y, -k), n)
+    value = _times_pow2(jnp.sum(jnp.sqrt(jnp.sum(diff**2, axis=-1))), k)
+    return _refuse_overflow(_nan_unless_finite(value, x, y), "point_sum")

@@ -38,6 +38,7 @@ from cgda_jax.sizes import MAX_KNOTS, SizeError, check_elements
 __all__ = [
     "GeneralizedAction",
     "generalize",
+    "generalize_streams",
     "rbf_interpolate",
     "rbf_weights",
     "sample_actions",
@@ -391,5 +392,49 @@ def generalize(
         knots=jax.device_put(means.astype(np.float32)),
         weights=jax.device_put(weights.astype(np.float32)),
         feature_names=demos[0].feature_names,
+        name=name,
+    )
+
+
+def generalize_streams(
+    streams: Sequence[Sequence[Demonstration]],
+    interval_s: float = 1.0,
+    method: str = "paper",
+    name: str = "action",
+) -> GeneralizedAction:
+    """Generalize the same repetitions recorded as several streams, each on its own
+    time base, and put their features side by side.
+
+    Each stream is generalized by `generalize` with its own times (its own start and
+    duration), as the CGDA authors did for TEO's arm and wrist-force streams (their
+    iron goal ``target_iron[9][4]`` is the arm's X, Y, Z and the jr3's Fz, each
+    generalized separately).  The streams must give the same number of knots; the
+    linear RBF system depends on the knot times only, so the stacked weights are
+    those of one generalization of all the columns.
+
+    Args:
+        streams: per stream, its repetitions (the same feature names within it).
+        interval_s, method, name: as `generalize`.
+
+    Returns:
+        A GeneralizedAction with the streams' features in order.
+
+    Raises:
+        ValueError: no stream, or streams giving different numbers of knots (the
+            message names both).
+    """
+    if not streams:
+        raise ValueError("generalize_streams: no streams")
+    parts = [generalize(demos, interval_s, method, name) for demos in streams]
+    counts = [p.n_knots for p in parts]
+    if len(set(counts)) > 1:
+        raise ValueError(f"generalize_streams: the streams give {counts} knots at "
+                         f"interval_s={interval_s:g} (their durations differ); "
+                         "each must give the same number")
+    return GeneralizedAction(
+        knot_times=parts[0].knot_times,
+        knots=jnp.concatenate([p.knots for p in parts], axis=1),
+        weights=jnp.concatenate([p.weights for p in parts], axis=1),
+        feature_names=tuple(n for p in parts for n in p.feature_names),
         name=name,
     )

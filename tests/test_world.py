@@ -26,7 +26,7 @@ def teo_pair():
 
 
 def test_builtin_pieces():
-    assert list_pieces() == ("box", "table", "valve")
+    assert list_pieces() == ("box", "iron", "table", "valve")
 
 
 def test_robot_kinematics_unchanged(teo_pair):
@@ -165,9 +165,9 @@ def test_custom_piece_file(tmp_path):
 @pytest.mark.parametrize("obj, match", [
     ({"piece": "crate", "pos": [0, 0, 0]},
      r"unknown object piece 'crate'; the built-in pieces are "
-     r"\['box', 'table', 'valve'\]"),
+     r"\['box', 'iron', 'table', 'valve'\]"),
     ({"piece": "box", "pos": [0, 0, 0], "colour": "red"},
-     r"unknown key\(s\) \['colour'\]; allowed: \['piece', 'name', 'pos', 'euler', "
+     r"unknown key\(s\) \['colour'\]; allowed: \['piece', 'name', 'pos', 'body', 'euler', "
      r"'quat', 'size', 'mass', 'friction', 'rgba'\]"),
     ({"piece": "valve", "pos": [0, 0, 0], "size": [1, 1, 1]}, r"\['size'\]"),
     ({"pos": [0, 0, 0]}, "missing key 'piece'"),

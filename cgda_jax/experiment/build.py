@@ -32,7 +32,7 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     if d.source in OBJECT_SOURCES:
         demos = selected_demos(cfg, {cfg.name: object_demos(cfg)})[0][cfg.name]
         gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
-        return np.asarray(gen.knots, float) * d.scale, demos, gen
+        return np.asarray(gen.knots, float) * goal_scale(cfg), demos, gen
     if d.source == "paint_ramp":
         from cgda_jax.datasets import paint_ramp
 
@@ -45,6 +45,8 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
         demos = csv_demos(cfg)
     elif d.source == "video":
         demos = [track_recording(cfg, v, v.name) for v in demonstration_files(cfg)]
+    elif d.force_columns:
+        return xgnitive_force_goal(cfg)
     else:
         from cgda_jax.data import load_xgnitive
 
@@ -52,7 +54,45 @@ def build_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
     demos = selected_demos(cfg, {cfg.name: demos})[0][cfg.name]
     check_interval_count(demos, d.interval_s, d.method)  # before generalize allocates
     gen = generalize(demos, d.interval_s, d.method, name=cfg.name)
-    return np.asarray(gen.knots, float) * d.scale, demos, gen
+    return np.asarray(gen.knots, float) * goal_scale(cfg), demos, gen
+
+
+def xgnitive_force_goal(cfg: ExperimentConfig) -> tuple[np.ndarray, list, Any]:
+    """The goal of an xgnitive arm stream with wrist-force columns (``data.columns``
+    then ``data.force_columns``): each stream generalized on its own clock as the
+    authors did (`cgda_jax.generalization.generalize_streams`; the iron goal is their
+    ``target_iron[9][4]``); the demonstrations returned are the arm with the force
+    beside it on the arm's clock (`cgda_jax.data.load_xgnitive_force`)."""
+    from cgda_jax.data import load_xgnitive, load_xgnitive_force
+    from cgda_jax.generalization import generalize_streams
+
+    d = cfg.data
+    root = resolve_data_dir(cfg)
+    arm = load_xgnitive(root, d.action, d.stream, d.columns)
+    force = load_xgnitive(root, d.action, "jr3", d.force_columns)
+    for demos in (arm, force):
+        check_interval_count(demos, d.interval_s, d.method)
+    try:
+        gen = generalize_streams([arm, force], d.interval_s, d.method, name=cfg.name)
+    except ValueError as err:
+        raise ConfigError(f"key 'data.force_columns': {err}") from None
+    demos = load_xgnitive_force(root, d.action, d.columns, d.force_columns,
+                                stream=d.stream)
+    return np.asarray(gen.knots, float) * goal_scale(cfg), demos, gen
+
+
+def goal_scale(cfg: ExperimentConfig) -> float | np.ndarray:
+    """What the demonstrations and the goal are multiplied by: ``data.scale``, times
+    each column's ``scale`` of an ``objects`` scene (a weight such as 1/300 on a
+    force: the goal must be weighted as the features it is compared with)."""
+    from cgda_jax.sim.features import FeatureSpec
+
+    if cfg.scene.kind != "objects" or not cfg.scene.features:
+        return cfg.data.scale
+    specs = [FeatureSpec.from_dict(e) for e in cfg.scene.features]
+    if all(s.scale == 1 for s in specs):
+        return cfg.data.scale
+    return cfg.data.scale * np.concatenate([[s.scale] * len(s.columns()) for s in specs])
 
 
 def synthetic_demos(cfg: ExperimentConfig) -> dict:

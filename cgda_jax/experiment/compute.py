@@ -18,6 +18,7 @@ from cgda_jax.experiment.build import (
     BuiltExecution,
     error_unit,
     feature_labels,
+    goal_scale,
     recognition_demos,
     selected_demos,
 )
@@ -260,8 +261,8 @@ def compute_execution(
     arrays = {k: np.asarray(v) for k, v in res.arrays().items()}
     if gen is not None:  # the generalization and demonstrations, in the goal's units
         arrays["knot_times"] = np.asarray(gen.knot_times, np.float64)
-        arrays["knots"] = np.asarray(gen.knots, np.float64) * cfg.data.scale
-        arrays.update(_demo_arrays(demos, "demo", cfg.data.scale))
+        arrays["knots"] = np.asarray(gen.knots, np.float64) * goal_scale(cfg)
+        arrays.update(_demo_arrays(demos, "demo", goal_scale(cfg)))
     if sim.mode == "dynamic":
         summary["physics"] = {
             "backend": sim.backend.name, "waypoint_s": sim.waypoint_s,

@@ -45,6 +45,9 @@ class DataConfig:
         action, stream, columns: xgnitive action ("paint" | "iron"), stream and
             feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``); csv: the
             feature columns to keep, in order (e.g. ``["X_m", "Y_m", "Z_m"]``).
+        force_columns: xgnitive: wrist force/torque (jr3) columns put after
+            ``columns`` (e.g. ``["Fz"]``; `cgda_jax.data.load_xgnitive_force`,
+            each stream generalized on its own clock); empty: none.
         scale: factor applied to the goal's features (e.g. unit changes).
         start, end: move_box: the box's (x, y) before and after the push [m];
             rotate_valve: the valve angle before and after [rad] (one value);
@@ -74,6 +77,7 @@ class DataConfig:
     action: str = "paint"
     stream: str = "paintSquaresOnScreen"
     columns: list[str] = dataclasses.field(default_factory=lambda: ["percent"])
+    force_columns: list[str] = dataclasses.field(default_factory=list)
     scale: float = 1.0
     start: list[float] = dataclasses.field(default_factory=list)
     end: list[float] = dataclasses.field(default_factory=list)

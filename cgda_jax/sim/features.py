@@ -1,4 +1,5 @@
-"""Object features declared by name: body/site positions and yaw, joint angles.
+"""Object features declared by name: body/site positions and yaw, joint angles,
+forces and torques at a site.
 
 A feature is what CGDA tracks of the world (paper section 2): an object's position or
 orientation, a valve's angle.  Declare each one by name with a `FeatureSpec` (or its
@@ -11,8 +12,10 @@ world state as a flat ``(F,)`` vector, in the order declared:
   ``mujoco.MjData`` whose arrays are wrapped as JAX arrays);
 - `FeatureSet.from_sensordata` reads a ``(nsensordata,)`` vector of MuJoCo sensors that
   `add_sensors` put in the model spec beforehand (``framepos`` / ``framequat`` /
-  ``jointpos``).  This is how a MuJoCo C rollout (``mujoco.rollout.rollout(...)``
-  returning ``sensordata``) or ``mjx.forward`` gives features.
+  ``jointpos`` / ``force`` / ``torque``).  This is how a MuJoCo C rollout
+  (``mujoco.rollout.rollout(...)`` returning ``sensordata``) or ``mjx.forward``
+  gives features.  Forces and torques exist only here (they come from the physics:
+  dynamic mode); `from_data` refuses them.
 
 Both are pure ``jnp`` functions for one example: ``jax.jit`` and ``jax.vmap`` them at
 the call site.
@@ -29,9 +32,25 @@ body/site  ``yaw``                rotation about world z [rad]: the heading
                                   axis (R its rotation matrix)
 joint      ``angle``              hinge joint ``qpos`` [rad]
 joint      ``position``           slide joint ``qpos`` [m]
+site       ``force`` / ``fx`` ..  force [N] (3 or 1 values) of a MuJoCo
+           ``fz``                 ``force`` sensor on the site
+site       ``torque`` / ``tx`` .. torque [N m] of a ``torque`` sensor
+           ``tz``
 =========  =====================  ===========================================
 
 A body's position is its frame origin (``xpos``, not the centre of mass ``xipos``).
+
+Forces and torques (a force/torque sensor, e.g. TEO's wrist jr3): MuJoCo's ``force``
+and ``torque`` sensors give the interaction between the site's body and its parent:
+the force (torque about the site) that the PARENT exerts on the subtree rooted at
+the site's body (everything from the sensor outwards: the tool, what it touches).
+Put the site on a body of its own between the wrist and the tool (as a real wrist
+sensor sits).  ``frame = "sensor"`` (default): components in the site's frame, as a
+real sensor reports them; ``frame = "world"``: rotated into the world frame (the
+site's orientation is read by a ``framequat`` sensor added for it).  A tool hanging
+still with the site's z axis up reads ``fz = +m g`` (m the mass beyond the sensor);
+pressing it down on a table makes ``fz`` fall, negative once the push exceeds the
+weight.
 
 Example:
     >>> import mujoco, jax.numpy as jnp
@@ -56,9 +75,22 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["FRAME_COLUMNS", "FeatureSet", "FeatureSpec", "add_sensors"]
+__all__ = ["FRAMES", "FRAME_COLUMNS", "FeatureSet", "FeatureSpec", "add_sensors"]
 
 KINDS = ("body", "site", "joint")
+#: site quantity -> (sensor, columns of its (3,) vector, unit): forces and torques.
+_WRENCH_QUANTITIES: dict[str, tuple[str, tuple[int, ...], str]] = {
+    "force": ("force", (0, 1, 2), "N"),
+    "fx": ("force", (0,), "N"),
+    "fy": ("force", (1,), "N"),
+    "fz": ("force", (2,), "N"),
+    "torque": ("torque", (0, 1, 2), "N m"),
+    "tx": ("torque", (0,), "N m"),
+    "ty": ("torque", (1,), "N m"),
+    "tz": ("torque", (2,), "N m"),
+}
+#: frames a force or torque can be expressed in.
+FRAMES = ("sensor", "world")
 #: quantity -> (columns, unit) for bodies and sites; column = axis index or "yaw".
 _FRAME_QUANTITIES: dict[str, tuple[tuple[int | str, ...], str]] = {
     "xyz": ((0, 1, 2), "m"),
@@ -77,7 +109,7 @@ _JOINT_QUANTITIES = {
 FRAME_COLUMNS = {q: cols for q, (cols, _) in _FRAME_QUANTITIES.items()}
 QUANTITIES = {
     "body": tuple(_FRAME_QUANTITIES),
-    "site": tuple(_FRAME_QUANTITIES),
+    "site": (*_FRAME_QUANTITIES, *_WRENCH_QUANTITIES),
     "joint": tuple(_JOINT_QUANTITIES),
 }
 _JOINT_TYPE_NAMES = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}
@@ -98,15 +130,28 @@ class FeatureSpec:
         kind: ``"body"``, ``"site"`` or ``"joint"``.
         name: the element's name in the model.
         quantity: for bodies and sites ``"xyz"``, ``"xy"``, ``"x"``, ``"y"``, ``"z"``
-            or ``"yaw"``; for joints ``"angle"`` (hinge) or ``"position"`` (slide).
+            or ``"yaw"``; for sites also ``"force"``, ``"fx"``, ``"fy"``, ``"fz"``,
+            ``"torque"``, ``"tx"``, ``"ty"``, ``"tz"`` (a force/torque sensor on
+            the site; dynamic mode); for joints ``"angle"`` (hinge) or
+            ``"position"`` (slide).
+        frame: forces and torques only: ``"sensor"`` (the site's frame, default)
+            or ``"world"``.
+        scale: the feature's values are multiplied by it (default 1): a weight
+            between features of different units in the strategies' point
+            distances, e.g. 1/300 for a force beside positions in metres (the
+            CGDA authors' iron fitness counts 300 N like 1 m).  The column's name
+            says so (``"ft.fz/300 [N]"``: the force in N, divided by 300).
 
     Raises:
-        ValueError: an unknown kind or a quantity that the kind does not have.
+        ValueError: an unknown kind, a quantity that the kind does not have, or a
+            frame on a quantity that is not a force or torque.
     """
 
     kind: str
     name: str
     quantity: str
+    frame: str = "sensor"
+    scale: float = 1.0
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -120,6 +165,21 @@ class FeatureSpec:
                 f"{self.kind} {self.name!r}: quantity {self.quantity!r} unknown; "
                 f"a {self.kind} has {QUANTITIES[self.kind]}"
             )
+        if isinstance(self.scale, bool) or not isinstance(self.scale, (int, float)) \
+                or not np.isfinite(self.scale) or self.scale <= 0:
+            raise ValueError(f"{self.kind} {self.name!r}: scale must be a positive "
+                             f"number, got {self.scale!r}")
+        if self.frame not in FRAMES:
+            raise ValueError(f"{self.kind} {self.name!r}: frame {self.frame!r} "
+                             f"unknown; use one of {FRAMES}")
+        if self.frame != "sensor" and not self.is_wrench:
+            raise ValueError(f"{self.kind} {self.name!r}: a frame is only for forces "
+                             f"and torques, not quantity {self.quantity!r}")
+
+    @property
+    def is_wrench(self) -> bool:
+        """Whether this is a force or torque (read from the physics only)."""
+        return self.kind == "site" and self.quantity in _WRENCH_QUANTITIES
 
     @classmethod
     def from_dict(cls, entry: Mapping) -> FeatureSpec:
@@ -127,7 +187,8 @@ class FeatureSpec:
 
         Args:
             entry: exactly one of the keys ``body``, ``site``, ``joint`` (its value
-                the element's name) and ``quantity``.
+                the element's name) and ``quantity``; ``frame`` for a force or
+                torque (``{"site": "wrist_ft", "quantity": "fz"}``).
 
         Raises:
             ValueError: an unknown key, none or several of body/site/joint, or no
@@ -138,10 +199,11 @@ class FeatureSpec:
         if not isinstance(entry, Mapping):
             raise ValueError(f"a feature must be a dict like {{'body': 'box', "
                              f"'quantity': 'xy'}}, got {entry!r}")
-        bad = sorted(set(entry) - {*KINDS, "quantity"})
+        bad = sorted(set(entry) - {*KINDS, "quantity", "frame", "scale"})
         if bad:
             raise ValueError(f"feature {dict(entry)!r}: unknown key(s) {bad}; "
-                             f"allowed: 'body' | 'site' | 'joint', 'quantity'")
+                             f"allowed: 'body' | 'site' | 'joint', 'quantity', "
+                             f"'frame', 'scale'")
         kinds = [k for k in KINDS if k in entry]
         if len(kinds) != 1:
             raise ValueError(f"feature {dict(entry)!r}: give exactly one of the keys "
@@ -149,18 +211,36 @@ class FeatureSpec:
         if "quantity" not in entry:
             raise ValueError(f"feature {dict(entry)!r}: missing key 'quantity' "
                              f"(a {kinds[0]} has {QUANTITIES[kinds[0]]})")
-        return cls(kinds[0], entry[kinds[0]], entry["quantity"])
+        return cls(kinds[0], entry[kinds[0]], entry["quantity"],
+                   entry.get("frame", "sensor"), entry.get("scale", 1.0))
 
     def columns(self) -> tuple[str, ...]:
-        """Column names without units, e.g. ``("box.x", "box.y")``."""
+        """Column names without units, e.g. ``("box.x", "box.y")``; a scaled
+        feature's names end in ``/300`` (scale 1/300) or ``*2`` (scale 2)."""
+        cols = self._raw_columns()
+        if self.scale == 1:
+            return cols
+        inv = 1.0 / self.scale
+        tail = f"/{round(inv)}" if abs(inv - round(inv)) < 1e-9 * inv \
+            else f"*{self.scale:g}"
+        return tuple(c + tail for c in cols)
+
+    def _raw_columns(self) -> tuple[str, ...]:
         if self.kind == "joint":
             return (f"{self.name}.{self.quantity}",)
+        if self.is_wrench:
+            sensor, cols, _ = _WRENCH_QUANTITIES[self.quantity]
+            tail = "_world" if self.frame == "world" else ""
+            return tuple(f"{self.name}.{sensor[0]}{_AXES[c]}{tail}" for c in cols)
         cols = _FRAME_QUANTITIES[self.quantity][0]
         return tuple(f"{self.name}.{c if c == 'yaw' else _AXES[c]}" for c in cols)
 
     @property
     def unit(self) -> str:
-        """The unit of every column of this feature (``"m"`` or ``"rad"``)."""
+        """The unit of every column of this feature (``"m"``, ``"rad"``, ``"N"`` or
+        ``"N m"``)."""
+        if self.is_wrench:
+            return _WRENCH_QUANTITIES[self.quantity][2]
         table = _JOINT_QUANTITIES if self.kind == "joint" else _FRAME_QUANTITIES
         return table[self.quantity][1]
 
@@ -174,8 +254,25 @@ def _as_specs(specs: Sequence[FeatureSpec | Mapping]) -> tuple[FeatureSpec, ...]
     return out
 
 
+_WRENCH_SENSORS = {"force": mujoco.mjtSensor.mjSENS_FORCE,
+                   "torque": mujoco.mjtSensor.mjSENS_TORQUE}
+
+
+def _sensor_plans(spec: FeatureSpec, prefix: str) -> list[tuple[str, int, int]]:
+    """The sensors carrying one feature: its own, then (a force or torque in the
+    world frame) the site's ``framequat``."""
+    if not spec.is_wrench:
+        return [_sensor_plan(spec, prefix)]
+    sensor = _WRENCH_QUANTITIES[spec.quantity][0]
+    own = (f"{prefix}site:{spec.name}:{sensor}", _WRENCH_SENSORS[sensor],
+           _OBJ["site"])
+    if spec.frame == "sensor":
+        return [own]
+    return [own, _sensor_plan(FeatureSpec("site", spec.name, "yaw"), prefix)]
+
+
 def _sensor_plan(spec: FeatureSpec, prefix: str) -> tuple[str, int, int]:
-    """(sensor name, sensor type, object type) carrying one feature."""
+    """(sensor name, sensor type, object type) carrying one position-like feature."""
     kind, name = spec.kind, spec.name
     if kind == "joint":
         return f"{prefix}joint:{name}:pos", mujoco.mjtSensor.mjSENS_JOINTPOS, _OBJ[kind]
@@ -195,8 +292,9 @@ def add_sensors(
 
     A position (``xyz``/``xy``/``x``/``y``/``z``) becomes a ``framepos`` sensor (body
     frame for bodies), ``yaw`` a ``framequat`` sensor, a joint feature a ``jointpos``
-    sensor; several features of one element share a sensor, and sensors already in the
-    spec are kept.  After ``spec.compile()``, build `FeatureSet` on the compiled model
+    sensor, a force or torque a ``force`` / ``torque`` sensor on its site (plus the
+    site's ``framequat`` in the world frame); several features of one element share
+    a sensor, and sensors already in the spec are kept.  After ``spec.compile()``, build `FeatureSet` on the compiled model
     with the same ``prefix`` to read them with `FeatureSet.from_sensordata`.
 
     Args:
@@ -210,12 +308,12 @@ def add_sensors(
     existing = {s.name for s in spec.sensors}
     added = []
     for f in _as_specs(features):
-        name, stype, otype = _sensor_plan(f, prefix)
-        if name in existing:
-            continue
-        spec.add_sensor(name=name, type=stype, objtype=otype, objname=f.name)
-        existing.add(name)
-        added.append(name)
+        for name, stype, otype in _sensor_plans(f, prefix):
+            if name in existing:
+                continue
+            spec.add_sensor(name=name, type=stype, objtype=otype, objname=f.name)
+            existing.add(name)
+            added.append(name)
     return added
 
 
@@ -285,17 +383,29 @@ class FeatureSet:
         groups: dict[str, list] = {g: [] for g in
                                    ("body_pos", "site_pos", "body_yaw", "site_yaw",
                                     "qpos")}
-        sens: dict[str, list] = {"pos": [], "quat": []}
+        sens: dict[str, list] = {"pos": [], "quat": [], "wrench": [],
+                                 "wrench_quat": []}
         slots: list[tuple[str, int]] = []  # (group, index in group) per column
         sensor_ok = True
         for spec in self.specs:
             i = _resolve(mj_model, spec)
             names += [f"{c} [{spec.unit}]" for c in spec.columns()]
             units += [spec.unit] * len(spec.columns())
-            s_name, _, _ = _sensor_plan(spec, sensor_prefix)
-            s_id = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SENSOR, s_name)
-            sensor_ok &= s_id >= 0
-            adr = int(mj_model.sensor_adr[s_id]) if s_id >= 0 else 0
+            adrs = []
+            for s_name, _, _ in _sensor_plans(spec, sensor_prefix):
+                s_id = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SENSOR, s_name)
+                sensor_ok &= s_id >= 0
+                adrs.append(int(mj_model.sensor_adr[s_id]) if s_id >= 0 else 0)
+            adr = adrs[0]
+            if spec.is_wrench:  # sensordata only: (vector start, column, quat start)
+                for c in _WRENCH_QUANTITIES[spec.quantity][1]:
+                    slots.append(("wrench", len(sens["wrench"])))
+                    sens["wrench"].append([adr + k for k in range(3)])
+                    sens["wrench_quat"].append(
+                        [adrs[1] + k for k in range(4)] if len(adrs) > 1 else
+                        [-1] * 4)
+                    groups.setdefault("wrench_col", []).append(c)
+                continue
             if spec.kind == "joint":
                 slots.append(("qpos", len(groups["qpos"])))
                 groups["qpos"].append(int(mj_model.jnt_qposadr[i]))
@@ -311,31 +421,43 @@ class FeatureSet:
                     groups[group].append((i, c))
                     sens["pos"].append(adr + c)
                 slots.append((group, len(groups[group]) - 1))
+        scales = np.concatenate([[s.scale] * len(s.columns()) for s in self.specs])
+        #: (F,) the declared scales per column (None: all 1)
+        self._scales = None if np.all(scales == 1) else scales.astype(np.float32)
         self.feature_names = tuple(names)
         self.units = tuple(units)
         self.n_features = len(names)
         self.has_sensors = bool(sensor_ok)
+        #: the declared forces and torques (only `from_sensordata` reads them)
+        self.wrenches = tuple(s for s in self.specs if s.is_wrench)
+        wrench_col = groups.pop("wrench_col", [])
         self._groups = {
             g: np.asarray(v, dtype=np.int32).reshape(len(v), 2 if "_pos" in g else 1)
             for g, v in groups.items()
         }
         order = ("body_pos", "site_pos", "body_yaw", "site_yaw", "qpos")
         start = dict(zip(order, np.cumsum([0] + [len(groups[g]) for g in order])))
-        self._order = np.asarray([start[g] + k for g, k in slots], dtype=np.int32)
-        # sensordata: position-like columns (framepos, jointpos) then yaw columns.
+        self._order = np.asarray([start[g] + k for g, k in slots if g != "wrench"],
+                                 dtype=np.int32)
+        # sensordata: position-like columns (framepos, jointpos), yaw columns, then
+        # force/torque columns.
         self._sens_pos = np.asarray(sens["pos"], dtype=np.int32)
         self._sens_quat = np.asarray(sens["quat"], dtype=np.int32).reshape(-1, 4)
-        sens_slots, n_pos, n_yaw = [], 0, 0
+        self._sens_wrench = np.asarray(sens["wrench"], np.int32).reshape(-1, 3)
+        w_quat = np.asarray(sens["wrench_quat"], np.int32).reshape(-1, 4)
+        self._wrench_world = w_quat[:, 0] >= 0
+        self._sens_wrench_quat = np.maximum(w_quat, 0)
+        self._wrench_col = np.asarray(wrench_col, np.int32)
+        counts = {"pos": 0, "yaw": 0, "wrench": 0}
+        sens_slots = []
         for g, _ in slots:
-            if g.endswith("_yaw"):
-                sens_slots.append(("yaw", n_yaw))
-                n_yaw += 1
-            else:
-                sens_slots.append(("pos", n_pos))
-                n_pos += 1
-        self._sens_order = np.asarray(
-            [k if g == "pos" else n_pos + k for g, k in sens_slots], dtype=np.int32
-        )
+            g = "yaw" if g.endswith("_yaw") else g if g == "wrench" else "pos"
+            sens_slots.append((g, counts[g]))
+            counts[g] += 1
+        base = {"pos": 0, "yaw": counts["pos"],
+                "wrench": counts["pos"] + counts["yaw"]}
+        self._sens_order = np.asarray([base[g] + k for g, k in sens_slots],
+                                      dtype=np.int32)
 
     def __repr__(self) -> str:
         return f"FeatureSet({list(self.feature_names)})"
@@ -352,7 +474,17 @@ class FeatureSet:
 
         Returns:
             ``(F,)`` features in declared order (the dtype of ``data``).
+
+        Raises:
+            ValueError: the set holds forces or torques (they come from the
+                physics: `from_sensordata`, dynamic mode).
         """
+        if self.wrenches:
+            w = self.wrenches[0]
+            raise ValueError(
+                f"feature site {w.name!r} quantity {w.quantity!r}: forces and torques "
+                "come from the physics (MuJoCo force/torque sensors), not from "
+                "kinematics; use dynamic mode (robot.mode = 'dynamic')")
         g = self._groups
         parts = []
         if len(g["body_pos"]):
@@ -371,7 +503,10 @@ class FeatureSet:
             parts.append(_yaw_from_mat(data.site_xmat, g["site_yaw"][:, 0]))
         if len(g["qpos"]):
             parts.append(jnp.asarray(data.qpos)[g["qpos"][:, 0]])
-        return jnp.concatenate(parts)[self._order]
+        return self._scaled(jnp.concatenate(parts)[self._order])
+
+    def _scaled(self, values: Array) -> Array:
+        return values if self._scales is None else values * self._scales
 
     def from_sensordata(self, sensordata: Array) -> Array:
         """Features from one sensor vector of a model with `add_sensors`' sensors.
@@ -396,7 +531,21 @@ class FeatureSet:
         parts = [s[self._sens_pos]]
         if len(self._sens_quat):
             parts.append(_yaw_from_quat(s[self._sens_quat]))
-        return jnp.concatenate(parts)[self._sens_order]
+        if len(self._sens_wrench):
+            vec = s[self._sens_wrench]  # (W, 3) in the site's frame
+            if self._wrench_world.any():
+                world = _rotate(s[self._sens_wrench_quat], vec)
+                vec = jnp.where(self._wrench_world[:, None], world, vec)
+            parts.append(vec[np.arange(len(vec)), self._wrench_col])
+        return self._scaled(jnp.concatenate(parts)[self._sens_order])
+
+
+def _rotate(q: Array, v: Array) -> Array:
+    """Vectors ``v`` (..., 3) rotated by unit quaternions ``q`` (..., 4) (w, x, y,
+    z): ``v + 2 w (u x v) + 2 u x (u x v)`` with u the vector part."""
+    w, u = q[..., :1], q[..., 1:]
+    t = 2.0 * jnp.cross(u, v)
+    return v + w * t + jnp.cross(u, t)
 
 
 def _yaw_from_mat(xmat, ids: np.ndarray) -> Array:

@@ -10,8 +10,9 @@
   refuses (naming the element and pointing to dynamic mode, where the physics
   honours them) an active equality constraint (joint coupling, connect, weld,
   tendon) that involves an evolved joint or a body one moves; a limited tendon over
-  one; and a feature that no evolved joint moves: a free object, a valve's joint
-  (only contact could move them), so it would never change.
+  one; a feature that no evolved joint moves: a free object, a valve's joint
+  (only contact could move them), so it would never change; and a force or torque
+  (only the physics gives one).
 
 Tendons without a range only act through forces (springs, dampers, actuators),
 which kinematic mode has none of: they are allowed.
@@ -230,6 +231,11 @@ def _check_feature_moves(m, spec, evolved, moved, jname) -> None:
     i = mujoco.mj_name2id(m, obj, spec.name)
     if i < 0:
         return  # named by the feature set's own check
+    if getattr(spec, "is_wrench", False):
+        raise ValueError(
+            f"kinematic mode: feature site {spec.name!r} ({spec.quantity}) is a force "
+            "or torque: only the physics gives one. Use mode='dynamic' (robot.mode "
+            "= \"dynamic\")")
     if spec.kind == "joint":
         if i in evolved:
             return

@@ -9,7 +9,7 @@ the compiled ``mujoco.MjModel``.
 Object dicts (as in a config's ``[[world.objects]]``):
 
 ``piece`` (required)
-    a built-in piece, ``"box"``, ``"table"`` or ``"valve"`` (`list_pieces`; the files
+    a built-in piece, ``"box"``, ``"table"``, ``"valve"`` or ``"iron"`` (`list_pieces`; the files
     in ``models/objects/``), or the path of an MJCF file of your own.
 ``name``
     the object's name (default: the piece name, or the file's stem).  The piece's
@@ -20,6 +20,10 @@ Object dicts (as in a config's ``[[world.objects]]``):
 ``pos`` (required)
     ``[x, y, z]`` of the piece's frame in the world [m]: a box's centre, a table's top
     surface centre, a valve's hinge centre.
+``body`` (optional)
+    the name of a robot body to attach the piece to (a tool in the hand: the piece
+    is welded to that body and moves with it; ``pos`` and the orientation are then
+    in that body's frame); default: the world.
 ``euler`` / ``quat`` (optional, not both)
     the piece frame's orientation: ``[rx, ry, rz]`` in DEGREES, intrinsic x-y-z
     (MuJoCo's default ``eulerseq``), or ``[w, x, y, z]``.
@@ -30,6 +34,9 @@ piece parameters (optional; none for MJCF files of your own)
       surface to the feet [m] (0.6), ``friction`` (0.5), ``rgba``.
     - valve: ``radius`` of the wheel [m] (0.1), ``damping`` of the hinge [N m s/rad]
       (0.05), ``rgba``.
+    - iron: a tool for a hand (``body``): ``mass`` [kg] (1.0), ``friction`` of the
+      sole (0.3), ``rgba``; its force/torque sensor site ``"<name>/ft"`` sits at
+      its mount, its tool point ``"<name>/tcp"`` at the centre of the sole's face.
 
 Contacts: the pieces collide with each other through bit 1 (``contype`` and
 ``conaffinity`` 1: a box rests on and slides over a table); the valve's spoke and
@@ -67,7 +74,7 @@ OBJECTS_DIR = models_dir() / "objects"
 MAIN = "object"
 #: contype / conaffinity of the robot geoms named in ``contact_geoms``.
 ROBOT_CONTYPE, ROBOT_CONAFFINITY = 2, 1
-_COMMON_KEYS = ("piece", "name", "pos", "euler", "quat")
+_COMMON_KEYS = ("piece", "name", "pos", "body", "euler", "quat")
 
 
 def list_pieces() -> tuple[str, ...]:
@@ -137,6 +144,11 @@ def _table_layout(spec: mujoco.MjSpec, size=None, height=None) -> None:
         leg.pos = [sx * (hx - inset), sy * (hy - inset), -2 * hz - half]
 
 
+def _set_iron_mass(spec: mujoco.MjSpec, v: float) -> None:
+    """The sole carries the iron's mass (the handle is massless)."""
+    spec.geom(MAIN).mass = v
+
+
 def _set_valve_radius(spec: mujoco.MjSpec, r: float) -> None:
     spoke, handle, wheel = spec.geom(MAIN), spec.geom("handle"), spec.geom("wheel")
     spoke.size = [r / 2, *spoke.size[1:]]
@@ -164,6 +176,11 @@ PIECE_PARAMS: dict[str, dict[str, tuple[Callable, Callable]]] = {
         "size": (_vector("size", 3, positive=True),
                  lambda s, v: _table_layout(s, size=v)),
         "height": (_positive("height"), lambda s, v: _table_layout(s, height=v)),
+        "friction": (_positive("friction"), _set_friction),
+        "rgba": (_vector("rgba", 4), _set_rgba),
+    },
+    "iron": {
+        "mass": (_positive("mass"), _set_iron_mass),
         "friction": (_positive("friction"), _set_friction),
         "rgba": (_vector("rgba", 4), _set_rgba),
     },
@@ -249,7 +266,13 @@ def _attach(world: mujoco.MjSpec, obj: Mapping, index: int, taken: set[str]) -> 
                 setter(piece, check(obj[key]))
             except ValueError as err:
                 raise ValueError(f"{label}: {err}") from None
-    frame = world.worldbody.add_frame(pos=pos)
+    parent = world.worldbody
+    if "body" in obj:
+        parent = world.body(obj["body"]) if isinstance(obj["body"], str) else None
+        if parent is None:
+            raise ValueError(f"{label}: 'body' {obj['body']!r} not found; the robot "
+                             f"has bodies {[b.name for b in world.bodies if b.name]}")
+    frame = parent.add_frame(pos=pos)
     if quat is not None:
         frame.quat = quat
     world.attach(piece, prefix=f"{name}/", frame=frame)

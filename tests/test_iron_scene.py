@@ -1,0 +1,85 @@
+"""The ironing pieces (issue 41): a tool with a force sensor pressing on a plate, in
+physics, reaches a set force."""
+
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from cgda_jax.sim.simulator import Simulator
+from cgda_jax.sim.robot import Robot, model_path
+from cgda_jax.sim.scenes import ObjectScene
+from cgda_jax.sim.world import compile_world
+from cgda_jax.strategies import run_ie
+
+# the tiny arm with an iron (0.2 kg) at the tip of its forearm, sole down when the
+# forearm points down, over a plate whose surface is at z = -0.12
+OBJECTS = [
+    {"piece": "table", "name": "plate", "pos": [0.3, 0.0, -0.12],
+     "size": [0.15, 0.15, 0.01], "height": 0.1},
+    {"piece": "iron", "body": "link2", "pos": [0, 0, 0.3375], "euler": [180, 0, 0],
+     "mass": 0.2},
+]
+FEATURES = [{"site": "iron/tcp", "quantity": "xyz"},
+            {"site": "iron/ft", "quantity": "fz", "frame": "world", "scale": 0.01}]
+
+
+@pytest.fixture(scope="module")
+def sim():
+    robot = Robot.from_world(model_path("tiny_arm.xml"), OBJECTS,
+                             ["yaw", "shoulder", "elbow"], "marker", {})
+    return Simulator(robot, ObjectScene(FEATURES), mode="dynamic", timestep=0.004,
+                     waypoint_s=1.0, physics="mujoco")
+
+
+def test_iron_piece_on_a_hand():
+    m = compile_world(model_path("tiny_arm.xml"), OBJECTS)
+    iron = m.body("iron")
+    assert m.body(int(iron.parentid[0])).name == "link2"  # welded to the forearm
+    assert m.body("iron").jntnum[0] == 0
+    assert m.geom("iron").contype[0] == 2 and m.geom("iron").conaffinity[0] == 1
+    assert float(m.body_subtreemass[iron.id]) == pytest.approx(0.2)
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    # the sensor at the tip of the forearm, the tool point 0.0875 m beyond it
+    np.testing.assert_allclose(d.site("iron/ft").xpos, d.site("marker").xpos,
+                               atol=1e-9)
+    np.testing.assert_allclose(d.site("iron/tcp").xpos,
+                               d.site("marker").xpos + [0, 0, 0.0875], atol=1e-9)
+    with pytest.raises(ValueError, match="'body' 'hand' not found"):
+        compile_world(model_path("tiny_arm.xml"),
+                      [{"piece": "iron", "body": "hand", "pos": [0, 0, 0]}])
+
+
+def test_force_feature_reads_weight_and_pressing(sim):
+    """In the air the sensor carries the iron's weight (+m g, world z); pressed on
+    the plate, the push beyond it."""
+    st = sim.init_state()
+    _, air = sim.step(st, jnp.radians(jnp.array([0.0, 40.0, 120.0])))
+    assert float(air[3]) * 100 == pytest.approx(0.2 * 9.81, abs=0.05)
+    _, press = sim.step(st, jnp.radians(jnp.array([0.0, 60.0, 120.0])))
+    assert float(press[3]) * 100 < -10.0
+    assert float(press[2]) > -0.12  # the tool point stays above the plate's surface
+
+
+def test_tiny_arm_presses_a_set_force(sim):
+    """IE evolves the posture that presses the plate with -15 N (world z) at a set
+    point: within 1 N and 1 cm (scale 0.01: 1 N counts as 1 cm, tolerance 0.01)."""
+    st = sim.init_state()
+    _, air = sim.step(st, jnp.radians(jnp.array([0.0, 45.0, 110.0])))
+    _, near = sim.step(st, jnp.radians(jnp.array([0.0, 58.0, 120.0])))
+    goal = np.array([np.asarray(air), [*np.asarray(near)[:3], -15.0 * 0.01]])
+    res = run_ie(sim, goal, population_size=12, tolerance=0.01, max_generations=30,
+                 seed=0)
+    feats = np.asarray(res.features)
+    assert res.success, res.point_errors
+    np.testing.assert_allclose(feats[1, 3] / 0.01, -15.0, atol=1.0)
+    np.testing.assert_allclose(feats[:, :3], goal[:, :3], atol=0.01)
+    assert feats[0, 3] / 0.01 > 0  # the first point in the air
+
+
+def test_kinematic_mode_refuses_a_force():
+    robot = Robot.from_world(model_path("tiny_arm.xml"), OBJECTS,
+                             ["yaw", "shoulder", "elbow"], "marker", {})
+    with pytest.raises(ValueError, match="only the physics gives one"):
+        Simulator(robot, ObjectScene(FEATURES))
