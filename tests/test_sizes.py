@@ -261,3 +261,27 @@ print(sorted(keep), sorted(overlapping))
                           env={**os.environ, "JAX_PLATFORMS": "cpu"})
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert proc.stdout.strip() == "[('g20', 'floor')] []"
+
+
+def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
+    """`cgda run clean_ie --trials 200` passed the check and died allocating 3.05 GB:
+    the motion check's pairs held about 146 floats a pair and posture, the estimate
+    counted 1. The estimate (`sim_estimate`, the one rule of the API and of
+    --dry-run) must cover XLA's own count of the compiled programs (temporaries and
+    outputs of init, chunk and finish) with feasibility on, and not by more than 3x."""
+    from cgda_jax.strategies import IEPlan, IESettings
+    from cgda_jax.strategies.runner import compile_plan, plan_estimate, seed_keys
+
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), JOINTS, "marker")
+    sim = Simulator(robot, MarkerScene(), substeps=2, feasibility=True)
+    assert sim.feasibility.collider.n_pairs > 0
+    plan = IEPlan(sim, jnp.asarray(goal, jnp.float32),
+                  IESettings(population_size=8, max_generations=20, restarts=0))
+    held = {}
+    for trials in (2, 4):
+        progs = compile_plan(plan, seed_keys(list(range(trials))))
+        held[trials] = sum(p.memory_analysis().temp_size_in_bytes
+                           + p.memory_analysis().output_size_in_bytes for p in progs)
+    per_trial = (held[4] - held[2]) / 2
+    est = plan_estimate(plan, 1).nbytes
+    assert per_trial <= est <= 3 * per_trial, (per_trial, est)

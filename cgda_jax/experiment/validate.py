@@ -46,7 +46,6 @@ from cgda_jax.sizes import (
     check_processes,
     check_recognition,
     check_samples,
-    run_estimate,
     samples_estimate,
 )
 
@@ -309,24 +308,17 @@ def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
 
 def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | None,
                     processes: int, local: bool) -> None:
-    """What the run will hold at once (`cgda_jax.sizes.run_estimate`) within XLA's
-    32-bit sizes and the memory of each process; `processes` against the cores."""
-    from cgda_jax.sizes import dynamic_width, motion_width
+    """What the run will hold at once (`cgda_jax.strategies.runner.sim_estimate`)
+    within XLA's 32-bit sizes and the memory of each process; `processes` against
+    the cores."""
+    from cgda_jax.strategies.runner import sim_estimate
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)
-    backend = getattr(sim.backend, "name", None)
-    feas = getattr(sim, "feasibility", None)
     n = trials or 1
     share = -(-n // max(processes, 1))  # each process batches its own seeds
-    est = run_estimate(
-        trials=share, population=s.population_size, points=n_points,
-        features=sim.n_features, dof=sim.n_dof, bodies=sim.robot.mj_model.nbody,
-        strategy=s.name, samples=samples,
-        dynamic_width=dynamic_width(sim.robot.mj_model) if backend == "mjx" else 0,
-        motion_width=0 if feas is None else motion_width(
-            feas.samples, 0 if feas.collider is None else feas.collider.n_pairs,
-            0 if feas.collider is None else sim.robot.mj_model.ngeom, sim.n_dof))
+    est = sim_estimate(sim, trials=share, population=s.population_size,
+                       points=n_points, strategy=s.name, samples=samples)
     name = ("--trials" if trials and trials > 1
             else "keys 'strategy.population_size' and 'feasibility.samples'"
             if est.part == "motion"

@@ -81,7 +81,13 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
-from cgda_jax.sizes import Estimate, check_estimate, dynamic_width, run_estimate
+from cgda_jax.sizes import (
+    Estimate,
+    check_estimate,
+    dynamic_width,
+    motion_width,
+    run_estimate,
+)
 from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.result import ExecutionResult, SimulationDiverged
 
@@ -298,23 +304,38 @@ def check_divergence(results: list[ExecutionResult]) -> None:
     )
 
 
-def plan_estimate(plan: Any, n_trials: int) -> Estimate:
-    """What `n_trials` trials of `plan` in one batch hold at once
-    (`cgda_jax.sizes.run_estimate`)."""
-    sim = plan.sim
+def sim_estimate(sim: Any, *, trials: int, population: int, points: int,
+                 strategy: str, samples: int = 0) -> Estimate:
+    """What `trials` trials on `sim` in one batch hold at once
+    (`cgda_jax.sizes.run_estimate`): the widths read from the simulator (its
+    bodies, physics state and motion check). The one rule for a plan
+    (`plan_estimate`) and for a config's checks (``cgda run --dry-run``)."""
     robot = getattr(sim, "robot", None)
     model = getattr(robot, "mj_model", None)
+    backend = getattr(getattr(sim, "backend", None), "name", None)
+    feas = getattr(sim, "feasibility", None)
+    collider = getattr(feas, "collider", None)
+    return run_estimate(
+        trials=trials, population=population, points=points,
+        features=int(sim.n_features), dof=int(sim.n_dof),
+        bodies=int(model.nbody) if model is not None else 1, strategy=strategy,
+        samples=samples,
+        dynamic_width=(dynamic_width(model) if backend == "mjx" and model is not None
+                       else 0),
+        motion_width=0 if feas is None else motion_width(
+            feas.samples, 0 if collider is None else collider.n_pairs,
+            0 if collider is None or model is None else model.ngeom,
+            int(sim.n_dof)))
+
+
+def plan_estimate(plan: Any, n_trials: int) -> Estimate:
+    """What `n_trials` trials of `plan` in one batch hold at once (`sim_estimate`)."""
     samples = int(getattr(plan, "restart_samples", 0) or 0)
     if getattr(plan, "init_mode", None) in ("sampled", "reach"):
         samples = max(samples, int(plan.init_samples))
-    backend = getattr(getattr(sim, "backend", None), "name", None)
-    return run_estimate(
-        trials=n_trials, population=int(plan.info["population_size"]),
-        points=plan.n_points, features=int(sim.n_features), dof=plan.n_dof,
-        bodies=int(model.nbody) if model is not None else 1, strategy=plan.name,
-        samples=samples,
-        dynamic_width=(dynamic_width(model) if backend == "mjx" and model is not None
-                       else 0))
+    return sim_estimate(plan.sim, trials=n_trials,
+                        population=int(plan.info["population_size"]),
+                        points=plan.n_points, strategy=plan.name, samples=samples)
 
 
 def check_seeds(seeds: Any) -> list[int]:
