@@ -321,4 +321,8 @@ def test_absurd_gains_from_the_cli_exit_3_with_one_line(tmp_path, capsys, monkey
     code = main(["run", str(cfg), "--out", str(tmp_path / "out"), "--quiet"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 3
+    # the model has no speed or effort limits: one warning says so before the run
+    assert [w for w in err if w.startswith("cgda: warning:")] == [
+        w for w in err if "no speed limit" in w] and len(err) == 2
+    err = [e for e in err if not e.startswith("cgda: warning:")]
     assert len(err) == 1 and err[0].startswith("cgda: error:") and "diverge" in err[0]

@@ -12,26 +12,31 @@ import jax.numpy as jnp
 from cgda_jax.sim import Robot, model_path
 from cgda_jax.sim.feasibility import Feasibility
 
-CHECK = ("import jax, cgda_jax.sim.robot, cgda_jax.strategies; "
-         "print(jax.config.jax_default_matmul_precision)")
+IMPORT = "import jax, cgda_jax.sim.robot, cgda_jax.strategies; "
+BUILD = ("from cgda_jax import Robot, model_path; Robot.from_mjcf(model_path("
+         "'tiny_arm.xml'), ['yaw', 'shoulder', 'elbow'], 'marker'); ")
+PRINT = "print(jax.config.jax_default_matmul_precision)"
 
 
-def _precision_after_import(env_value=None) -> str:
+def _precision_after(code: str, env_value=None) -> str:
     env = {k: v for k, v in os.environ.items() if k != "JAX_DEFAULT_MATMUL_PRECISION"}
     if env_value is not None:
         env["JAX_DEFAULT_MATMUL_PRECISION"] = env_value
     env["JAX_PLATFORMS"] = "cpu"
-    out = subprocess.run([sys.executable, "-c", CHECK], env=env, capture_output=True,
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, timeout=120, check=True)
     return out.stdout.strip().splitlines()[-1]
 
 
-def test_importing_the_simulator_asks_for_full_float32_products():
-    assert _precision_after_import() == "highest"
+def test_importing_changes_no_setting_building_a_robot_asks_for_full_float32():
+    """The precision is set where programs are built (a Robot, a plan), not as a
+    side effect of an import."""
+    assert _precision_after(IMPORT + PRINT) == "None"
+    assert _precision_after(IMPORT + BUILD + PRINT) == "highest"
 
 
 def test_a_precision_the_user_chose_is_kept():
-    assert _precision_after_import("bfloat16") == "bfloat16"
+    assert _precision_after(IMPORT + BUILD + PRINT, "bfloat16") == "bfloat16"
 
 
 def _dot_precisions(jaxpr) -> list:

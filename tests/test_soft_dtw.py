@@ -99,7 +99,7 @@ def test_bad_input_is_refused_like_dtw():
         soft_dtw(x, bad)
     with pytest.raises(ValueError, match="feature counts"):
         soft_dtw(x, np.zeros((3, 3)))
-    with pytest.raises(ValueError, match="gamma must be > 0"):
+    with pytest.raises(ValueError, match="gamma must be a float32 number > 0"):
         soft_dtw(x, x, 0.0)
     with pytest.raises(ValueError, match="shape"):
         soft_dtw(np.zeros((2, 2, 2)), x)

@@ -318,7 +318,7 @@ def test_iet_commits_best_try_when_every_try_fails(sim):
         ({"tolerance": -1.0}, "tolerance"),
         ({"max_generations": 0}, "max_generations"),
         ({"algorithm_params": {"no_such": 1.0}}, "no_such"),
-        ({"aim": 0.0}, "aim must be in \\(0, 1\\]"),
+        ({"aim": 0.0}, "aim must be a finite number in \\(0, 1\\]"),
         ({"aim": 1.5}, "aim"),
     ],
 )
