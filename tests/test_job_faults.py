@@ -276,7 +276,7 @@ import os
 if os.environ.get("CGDA_PROCESS_ID") is not None:  # the job's workers only
     import cgda_jax.experiment.trials as trials
 
-    def trial_records(cfg, seeds, progress_fn=None):
+    def trial_records(cfg, seeds, progress_fn=None, built=None):
         if os.environ["CGDA_PROCESS_ID"] == os.environ["FAIL_ON"]:
             raise ValueError("planned failure of process " + os.environ["FAIL_ON"])
         return [{"seed": s, "success": True, "max_point_error": 0.0,
