@@ -137,3 +137,24 @@ def test_diverged_simulation_exits_3_with_one_line(monkeypatch, capsys, tmp_path
     assert code == 3
     assert err.startswith("cgda: error: every one of the 96") and err.count("\n") == 1
     assert "Traceback" not in err
+
+
+def test_warnings_go_to_the_stderr_of_each_call(monkeypatch):
+    """`cgda` called twice in one process (pytest, a notebook): the warning handler
+    made by the first call wrote to that call's stderr, closed by then, and the
+    second printed a "Logging error" report instead of its warning."""
+    import io
+    import logging
+    import sys
+
+    from cgda_jax.cli.output import log_warnings
+
+    first = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", first)
+    log_warnings()
+    first.close()
+    second = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", second)
+    log_warnings()
+    logging.getLogger("cgda_jax").warning("%s", "no speed limit for yaw")
+    assert second.getvalue() == "cgda: warning: no speed limit for yaw\n"

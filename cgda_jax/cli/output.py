@@ -38,11 +38,26 @@ def diverged(err: BaseException) -> bool:
     return mod is not None and isinstance(err, mod.SimulationDiverged)
 
 
+class _StderrHandler(logging.StreamHandler):
+    """A stream handler on whatever ``sys.stderr`` is at each write (a plain
+    `logging.StreamHandler` keeps the stderr of when it was made: called again in
+    one process, e.g. under pytest's capture, it wrote to a closed stream and
+    printed a "Logging error" report instead of the warning)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:  # set by StreamHandler.__init__: ignored
+        pass
+
+
 def log_warnings() -> None:
     """Library warnings (logger ``cgda_jax``) as ``cgda: warning: ...`` lines."""
     logger = logging.getLogger("cgda_jax")
-    if not logger.handlers:
-        handler = logging.StreamHandler()  # resolves sys.stderr at each write
+    if not any(isinstance(h, _StderrHandler) for h in logger.handlers):
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("cgda: warning: %(message)s"))
         logger.addHandler(handler)
         logger.propagate = False
