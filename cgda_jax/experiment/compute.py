@@ -6,6 +6,7 @@ What is drawn and written from them (figures, video, ``result.json``,
 
 from __future__ import annotations
 
+import functools
 import json
 import pathlib
 import time
@@ -101,7 +102,7 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
     factor x the sub-steps; default `REPLAY_FACTOR`): the features must agree, or
     the optimiser exploited the resolution it was evaluated at."""
     fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
-    feats = np.asarray(fine.execute(np.asarray(res.joints, np.float32)), np.float64)
+    feats = np.asarray(replayed_features(fine, res.joints), np.float64)
     errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
     out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
            else {"substeps": fine.substeps})
@@ -110,6 +111,27 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
         "max_point_error": float(errors.max()),
         "success": bool(np.all(errors < res.tolerance)),
     }
+
+
+def replayed_features(sim, joints) -> np.ndarray:
+    """Features (N, F) of executing ``joints`` (N, DoF) on ``sim`` from its start,
+    its moves not judged (``Simulator.step(judge=False)``: the features are the
+    same, the collision check is not compiled): one program, compiled once a
+    process for the same simulator and shape (`cgda_jax.programs.jit_call`)."""
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import jit_call
+    from cgda_jax.sim.sim_state import check_waypoints
+
+    joints = jnp.asarray(np.asarray(joints, np.float32))
+    check_waypoints(joints, sim.robot)
+
+    def features(waypoints):
+        step = functools.partial(sim.step, judge=False)
+        return jax.lax.scan(step, sim.init_state(), waypoints)[1]
+
+    return np.asarray(jit_call(features, joints))
 
 
 #: The control rate of the exported trajectory a run checks [Hz].

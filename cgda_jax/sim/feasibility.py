@@ -49,6 +49,7 @@ joint limits to respect the speed and acceleration limits
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Mapping, Sequence
@@ -306,15 +307,20 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     start: checking more pairs is safe, a grid that grows as a power of the joint
     count is not (2**30 postures would not fit in memory).
 
+    The start posture's distances are one program (`cgda_jax.programs.jit_call`:
+    compiled once per process for the same robot); the grid's bounds are NumPy
+    for pairs of moving geoms and one batched call a geom kind for the others.
+
     Returns:
         (kept pair names, overlapping pair names).
     """
+    from cgda_jax.programs import jit_call
     from cgda_jax.sim.geoms import geom_bound, geom_ids, geom_shape
 
     if collider.n_pairs == 0:
         return [], []
     m = robot.mj_model
-    d0 = np.asarray(jax.jit(collider.distances)(jnp.asarray(robot.start_genes)))
+    d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes)))
     overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
     gid = geom_ids(m)
     obs = {o.name: o for o in obstacles}
@@ -335,27 +341,48 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     data.qpos[:] = qpos0  # the constant geoms' poses, below
     mujoco.mj_kinematics(m, data)
     spacing = (upper - lower) / (n - 1)
-    keep = []
+    bound = np.full(collider.n_pairs, np.inf)  # min over the grid of the bound
+    fixed: dict[str, list] = {}  # kind: [(pair, size, local points, radius)]
     for k, (a, b) in enumerate(collider.pair_names):
         if (a, b) in overlapping:
             continue
-        slack = float(collider.pair_reach[k] @ spacing) / 2.0
         ga = gid[a]
         ra = geom_bound(m, ga)
         moving_b = b in gid and np.any(np.ptp(centres[:, gid[b]], axis=0) > 1e-9)
         if moving_b:
             gb = gid[b]
-            rb = geom_bound(m, gb)
-            lb = np.linalg.norm(centres[:, ga] - centres[:, gb], axis=-1) - ra - rb
-        elif b in gid:
+            bound[k] = np.min(np.linalg.norm(centres[:, ga] - centres[:, gb], axis=-1)
+                              - ra - geom_bound(m, gb))
+            continue
+        if b in gid:
             gb = gid[b]
             kind, size, centre = geom_shape(m, gb)
             R = data.geom_xmat[gb].reshape(3, 3)
-            lb = _sdf(kind, size, R, data.geom_xpos[gb] + R @ centre,
-                      centres[:, ga]) - ra
+            p = data.geom_xpos[gb] + R @ centre
         else:
+            kind = obs[b].type
             R, p, size = obs[b].frame()
-            lb = _sdf(obs[b].type, size, R, p, centres[:, ga]) - ra
-        if float(np.min(lb)) - slack <= 0.0:
-            keep.append((a, b))
+        fixed.setdefault(kind, []).append(
+            (k, np.resize(np.asarray(size, np.float32), 3), (centres[:, ga] - p) @ R,
+             ra))
+    for kind, rows in fixed.items():
+        ks, sizes, local, radii = zip(*rows)
+        d = np.asarray(_batched_sdf(kind, jnp.asarray(np.stack(sizes)),
+                                    jnp.asarray(np.stack(local), jnp.float32)),
+                       np.float64)  # (pairs of this kind, nodes)
+        bound[list(ks)] = d.min(axis=1) - np.asarray(radii)
+    slack = collider.pair_reach @ spacing / 2.0
+    keep = [p for k, p in enumerate(collider.pair_names)
+            if p not in overlapping and float(bound[k]) - float(slack[k]) <= 0.0]
     return keep, overlapping
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _batched_sdf(kind: str, size: Array, x: Array) -> Array:
+    """Signed distances (P, K) from points ``x`` (P, K, 3), each row in its geom's
+    frame, to geoms of one ``kind`` with sizes ``size`` (P, 3):
+    `cgda_jax.sim.primitive_distances.sdf_local`."""
+    from cgda_jax.sim.primitive_distances import sdf_local
+
+    one = jax.vmap(lambda s, y: sdf_local(kind, s, y), in_axes=(None, 0))
+    return jax.vmap(one)(size, x)

@@ -102,6 +102,8 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     import jax
     import jax.numpy as jnp
 
+    from cgda_jax.programs import jit_call
+
     feas = getattr(sim, "feasibility", None)
     collider = getattr(feas, "collider", None)
     if collider is None:
@@ -115,8 +117,9 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     k = max(2, int(sim.substeps) * int(factor))
     alphas = np.arange(1, k + 1) / k
     path = q_all[:-1, None] + alphas[None, :, None] * np.diff(q_all, axis=0)[:, None]
-    d = np.asarray(jax.jit(jax.vmap(jax.vmap(collider.distances)))(
-        jnp.asarray(path, jnp.float32)), np.float64)  # (N, K, pairs)
+    # (N, K, pairs): one program, compiled once a process for a collider and shape
+    d = np.asarray(jit_call(jax.vmap(jax.vmap(collider.distances)),
+                            jnp.asarray(path, jnp.float32)), np.float64)
     move, step, pair = np.unravel_index(int(np.argmin(d)), d.shape)
     worst = float(d[move, step, pair])
     per_move = d.min(axis=(1, 2))

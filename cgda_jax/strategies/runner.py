@@ -80,6 +80,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
+from cgda_jax.programs import compile_lowered
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
 from cgda_jax.sizes import (
     Estimate,
@@ -163,12 +164,11 @@ def compile_plan(
         init_kw = {"in_shardings": sharding, "out_shardings": cs}
         chunk_kw = {"in_shardings": (cs,), "out_shardings": (cs, ms)}
         carry_kw = {"in_shardings": (cs,)}
-    return (
-        jax.jit(over_trials(plan.init), **init_kw).lower(keys).compile(),
-        jax.jit(chunk, **chunk_kw).lower(carry_shape).compile(),
-        jax.jit(all_done, **carry_kw).lower(carry_shape).compile(),
-        jax.jit(over_trials(plan.finish), **carry_kw).lower(carry_shape).compile(),
-    )
+    return tuple(  # a program compiled before in this process is reused
+        compile_lowered(jax.jit(f, **kw).lower(x)) for f, kw, x in (
+            (over_trials(plan.init), init_kw, keys), (chunk, chunk_kw, carry_shape),
+            (all_done, carry_kw, carry_shape),
+            (over_trials(plan.finish), carry_kw, carry_shape)))
 
 
 def report_progress(progress_fn: Callable[[dict[str, Any]], None] | None, plan: Any,
@@ -466,7 +466,7 @@ class _Programs:
         key = (name, str(key))
         if key not in self.cache:
             t0 = time.perf_counter()
-            self.cache[key] = jax.jit(fn).lower(*args).compile()
+            self.cache[key] = compile_lowered(jax.jit(fn).lower(*args))
             self.compile_s += time.perf_counter() - t0
         return self.cache[key]
 
