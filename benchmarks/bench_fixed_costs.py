@@ -17,7 +17,8 @@ not need"), in one command:
 3. ``--demo``: ``cgda demo`` the same way (``--small`` passes ``--small``; targets
    for the full demo: <= 20 s empty, <= 10 s filled).
 
-Prints the load average at each start: the figures of a loaded machine are not
+Works on any checkout (``PYTHONPATH=/path/to/checkout`` measures another one, e.g.
+``git archive main``).  Prints the load average at each start: the figures of a loaded machine are not
 comparable with an idle one's; compare runs taken back to back.
 """
 
@@ -71,7 +72,12 @@ def _timed_phases(spent: dict[str, float]) -> None:
 def in_process(name: str, repeats: int) -> list[dict]:
     from cgda_jax.builtin import resolve_config
     from cgda_jax.experiment import load_config
-    from cgda_jax.programs import cache_stats
+
+    try:  # a checkout before the program cache (PYTHONPATH=...) has none
+        from cgda_jax.programs import cache_stats
+    except ImportError:
+        def cache_stats():
+            return {"hits": 0, "misses": 0}
 
     spent: dict[str, float] = {}
     _timed_phases(spent)

@@ -6,7 +6,8 @@ experiment run again in one process would compile every program again (clean_ie:
 12 programs, most of a second run's time).  `compile_lowered` keys a compiled
 program by its lowered StableHLO text instead (constants included, no source
 locations), its argument and result trees, and the backend and devices, the
-same content JAX's persistent cache keys on: a program identical to one compiled
+and every argument's type (an unused argument is pruned from the text but
+still checked by the call), the same content JAX's persistent cache keys on: a program identical to one compiled
 before in the process is taken from memory, and any difference (another goal,
 another robot, another population size, a constant changed by a setting) gives
 another text and a fresh compile.  Tracing and lowering still run (a few tenths
@@ -46,8 +47,11 @@ def _key(lowered: jax.stages.Lowered) -> str | None:
     if "callback" in text:  # host callbacks: named by index, not by what they do
         return None
     devices = [(d.platform, d.id) for d in jax.devices()]
+    # every argument's type: an unused one is left out of the text, not the call
+    args = [(a.shape, str(a.dtype), a.donated)
+            for a in jax.tree.leaves(lowered.args_info)]
     h = hashlib.sha256(text.encode())
-    h.update(repr((str(lowered.in_tree), str(lowered.out_tree), devices,
+    h.update(repr((str(lowered.in_tree), str(lowered.out_tree), args, devices,
                    jax.default_backend())).encode())
     return h.hexdigest()
 

@@ -53,6 +53,16 @@ def test_the_same_program_is_compiled_once_another_is_not_shared():
     assert isinstance(pair, tuple) and len(pair) == 2
 
 
+def test_an_unused_argument_of_another_shape_gets_its_own_program():
+    """An argument the program does not read is pruned from its text; a call
+    with another shape of it must not take the first program."""
+    clear_programs()
+    for n in (3, 5):
+        out = jit_call(lambda state, path: state + 1.0, jnp.zeros(2), jnp.zeros(n))
+        np.testing.assert_array_equal(out, np.ones(2))
+    assert cache_stats()["misses"] == 2
+
+
 def test_programs_with_host_callbacks_are_never_shared():
     clear_programs()
 

@@ -54,9 +54,22 @@ class SceneTracker:
             def go(st, path):
                 return jax.lax.scan(lambda s, m: (scene.update(s, m), None), st,
                                     path)[0]
-            self._advance = jax.jit(go)
+            self._go = go
         else:
-            self._advance = jax.jit(self._sweep)
+            self._go = self._sweep
+        self._programs: dict[tuple, object] = {}  # per path length
+
+    def _advance(self, state, path):
+        """``_go`` compiled once per path shape (a program compiled before in the
+        process for the same scene is reused: `cgda_jax.programs`)."""
+        import jax
+
+        from cgda_jax.programs import compile_lowered
+
+        if path.shape not in self._programs:
+            self._programs[path.shape] = compile_lowered(
+                jax.jit(self._go).lower(state, path))
+        return self._programs[path.shape](state, path)
 
     def advance(self, markers: np.ndarray) -> np.ndarray:
         """Move the marker through ``markers`` (K, 3), K >= 1 (a paint wall sweeps
