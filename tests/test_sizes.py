@@ -270,7 +270,7 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
     --dry-run) must cover XLA's own count of the compiled programs (temporaries and
     outputs of init, chunk and finish) with feasibility on, and not by more than 3x."""
     from cgda_jax.strategies import IEPlan, IESettings
-    from cgda_jax.strategies.runner import compile_plan, plan_estimate, seed_keys
+    from cgda_jax.strategies.runner import compile_plan, seed_keys
 
     robot = Robot.from_mjcf(model_path("tiny_arm.xml"), JOINTS, "marker")
     sim = Simulator(robot, MarkerScene(), substeps=2, feasibility=True)
@@ -283,5 +283,5 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
         held[trials] = sum(p.memory_analysis().temp_size_in_bytes
                            + p.memory_analysis().output_size_in_bytes for p in progs)
     per_trial = (held[4] - held[2]) / 2
-    est = plan_estimate(plan, 1).nbytes
+    est = plan.estimate(1).nbytes
     assert per_trial <= est <= 3 * per_trial, (per_trial, est)
