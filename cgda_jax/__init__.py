@@ -52,7 +52,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     "cgda_jax.experiment.load": ("Run", "load_run"),
     "cgda_jax.experiment.export": ("export_trajectory", "check_exported"),
     # from simulation to a robot: export, replay, a mismatched world
-    "cgda_jax.reality.export": ("ExportedTrajectory", "time_parameterize"),
+    "cgda_jax.reality.control_trajectory": ("ExportedTrajectory", "time_parameterize"),
     "cgda_jax.reality.files": ("load_trajectory", "save_trajectory"),
     "cgda_jax.reality.replay": ("replay_trajectory",),
     "cgda_jax.reality.protocol": ("Reality", "Measurement", "RealityError"),

@@ -65,7 +65,7 @@ def cmd_export(args, session: Session) -> int:
 
     from cgda_jax.experiment.export import check_exported, export_trajectory
     from cgda_jax.experiment.load import load_run
-    from cgda_jax.reality.export import RATE_RANGE
+    from cgda_jax.reality.control_trajectory import RATE_RANGE
     from cgda_jax.results_folder.rules import expand
     from cgda_jax.reality.files import load_trajectory, save_trajectory
 

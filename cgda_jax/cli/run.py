@@ -123,7 +123,7 @@ def cmd_run(args, session: Session) -> int:
     extra = ["reality.enabled=true"] if getattr(args, "reality", False) else []
     cfg = load_config(resolve_config(args.config), [*args.overrides, *extra])
     if args.trials is not None:
-        from cgda_jax.experiment.trials import check_trials
+        from cgda_jax.experiment.success_rate import check_trials
 
         check_trials(cfg, args.trials)
     processes, local = _job_size(args)

@@ -1,7 +1,7 @@
 """``cgda run CONFIG --trials N [--processes P]``: the success rate of N seeds.
 
 The N seeds (``strategy.seed``, +1, ...) run in one batched call
-(`cgda_jax.experiment.trials`). With ``--processes P`` (P > 1) this process checks
+(`cgda_jax.experiment.success_rate`). With ``--processes P`` (P > 1) this process checks
 the config and takes the results folder (lock, temporary folder: a folder that is
 not empty, in use or not writable is refused before any worker starts), then starts
 P local copies of itself as one `jax.distributed` job (`cgda_jax.launch`); each
@@ -165,7 +165,7 @@ def run_trials_command(cfg, args, session: Session, open_folder, chosen,
             None: each process builds its own).
     """
     from cgda_jax import distributed
-    from cgda_jax.experiment.trials import check_trials
+    from cgda_jax.experiment.success_rate import check_trials
 
     n = check_trials(cfg, args.trials)
     if _launching(args):
@@ -229,7 +229,7 @@ def _run_share(cfg, session: Session, n: int, built=None) -> tuple[list[dict], i
     import jax
 
     from cgda_jax import distributed
-    from cgda_jax.experiment.trials import trial_records
+    from cgda_jax.experiment.success_rate import trial_records
     from cgda_jax.progress import ProgressLine
 
     seeds = [cfg.strategy.seed + i for i in range(n)]
@@ -264,7 +264,7 @@ def _run_share(cfg, session: Session, n: int, built=None) -> tuple[list[dict], i
 
 
 def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
-    from cgda_jax.experiment.trials import write_trials
+    from cgda_jax.experiment.success_rate import write_trials
 
     return write_trials(cfg, records, folder,
                         {"total_time_s": time.perf_counter() - t0, "processes": procs})

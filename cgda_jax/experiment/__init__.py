@@ -22,7 +22,7 @@ another's ``_private`` name:
    ``[robot]``, ...), one typed dataclass each, with their defaults.
 2. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
    overrides (`merge_table`).
-3. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
+3. :mod:`~cgda_jax.experiment.demo_suite`: the experiments of ``cgda demo`` (configs).
 4. :mod:`~cgda_jax.experiment.locate`: the files and folders a config names (model,
    data folder, demonstration files, recordings per action).
 5. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
@@ -42,7 +42,7 @@ another's ``_private`` name:
     drawn from what its folder stores (also ``cgda plot``).
 13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-14. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+14. :mod:`~cgda_jax.experiment.success_rate`: many seeds of one experiment (``cgda
     trials``).
 
 The results folder itself (its rules, writing it aside, reading its files back) is
@@ -79,7 +79,7 @@ from cgda_jax.experiment.config import (
     load_config as load_config,
     merge_table as merge_table,
 )
-from cgda_jax.experiment.demo import (
+from cgda_jax.experiment.demo_suite import (
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
 )
