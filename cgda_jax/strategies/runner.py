@@ -13,6 +13,10 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 - ``max_generations_total``: an upper bound on generations (loop guard).
 - ``n_points``: goal points (reported to ``progress_fn`` as ``points``).
 
+and, from `cgda_jax.strategies.base.PlanBase`, what every driver asks of it:
+``report_progress`` (``progress_fn`` after a chunk), ``split_results`` (a batch's
+results per trial) and ``estimate`` (what a batch holds, checked before compiling).
+
 `run_plan` is the entry every run shares (`cgda_jax.strategies.run`): it checks the goal,
 builds the plan from its settings and drives it for a list of seeds.
 
