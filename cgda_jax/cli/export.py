@@ -1,7 +1,7 @@
 """``cgda export RUN_FOLDER``: the run's result as a trajectory file a robot
 controller can take (CSV, JSON with a ROS ``JointTrajectory``, NPZ), checked by its
 replay on MuJoCo C.  Argument parsing and messages only; the trajectory is
-`cgda_jax.experiment.export`'s, its files `cgda_jax.reality.files`'."""
+`cgda_jax.experiment.trajectory_file`'s, its files `cgda_jax.reality.files`'."""
 
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def cmd_export(args, session: Session) -> int:
     the replay missed it (errors are raised and reported by `cgda_jax.cli`)."""
     import math
 
-    from cgda_jax.experiment.export import check_exported, export_trajectory
+    from cgda_jax.experiment.trajectory_file import check_exported, export_trajectory
     from cgda_jax.experiment.load import load_run
     from cgda_jax.reality.control_trajectory import RATE_RANGE
     from cgda_jax.results_folder.rules import expand
@@ -98,8 +98,8 @@ def cmd_export(args, session: Session) -> int:
     say(session, f"[{run.name}] {traj.n_samples} samples at {traj.rate:g} Hz, "
         f"{traj.duration:.2f} s, joints {', '.join(traj.joint_names)} -> {out}")
     for s in traj.info["stretched"]:
-        say(session, f"[{run.name}] move {s['move']} takes {s['export_s']:.2f} s, longer "
-            f"than the run's {s['run_s']:.2f} s: the robot's limits need it")
+        say(session, f"[{run.name}] move {s['move']} takes {s['export_s']:.2f} s, "
+            f"longer than the run's {s['run_s']:.2f} s: the robot's limits need it")
     if args.no_check:
         return 0
     check = check_exported(run, load_trajectory(out), sim=sim)

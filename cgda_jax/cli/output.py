@@ -205,10 +205,10 @@ class SignalWatcher:
 
     The thread is woken through `signal.set_wakeup_fd` (the Python handlers left
     do nothing); it abandons the results folder this process holds
-    (`Session.run_folder`: `~cgda_jax.results_folder.writing.RunFolder.abandon`), says the one
-    line unless ``quiet`` (a launched worker: its launcher speaks) and exits with
-    130 / 143 through `os._exit`, skipping JAX's exit-time shutdown, which would
-    wait for the other processes.
+    (`Session.run_folder`: `~cgda_jax.results_folder.writing.RunFolder.abandon`),
+    says the one line unless ``quiet`` (a launched worker: its launcher speaks) and
+    exits with 130 / 143 through `os._exit`, skipping JAX's exit-time shutdown,
+    which would wait for the other processes.
     """
 
     def __init__(self, session: Session, quiet: bool = False):

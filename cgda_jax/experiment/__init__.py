@@ -36,7 +36,7 @@ another's ``_private`` name:
    execution run (and the replay on a finer simulator).
 9. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
 10. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-11. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+11. :mod:`~cgda_jax.experiment.trajectory_file`: a run as a controller's trajectory file
     (`export_trajectory`, `check_exported`; ``cgda export``).
 12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
@@ -83,7 +83,7 @@ from cgda_jax.experiment.demo_suite import (
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
 )
-from cgda_jax.experiment.export import (
+from cgda_jax.experiment.trajectory_file import (
     check_exported as check_exported,
     export_trajectory as export_trajectory,
 )

@@ -5,8 +5,8 @@
     >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
 
 The trajectory itself is `cgda_jax.reality.control_trajectory`'s (straight
-joint-space moves with the run's timing, on its minimum-jerk ramp or ruckig's profile); its files are
-`cgda_jax.reality.files`'.
+joint-space moves with the run's timing, on its minimum-jerk ramp or ruckig's
+profile); its files are `cgda_jax.reality.files`'.
 """
 
 from __future__ import annotations
@@ -60,8 +60,8 @@ def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *
 
     Returns:
         `cgda_jax.reality.control_trajectory.ExportedTrajectory` (positions,
-        velocities and accelerations of the evolved joints, from the start posture through every
-        waypoint, each held as long as the run held it).
+        velocities and accelerations of the evolved joints, from the start posture
+        through every waypoint, each held as long as the run held it).
 
     Raises:
         FolderError: not a results folder; ValueError: a recognition run, or joints
