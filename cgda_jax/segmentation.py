@@ -25,10 +25,14 @@ in which several library actions follow each other (with or without pauses) into
    so around each gap between two actions (and before the first, after the last)
    the samples are fitted by an explicit model of a human motion's ends: the object
    held still, then leaving (or, before, reaching) its rest along a minimum-jerk
-   profile (Flash & Hogan 1985) over the action's duration, each feature with its
-   own amplitude (linear least squares); the end and start times of least residual
-   are searched jointly, on every sample within a share of the action's duration of
-   the search's boundaries.
+   profile (Flash & Hogan 1985) over the action's duration; the end and start
+   times of least residual are searched jointly, on every sample within a share of
+   the action's duration of the search's boundaries. Where a feature changes
+   monotonically over an action (its net change is most of its range), that change
+   is the profile's amplitude: fixed, the profile's curvature places the onset (a
+   free amplitude lets a steep end pass for a longer, larger profile and the
+   boundary slide into the pause after it); a feature that goes and comes back
+   (CLEAN's circle) has its amplitude fitted (linear least squares).
 
 Rests are dropped from the result; each action segment says its start and end in
 the recording's time unit (seconds) and its cost.
@@ -72,13 +76,19 @@ _STARTS_PER_CHUNK = 64
 #: `refine_boundaries`: a boundary moves at most this share of its action's
 #: (search) duration; the samples fitted reach this share into each action.
 _REACH = 0.25
-_INTO = 0.3
+_INTO = 0.2
 #: `refine_boundaries`: rounds of refitting (each centres its window on the last).
 _ROUNDS = 10
 #: (end, start) pairs of candidate times fitted in one vectorised step.
 _PAIRS_PER_CHUNK = 512
 #: `refine_boundaries`: candidate times per side in the coarse pass.
 _COARSE = 24
+#: `refine_boundaries`: an action's net change is measured on the samples within
+#: this share of its duration of each end (medians) ...
+_LEVEL = 0.05
+#: ... and fixed in the fit for the features whose net change is at least this
+#: share of their range over the action (the others go and come back: fitted).
+_MONOTONE = 0.8
 
 
 class Segment(NamedTuple):
@@ -392,14 +402,16 @@ def _min_jerk(u: np.ndarray) -> np.ndarray:
 def _fit_gap(t, y, end, start, box_end, box_start):
     """The (end, start) times of least residual around one gap.
 
-    ``end``: (estimate, duration) of the action before the gap, or None (the gap
-    opens the recording); ``start``: the same for the action after it, or None (it
-    closes the recording). ``box_*``: (lowest, highest) allowed time. The samples
-    from ``_INTO`` durations before the end to ``_INTO`` after the start (1 s of
-    rest where a side is missing) are fitted by, per feature, a constant plus an
-    amplitude times the minimum-jerk descent ending at ``t1`` (over the previous
-    action's duration) plus one times the rise starting at ``t0``; ``t1 <= t0``.
-    Returns ``(t1, t0)``, None for a missing side.
+    ``end``: (estimate, duration, amplitudes (F,)) of the action before the gap,
+    or None (the gap opens the recording); ``start``: the same for the action
+    after it, or None (it closes the recording). ``box_*``: (lowest, highest)
+    allowed time. The samples from ``_INTO`` durations before the end to
+    ``_INTO`` after the start (1 s of rest where a side is missing) are fitted by,
+    per feature, a constant plus an amplitude times the minimum-jerk descent
+    ending at ``t1`` (over the previous action's duration) plus one times the rise
+    starting at ``t0``; ``t1 <= t0``. An amplitude is the given one (the action's
+    net change, negated for the descent) where that is finite, fitted where it
+    is NaN. Returns ``(t1, t0)``, None for a missing side.
     """
     lo = end[0] - _INTO * end[1] if end else start[0] - 1.0
     hi = start[0] + _INTO * start[1] if start else end[0] + 1.0
@@ -424,30 +436,62 @@ def _fit_gap(t, y, end, start, box_end, box_start):
 def _best_pair(tt, yy, end, start, c1, c0):
     """`_fit_gap`'s search over the candidate end times ``c1`` and start times
     ``c0`` (``[nan]`` for a missing side): the (t1, t0) of least residual, or None
-    when no pair is allowed."""
+    when no pair is allowed. The features are fitted in groups by which of their
+    amplitudes are fixed: the fixed profiles are subtracted, the constant and the
+    free amplitudes solved by least squares."""
     t1, t0 = (v.ravel() for v in np.meshgrid(c1, c0, indexing="ij"))
     ok = np.isnan(t1) | np.isnan(t0) | (t1 <= t0)
     t1, t0 = t1[ok], t0[ok]
     if t1.size == 0:
         return None
-    total = float(np.sum(yy**2))
     best, arg = np.inf, None
+    amp1 = end[2] if end else np.full(yy.shape[1], np.nan)
+    amp0 = start[2] if start else np.full(yy.shape[1], np.nan)
+    groups = [(f1, f0, np.flatnonzero((np.isnan(amp1) == f1) & (np.isnan(amp0) == f0)))
+              for f1 in (False, True) for f0 in (False, True)]
+    groups = [g for g in groups if g[2].size]
     for i in range(0, t1.size, _PAIRS_PER_CHUNK):
         a, b = t1[i:i + _PAIRS_PER_CHUNK], t0[i:i + _PAIRS_PER_CHUNK]
-        cols = [np.ones((a.size, tt.size))]
-        if end:
-            cols.append(_min_jerk((a[:, None] - tt[None]) / end[1]))
-        if start:
-            cols.append(_min_jerk((tt[None] - b[:, None]) / start[1]))
-        x = np.stack(cols, -1)  # (pairs, samples, basis)
-        xt = x.transpose(0, 2, 1)
-        gram = xt @ x + 1e-12 * np.eye(x.shape[-1])
-        rhs = xt @ yy[None]
-        residual = total - np.sum(rhs * np.linalg.solve(gram, rhs), axis=(1, 2))
+        m1 = (_min_jerk((a[:, None] - tt[None]) / end[1]) if end
+              else np.zeros((a.size, tt.size)))
+        m0 = (_min_jerk((tt[None] - b[:, None]) / start[1]) if start
+              else np.zeros((a.size, tt.size)))
+        residual = np.zeros(a.size)
+        for free1, free0, f in groups:
+            yf = yy[None, :, f]
+            if not free1 and end:
+                yf = yf - m1[:, :, None] * amp1[f]
+            if not free0 and start:
+                yf = yf - m0[:, :, None] * amp0[f]
+            cols = [np.ones((a.size, tt.size))]
+            if free1 and end:
+                cols.append(m1)
+            if free0 and start:
+                cols.append(m0)
+            x = np.stack(cols, -1)  # (pairs, samples, basis)
+            xt = x.transpose(0, 2, 1)
+            gram = xt @ x + 1e-12 * np.eye(x.shape[-1])
+            rhs = xt @ yf
+            residual += (np.sum(yf**2, axis=(1, 2))
+                         - np.sum(rhs * np.linalg.solve(gram, rhs), axis=(1, 2)))
         j = int(np.argmin(residual))
         if residual[j] < best:
             best, arg = residual[j], (a[j], b[j])
     return arg
+
+
+def _amplitude(t, y, start, end, duration):
+    """(F,) each feature's net change over the action ``start .. end`` (medians of
+    the samples within ``_LEVEL`` of its duration of each end), NaN for a feature
+    whose net change is below ``_MONOTONE`` of its range over the action (it goes
+    and comes back: its amplitude is fitted)."""
+    half = _LEVEL * duration
+    before = np.median(y[(t >= start - half) & (t <= start)], axis=0)
+    after = np.median(y[(t >= end) & (t <= end + half)], axis=0)
+    inside = y[(t >= start) & (t <= end)]
+    delta = after - before
+    span = np.ptp(inside, axis=0) if inside.shape[0] else np.abs(delta)
+    return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
 def refine_boundaries(recording: Demonstration,
@@ -457,10 +501,15 @@ def refine_boundaries(recording: Demonstration,
     Each gap between two segments (and the stretches before the first and after
     the last) is fitted by the object at rest between a minimum-jerk end of the
     action before and a minimum-jerk start of the action after (`segment`, step
-    4), each feature in units of its noise; the end and start times (samples of the
-    recording, the end not after the start) within ``0.25`` of each action's
-    duration of the given boundaries are chosen jointly by least residual, the
-    window recentred and refitted until it settles (at most 10 rounds).
+    4), each feature in units of its noise, on the samples from 0.2 of the
+    actions' durations inside them; a feature's amplitude is the action's net
+    change (medians of the samples within 5 % of its duration of the given start
+    and end) where that is at least 80 % of the feature's range over the action,
+    fitted otherwise. The end and start times (samples of the recording, the end
+    not after the start) within ``0.25`` of each action's duration of the given
+    boundaries are chosen jointly by least residual, the window recentred and
+    refitted, with each action's duration and net change measured anew, until it
+    settles (at most 10 rounds).
 
     Args:
         recording: the recording the segments were found in.
@@ -482,10 +531,12 @@ def refine_boundaries(recording: Demonstration,
     starts = [s.start for s in segments]
     ends = [s.end for s in segments]
     for _ in range(_ROUNDS):
+        dur = [b - a for a, b in zip(starts, ends)]  # the profiles' durations
+        amp = [_amplitude(t, y, a, b, d) for a, b, d in zip(starts, ends, dur)]
         new_starts, new_ends = list(starts), list(ends)
         for g in range(n + 1):
-            before = (ends[g - 1], dur[g - 1]) if g > 0 else None
-            after = (starts[g], dur[g]) if g < n else None
+            before = (ends[g - 1], dur[g - 1], -amp[g - 1]) if g > 0 else None
+            after = (starts[g], dur[g], amp[g]) if g < n else None
             t1, t0 = _fit_gap(t, y, before, after,
                               box[g - 1][2:] if g > 0 else None,
                               box[g][:2] if g < n else None)

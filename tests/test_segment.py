@@ -136,11 +136,9 @@ def test_synthetic_sequences_are_segmented(library, pause_s):
     # the refinement is what brings the boundaries near the 10 % target: the
     # search alone is ~10 % off at the median (README, bench_sequence.py)
     assert np.median(errs) <= 0.05 < np.median(raw_errs), (errs, raw_errs)
-    # the target (every boundary within 10 %) is NOT met on every recording: here
-    # 21 of 22 actions, one at 43 % (seed 103 with pauses); the benchmark's 80
-    # actions: 91 % within 10 %, worst 38 %
-    assert np.mean(np.asarray(errs) <= 0.1) >= 0.9, errs
-    assert max(errs) <= 0.5, errs
+    # the target: every boundary within 10 % of its action's duration (the
+    # benchmark's 2 x 80 actions: all but one, worst 11.8 %)
+    assert max(errs) <= 0.1, errs
 
 
 def test_refinement_finds_minimum_jerk_ends_exactly():
