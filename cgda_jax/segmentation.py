@@ -48,6 +48,7 @@ References:
 
 from __future__ import annotations
 
+import copy
 import functools
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -555,6 +556,8 @@ def execute_sequence(
     sim: Any,
     goals: Sequence[Any],
     run: Callable[..., Any] | Sequence[Callable[..., Any]],
+    *,
+    carry_state: bool = True,
     **settings: Any,
 ) -> list[Any]:
     """Execute goals one after another, each starting where the previous left the
@@ -562,7 +565,15 @@ def execute_sequence(
 
     Goal ``k > 0`` is moved (every point by the same offset) so that its first point
     is the last feature point that execution ``k - 1`` reached; the first goal is
-    executed as given. A thin composition: each goal is one call of a strategy.
+    executed as given. With ``carry_state`` (the default), execution ``k > 0`` also
+    starts from the simulator state in which execution ``k - 1`` ended: its posture
+    and its scene's state (the paint wall's painted squares), so a second PAINT
+    goes on painting the wall the first one left, from where the arm stands. That
+    state is what the strategy's simulator gives as `init_state()` (the
+    incrementally evolved strategies, IET and OET, start there; IE's batched
+    executions start from the robot's start posture, and a spatial goal is
+    carried by its moved first point). A thin composition: each goal is one call
+    of a strategy.
 
     Args:
         sim: the simulator every goal is executed on (same features as the goals).
@@ -570,6 +581,9 @@ def execute_sequence(
             recognized actions (``library[s.action].knots`` for each `Segment`).
         run: a strategy function (`cgda_jax.strategies.run_ie`, ``run_iet``, ...)
             called as ``run(sim, goal, **settings)``, or one per goal.
+        carry_state: start each execution after the first from the previous one's
+            final state (its joints replayed on the simulator); False: every
+            execution starts from ``sim.init_state()``.
         **settings: passed to every call (population_size, tolerance, seed, ...).
 
     Returns:
@@ -593,11 +607,31 @@ def execute_sequence(
                 n_features is not None and g.shape[1] != n_features):
             raise ValueError(f"execute_sequence: goal {k} has shape {g.shape}; "
                              f"expected (N, {n_features}) for this simulator")
-    results, here = [], None
+    results, here, current = [], None, sim
     for goal, fn in zip(goals, runs):
         if here is not None:
             goal = goal - goal[0] + here
-        result = fn(sim, goal, **settings)
+        result = fn(current, goal, **settings)
         results.append(result)
         here = np.asarray(result.features)[-1]
+        joints = np.asarray(result.joints)
+        if carry_state and np.all(np.isfinite(joints)):
+            final = current.rollout(joints, current.init_state())[1]
+            current = _continued(sim, final)
     return results
+
+
+def _continued(sim: Any, state: Any) -> Any:
+    """A shallow copy of ``sim`` whose `init_state()` (no posture given) is
+    ``state``, a previous execution's final state, with its feasibility
+    violations cleared (each execution is judged on its own moves)."""
+    if getattr(state, "violation", None) is not None:
+        zero = jnp.float32(0.0)
+        state = state.replace(violation=zero, move_violation=zero)
+    other = copy.copy(sim)
+
+    def init_state(genes0=None):
+        return state if genes0 is None else sim.init_state(genes0)
+
+    other.init_state = init_state
+    return other
