@@ -58,6 +58,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.data import Demonstration
+from cgda_jax.numerics import min_jerk_np
 from cgda_jax.recognition import METRICS, ActionLibrary
 from cgda_jax.sizes import check_recognition
 
@@ -394,12 +395,6 @@ def segment(
     return refine_boundaries(recording, found) if refine else found
 
 
-def _min_jerk(u: np.ndarray) -> np.ndarray:
-    """Minimum-jerk progress ``10 u^3 - 15 u^4 + 6 u^5`` of ``u`` clipped to [0, 1]."""
-    u = np.clip(u, 0.0, 1.0)
-    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
-
-
 def _fit_gap(t, y, end, start, box_end, box_start):
     """The (end, start) times of least residual around one gap.
 
@@ -453,9 +448,9 @@ def _best_pair(tt, yy, end, start, c1, c0):
     groups = [g for g in groups if g[2].size]
     for i in range(0, t1.size, _PAIRS_PER_CHUNK):
         a, b = t1[i:i + _PAIRS_PER_CHUNK], t0[i:i + _PAIRS_PER_CHUNK]
-        m1 = (_min_jerk((a[:, None] - tt[None]) / end[1]) if end
+        m1 = (min_jerk_np((a[:, None] - tt[None]) / end[1]) if end
               else np.zeros((a.size, tt.size)))
-        m0 = (_min_jerk((tt[None] - b[:, None]) / start[1]) if start
+        m0 = (min_jerk_np((tt[None] - b[:, None]) / start[1]) if start
               else np.zeros((a.size, tt.size)))
         residual = np.zeros(a.size)
         for free1, free0, f in groups:
