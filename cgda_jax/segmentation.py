@@ -564,11 +564,9 @@ def execute_sequence(
     starts from the simulator state in which execution ``k - 1`` ended: its posture
     and its scene's state (the paint wall's painted squares), so a second PAINT
     goes on painting the wall the first one left, from where the arm stands. That
-    state is what the strategy's simulator gives as `init_state()` (the
-    incrementally evolved strategies, IET and OET, start there; IE's batched
-    executions start from the robot's start posture, and a spatial goal is
-    carried by its moved first point). A thin composition: each goal is one call
-    of a strategy.
+    state is what the strategy's simulator gives as `init_state()`, where every
+    strategy starts its executions. A thin composition: each goal is one call of
+    a strategy.
 
     Args:
         sim: the simulator every goal is executed on (same features as the goals).
