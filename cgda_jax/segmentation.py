@@ -373,7 +373,7 @@ def segment(
         >>> x = np.r_[np.minimum(t[:41], 2), 2 + np.minimum(t[1:41], 2)]  # up, up
         >>> segs = segment(Demonstration(t, x, ("x",)), lib, step_s=0.1)
         >>> [(s.action, round(s.start, 1), round(s.end, 1)) for s in segs]
-        [('up', 0.1, 1.7), ('up', 1.9, 3.7)]
+        [('up', 0.0, 2.1), ('up', 2.1, 4.0)]
     """
     grid_t, lengths, costs = segment_costs(
         recording, library, metric=metric, n_samples=n_samples, step_s=step_s,
