@@ -63,20 +63,42 @@ import numpy as np
 from jax import Array
 
 from cgda_jax.sim.chain import body_chain_ops
-from cgda_jax.sim.primitive_distances import KINDS, error_bound, pair_distance, swap_needed
 from cgda_jax.sim.geoms import (
     GEOM_KINDS,
     Obstacle,
+    closed_form_bounds,
+    cover_excess,
     geom_name,
     geom_radius,
     geom_reach,
     geom_shape,
     quat_mat,
+    round_cover,
+)
+from cgda_jax.sim.primitive_distances import (
+    BASE_ERROR,
+    KINDS,
+    error_bound,
+    pair_distance,
+    swap_needed,
 )
 
 __all__ = ["GEOM_KINDS", "Collider", "Obstacle", "geom_radius", "geom_reach"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+
+
+def _pieces(kind: str, size, moving: bool, rounded: bool) -> list:
+    """The shapes a table entry is checked as (`geoms.Piece`s, in its frame):
+    itself; with ``rounded`` a moving geom's `round_cover` (a plane stays one)
+    and a still geom's `closed_form_bounds`."""
+    if rounded and moving and kind != "plane":
+        return round_cover(kind, size)
+    if rounded and not moving:
+        return closed_form_bounds(kind, size)
+    return [(kind, size, np.eye(3), np.zeros(3))]
+
+
 def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
     """Compose folded chain ops (`cgda_jax.sim.chain.ChainOp`) onto a frame."""
     for op in ops:
@@ -129,7 +151,8 @@ class Collider:
 
     def __init__(self, robot, obstacles: Sequence[Obstacle] = (), *,
                  self_collision: bool = True, exclude: Sequence[str] = (),
-                 only: Sequence[tuple[str, str]] | None = None):
+                 only: Sequence[tuple[str, str]] | None = None,
+                 rounded: bool = False):
         m = robot.mj_model
         self.n_dof = int(robot.n_dof)
         joint_ids = [int(j) for j in robot.joint_ids]
@@ -232,7 +255,8 @@ class Collider:
         self.pair_names = tuple((table_names[a], table_names[b]) for a, b in pairs)
         self.pair_types = tuple((table_types[a], table_types[b]) for a, b in pairs)
         self.error_bounds = np.array(
-            [error_bound(table_types[a], sizes[a], table_types[b], sizes[b])
+            [BASE_ERROR if rounded else
+             error_bound(table_types[a], sizes[a], table_types[b], sizes[b])
              for a, b in pairs])
 
         # body frames: each needed body from its nearest moving ancestor
@@ -265,29 +289,68 @@ class Collider:
             self._body_plan.append((b, r, ops))
         slot = {b: k for k, b in enumerate(self._bodies)}
         used = sorted({a for a, _ in pairs} | {b for _, b in pairs if b < n_mov})
-        self.geom_names = (tuple(table_names[a] for a in used)
-                           + tuple(table_names[n_mov:]))
-        self._mov_body = np.asarray([slot[int(m.geom_bodyid[mov[a]])] for a in used],
-                                    np.int32)
-        self._mov_pos = np.asarray(
-            [m.geom_pos[mov[a]] + quat_mat(m.geom_quat[mov[a]]) @ shape[mov[a]][2]
-             for a in used], np.float32).reshape(-1, 3)
-        self._mov_rot = np.asarray(
-            [quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
-        self._const_R = np.asarray(c_R, np.float32).reshape(-1, 3, 3)
-        self._const_p = np.asarray(c_p, np.float32).reshape(-1, 3)
+        # the table: used moving geoms, then the constants (and obstacles); each
+        # entry checked as one or more pieces (`_pieces`)
+        tab = [(table_types[a], sizes[a]) for a in used] + [
+            (table_types[n_mov + c], sizes[n_mov + c]) for c in range(len(c_R))]
+        pieces = [_pieces(k, sz, t < len(used), rounded) for t, (k, sz) in enumerate(tab)]
+        self.rounded = bool(rounded)
+        excess = np.asarray([
+            cover_excess(k, sz, t < len(used)) if rounded else 0.0
+            for t, (k, sz) in enumerate(tab)])
+        piece_names = [
+            [table_names[n] if len(ps) == 1 else f"{table_names[n]}[{i}]"
+             for i in range(len(ps))]
+            for n, ps in zip(used + list(range(n_mov, len(table_names))), pieces,
+                             strict=True)]
+        self.geom_names = tuple(x for names_t in piece_names for x in names_t)
+        mov_body, mov_pos, mov_rot, p_R, p_p, kinds, psize = [], [], [], [], [], [], []
+        for t, ps in enumerate(pieces):
+            if t < len(used):
+                g = mov[used[t]]
+                gR = quat_mat(m.geom_quat[g])
+                gp = m.geom_pos[g] + gR @ shape[g][2]
+            else:
+                gR, gp = c_R[t - len(used)], c_p[t - len(used)]
+            for kind, size, R, pos in ps:
+                kinds.append(kind)
+                psize.append(size)
+                if t < len(used):
+                    mov_body.append(slot[int(m.geom_bodyid[mov[used[t]]])])
+                    mov_rot.append(gR @ R)
+                    mov_pos.append(gp + gR @ pos)
+                else:
+                    p_R.append(gR @ R)
+                    p_p.append(gp + gR @ pos)
+        self._mov_body = np.asarray(mov_body, np.int32)
+        self._mov_pos = np.asarray(mov_pos, np.float32).reshape(-1, 3)
+        self._mov_rot = np.asarray(mov_rot, np.float32).reshape(-1, 3, 3)
+        self._const_R = np.asarray(p_R, np.float32).reshape(-1, 3, 3)
+        self._const_p = np.asarray(p_p, np.float32).reshape(-1, 3)
+        first = np.cumsum([0] + [len(ps) for ps in pieces])
 
-        # pairs grouped by (type a, type b) in pair_distance's order, table indices
-        # remapped: used moving geoms first, then the constants
+        # rows: every piece of a pair's first entry against every piece of its
+        # second, grouped by (kind a, kind b) in pair_distance's order
         remap = {a: k for k, a in enumerate(used)}
         remap.update({n_mov + c: len(used) + c for c in range(len(c_R))})
         groups: dict[tuple[str, str], list] = {}
+        grid = []  # per pair: (its rows' numbers (pieces a, pieces b), join by max)
+        n_rows = 0
         for n, (a, b) in enumerate(pairs):
-            ta, tb = table_types[a], table_types[b]
-            if swap_needed(ta, tb):
-                a, b, ta, tb = b, a, tb, ta
-            groups.setdefault((ta, tb), []).append((n, remap[a], remap[b],
-                                                    sizes[a], sizes[b]))
+            ta, tb = remap[a], remap[b]
+            cells = np.empty((first[ta + 1] - first[ta], first[tb + 1] - first[tb]),
+                             np.int64)
+            for i, ia in enumerate(range(first[ta], first[ta + 1])):
+                for j, ib in enumerate(range(first[tb], first[tb + 1])):
+                    ka, kb, x, y = kinds[ia], kinds[ib], ia, ib
+                    if swap_needed(ka, kb):
+                        x, y, ka, kb = y, x, kb, ka
+                    groups.setdefault((ka, kb), []).append((n_rows, x, y, psize[x],
+                                                            psize[y]))
+                    cells[i, j] = n_rows
+                    n_rows += 1
+            # a still geom's bounds hold it together: the largest distance counts
+            grid.append((cells, rounded and tb >= len(used) and cells.shape[1] > 1))
         self._groups = [
             (ta, tb, np.asarray([e[1] for e in g], np.int32),
              np.asarray([e[2] for e in g], np.int32),
@@ -295,7 +358,22 @@ class Collider:
              np.asarray([e[4] for e in g], np.float32))
             for (ta, tb), g in groups.items()]
         order = np.concatenate([[e[0] for e in g] for g in groups.values()] or [[]])
-        self._inverse = np.argsort(order).astype(np.int32)
+        self._inverse = np.argsort(order).astype(np.int32)  # rows, in row order
+        self._reduce = None
+        if n_rows > len(pairs):  # some pair has several rows: (pairs, Pa, Pb)
+            pa = max(c.shape[0] for c, _ in grid)
+            pb = max(c.shape[1] for c, _ in grid)
+            idx = np.zeros((len(pairs), pa, pb), np.int32)
+            valid = np.zeros((len(pairs), pa, pb), bool)
+            for n, (cells, _) in enumerate(grid):
+                idx[n, :cells.shape[0], :cells.shape[1]] = self._inverse[cells]
+                valid[n, :cells.shape[0], :cells.shape[1]] = True
+            self._reduce = (idx, valid, np.asarray([j for _, j in grid], bool))
+        self.excess = np.asarray([excess[remap[a]] + excess[remap[b]]
+                                  for a, b in pairs], np.float64)
+        self.pair_reach = self.pair_reach + np.asarray(
+            [excess[remap[a]] * (reach[a] > 0) + excess[remap[b]] * (reach[b] > 0)
+             for a, b in pairs], np.float64).reshape(-1, self.n_dof)
 
     def __repr__(self) -> str:
         return f"Collider(n_pairs={self.n_pairs}, bodies={len(self._bodies)})"
@@ -350,7 +428,16 @@ class Collider:
             out.append(jax.vmap(one)(ia, ib, sa, sb))
         if not out:
             return jnp.zeros((0,), jnp.float32)
-        return jnp.concatenate(out)[self._inverse]
+        rows = jnp.concatenate(out)
+        if self._reduce is None:
+            return rows[self._inverse]
+        # a union of pieces: the nearest; a still geom's bounds: the farthest
+        idx, valid, join_max = self._reduce
+        d = rows[idx]  # (pairs, pieces a, pieces b)
+        inner = jnp.where(join_max[:, None],
+                          jnp.max(jnp.where(valid, d, -jnp.inf), axis=-1),
+                          jnp.min(jnp.where(valid, d, jnp.inf), axis=-1))
+        return jnp.min(jnp.where(valid.any(-1), inner, jnp.inf), axis=-1)
 
     def min_distance(self, genes: Array) -> tuple[Array, Array]:
         """The worst (smallest) signed distance and its pair's index.
