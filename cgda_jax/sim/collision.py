@@ -62,6 +62,13 @@ import mujoco
 import numpy as np
 from jax import Array
 
+from cgda_jax.sim.box_distances import (
+    dot3,
+    mat_mul3,
+    mat_vec3,
+    segment_box_min,
+    to_local,
+)
 from cgda_jax.sim.chain import body_chain_ops
 from cgda_jax.sim.geoms import (
     GEOM_KINDS,
@@ -80,6 +87,7 @@ from cgda_jax.sim.primitive_distances import (
     KINDS,
     error_bound,
     pair_distance,
+    segment_segment,
     swap_needed,
 )
 
@@ -101,19 +109,19 @@ def _pieces(kind: str, size, moving: bool, rounded: bool) -> list:
 
 def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
     """Compose folded chain ops (`cgda_jax.sim.chain.ChainOp`) onto a frame."""
-    for op in ops:
+    for op in ops:  # by component (box_distances.mat_mul3: fused, vectorized)
         if op.kind == "const":
-            p = p + R @ op.vec
-            R = R @ op.rot
+            p = p + mat_vec3(R, op.vec)
+            R = mat_mul3(R, op.rot)
         elif op.kind == "slide":
-            p = p + R @ (op.vec * (genes[op.gene] - op.offset))
+            p = p + mat_vec3(R, op.vec * (genes[op.gene] - op.offset))
         else:  # hinge: Rodrigues rotation about the unit axis through the origin
             angle = genes[op.gene] - op.offset
             k = op.vec
             K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]],
                          np.float32)
-            R = R @ (np.eye(3, dtype=np.float32) + jnp.sin(angle) * K
-                     + (1 - jnp.cos(angle)) * (K @ K))
+            R = mat_mul3(R, np.eye(3, dtype=np.float32) + jnp.sin(angle) * K
+                         + (1 - jnp.cos(angle)) * (K @ K))
     return R, p
 
 
@@ -369,6 +377,8 @@ class Collider:
                 idx[n, :cells.shape[0], :cells.shape[1]] = self._inverse[cells]
                 valid[n, :cells.shape[0], :cells.shape[1]] = True
             self._reduce = (idx, valid, np.asarray([j for _, j in grid], bool))
+        self._round = self._round_plan(groups, grid, kinds, psize, mov_body,
+                                       mov_pos, mov_rot, p_R, p_p) if rounded else None
         self.excess = np.asarray([excess[remap[a]] + excess[remap[b]]
                                   for a, b in pairs], np.float64)
         self.pair_reach = self.pair_reach + np.asarray(
@@ -377,6 +387,83 @@ class Collider:
 
     def __repr__(self) -> str:
         return f"Collider(n_pairs={self.n_pairs}, bodies={len(self._bodies)})"
+
+    def _round_plan(self, groups, grid, kinds, psize, mov_body, mov_pos, mov_rot,
+                    p_R, p_p) -> dict:
+        """Constants of the rounded check (`_round_distances`): each round
+        piece's core ends (a moving one's in its body's frame, a still one's in
+        the world's), each row's pieces, the still boxes' and planes' world
+        frames, and which rows each pair reduces."""
+        n_mov = len(mov_body)
+        ends = []
+        for i, (kind, size) in enumerate(zip(kinds, psize, strict=True)):
+            if kind != "capsule":
+                ends.append(None)
+                continue
+            R, p = (mov_rot[i], mov_pos[i]) if i < n_mov else (p_R[i - n_mov],
+                                                               p_p[i - n_mov])
+            ends.append((p - R[:, 2] * size[1], p + R[:, 2] * size[1], size[0]))
+        plan = {"rows": [], "n_mov": n_mov,
+                "bodies": np.asarray(mov_body, np.int32),
+                "c0": np.asarray([e[0] if e else np.zeros(3) for e in ends[:n_mov]],
+                                 np.float32).reshape(-1, 3),
+                "c1": np.asarray([e[1] if e else np.zeros(3) for e in ends[:n_mov]],
+                                 np.float32).reshape(-1, 3)}
+        for (ka, kb), rows in groups.items():
+            if ka != "capsule" or kb not in ("capsule", "box", "plane"):
+                raise ValueError(
+                    f"the round check has no closed form for a {ka} against a {kb} "
+                    f"(a plane on a moving body?): use the exact geometry "
+                    f"(feasibility.geometry = \"exact\")")
+            xs = np.asarray([e[1] for e in rows], np.int32)
+            ys = np.asarray([e[2] for e in rows], np.int32)
+            row = {"kind": kb, "a": xs, "ra": np.asarray([ends[x][2] for x in xs],
+                                                          np.float32)}
+            if kb == "capsule":
+                row["b"] = ys
+                row["rb"] = np.asarray([ends[y][2] for y in ys], np.float32)
+            else:  # a still box or plane: its world frame, constant
+                row["R"] = np.asarray([p_R[y - n_mov] for y in ys], np.float32)
+                row["p"] = np.asarray([p_p[y - n_mov] for y in ys], np.float32)
+                row["size"] = np.asarray([psize[y] for y in ys], np.float32)
+            plan["rows"].append(row)
+        # the still round pieces' ends, after the moving ones'
+        plan["s0"] = np.asarray([e[0] if e else np.zeros(3) for e in ends[n_mov:]],
+                                np.float32).reshape(-1, 3)
+        plan["s1"] = np.asarray([e[1] if e else np.zeros(3) for e in ends[n_mov:]],
+                                np.float32).reshape(-1, 3)
+        return plan
+
+    def _round_distances(self, genes: Array) -> Array:
+        """The rounded check's distances (module doc), by component: the moving
+        pieces' core ends from their bodies' frames, then each row's closed-form
+        distance vectorized over the rows, then each pair's reduction."""
+        plan = self._round
+        genes = jnp.asarray(genes, jnp.float32)
+        frames = {0: (jnp.eye(3, dtype=jnp.float32), jnp.zeros(3, jnp.float32))}
+        for b, r, ops in self._body_plan:
+            frames[b] = _frame_apply(ops, genes, *frames[r])
+        if plan["n_mov"]:
+            bR = jnp.stack([frames[b][0] for b in self._bodies])[plan["bodies"]]
+            bp = jnp.stack([frames[b][1] for b in self._bodies])[plan["bodies"]]
+            e0 = jnp.concatenate([bp + mat_vec3(bR, plan["c0"]), plan["s0"]])
+            e1 = jnp.concatenate([bp + mat_vec3(bR, plan["c1"]), plan["s1"]])
+        else:
+            e0, e1 = jnp.asarray(plan["s0"]), jnp.asarray(plan["s1"])
+        out = []
+        for row in plan["rows"]:
+            a0, a1 = e0[row["a"]].T, e1[row["a"]].T  # (3, rows)
+            if row["kind"] == "capsule":
+                d = segment_segment(a0, a1, e0[row["b"]].T, e1[row["b"]].T) - row["rb"]
+            elif row["kind"] == "box":
+                R, p = row["R"], row["p"]
+                d = segment_box_min(row["size"].T, to_local(R.transpose(1, 2, 0), p.T, a0),
+                                    to_local(R.transpose(1, 2, 0), p.T, a1))
+            else:  # plane: the lower end along its normal
+                n, pp = row["R"][:, :, 2].T, row["p"].T
+                d = jnp.minimum(dot3(n, a0 - pp), dot3(n, a1 - pp))
+            out.append(d - row["ra"])
+        return self._pairs_of(jnp.concatenate(out))
 
     def geom_frames(self, genes: Array) -> tuple[Array, Array]:
         """World frames of the geom table (used moving geoms, then constants).
@@ -397,8 +484,8 @@ class Collider:
             return jnp.asarray(self._const_R), jnp.asarray(self._const_p)
         bR = jnp.stack([frames[b][0] for b in self._bodies])[self._mov_body]
         bp = jnp.stack([frames[b][1] for b in self._bodies])[self._mov_body]
-        R = jnp.einsum("gij,gjk->gik", bR, self._mov_rot)
-        p = bp + jnp.einsum("gij,gj->gi", bR, self._mov_pos)
+        R = mat_mul3(bR, self._mov_rot)
+        p = bp + mat_vec3(bR, self._mov_pos)
         return (jnp.concatenate([R, self._const_R]),
                 jnp.concatenate([p, self._const_p]))
 
@@ -418,6 +505,9 @@ class Collider:
         Returns:
             (n_pairs,) float32, in `pair_names` order.
         """
+        if self._round is not None:
+            return self._round_distances(genes) if self.n_pairs else jnp.zeros(
+                (0,), jnp.float32)
         R, p = self.geom_frames(genes)
         out = []
         for ta, tb, ia, ib, sa, sb in self._groups:
@@ -428,10 +518,13 @@ class Collider:
             out.append(jax.vmap(one)(ia, ib, sa, sb))
         if not out:
             return jnp.zeros((0,), jnp.float32)
-        rows = jnp.concatenate(out)
+        return self._pairs_of(jnp.concatenate(out))
+
+    def _pairs_of(self, rows: Array) -> Array:
+        """Each pair's distance from its rows' (in group order): a union of pieces
+        the nearest, a still geom's bounds the farthest."""
         if self._reduce is None:
             return rows[self._inverse]
-        # a union of pieces: the nearest; a still geom's bounds: the farthest
         idx, valid, join_max = self._reduce
         d = rows[idx]  # (pairs, pieces a, pieces b)
         inner = jnp.where(join_max[:, None],
