@@ -203,8 +203,8 @@ def cover_excess(kind: str, size, moving: bool = True) -> float:
     size = np.asarray(size, float)
     if kind in ("sphere", "capsule", "plane") or not moving and kind == "box":
         return 0.0
-    if not moving:  # a cylinder: the octagonal prism's corners
-        return float(size[0] * (1.0 / math.cos(math.pi / 8) - 1.0))
+    if not moving:  # a cylinder: its bounding box's corners
+        return float(size[0] * (math.sqrt(2) - 1.0))
     pieces = round_cover(kind, size)
     # each core lies inside the geom's box; a cylinder's box's corners lie
     # r (sqrt 2 - 1) beyond it (its own capsule's core lies inside it)
@@ -242,13 +242,14 @@ def round_cover(kind: str, size) -> list[Piece]:
 
 
 def closed_form_bounds(kind: str, size) -> list[Piece]:
-    """Shapes whose intersection holds a geom that does not move, each a sphere,
-    capsule, box or plane (closed-form distances to a capsule): a cylinder as two
-    boxes, its bounding box and the same turned 45 degrees about its axis (their
-    intersection, a regular octagonal prism, lies at most ``r (1 / cos 22.5 - 1)``
-    = 0.082 r beyond it); a sphere as a capsule of half length 0; the others as
-    they are.  The largest of the distances to them is a distance never larger
-    than to the geom."""
+    """Shapes that each hold a geom that does not move, each a sphere, capsule,
+    box or plane (closed-form distances to a capsule): a cylinder as two boxes,
+    its bounding box and the same turned 45 degrees about its axis; a sphere as a
+    capsule of half length 0; the others as they are.  The largest of the
+    distances to them is a distance never larger than to the geom, and at most
+    `cover_excess` smaller (a cylinder's: ``r (sqrt 2 - 1)``, its bounding box's
+    corners; the turned box takes most of that back, about half where measured,
+    `tests/test_round_collision.py`)."""
     size = np.asarray(size, float)
     eye, zero = np.eye(3), np.zeros(3)
     if kind == "sphere":
