@@ -38,6 +38,22 @@ their own way: signs agree in the tests, magnitudes may differ by centimetres fo
 overlaps; MuJoCo's capsule-box even reports a separation for a thin capsule that
 pierces right through a box, where this module is negative).
 
+Round geometry (``rounded=True``, the feasibility check's, `cgda_jax.sim.feasibility`):
+every moving geom that is not a sphere or capsule is checked as capsules whose union
+holds it (`cgda_jax.sim.geoms.round_cover`: a box, a mesh's or ellipsoid's box, as 1-4
+capsules along its longest axis, side by side across its middle one; a cylinder as
+its own capsule or its box's), every still geom as shapes that each hold it
+(`geoms.closed_form_bounds`: a cylinder as its bounding box and that box turned 45
+degrees, the larger distance counting).  So every pair is a capsule against a
+capsule, a box or a plane, all closed form (no golden-section search, no separating
+axes), and a distance is never larger than the geoms' own and at most
+`Collider.excess` smaller (TEO's hand box: 2 capsules of radius 37.5 mm, at most
+37.5 mm stricter; `tests/test_round_collision.py` checks both against MuJoCo C).
+Its pairs are computed by component (`cgda_jax.sim.box_distances.dot3`): the moving
+pieces' core ends from their bodies' frames, then every row of a kind at once, a
+few tens of nanoseconds a pair on one CPU core
+(``benchmarks/bench_check_budget.py``).
+
 Example:
     >>> import jax.numpy as jnp
     >>> from cgda_jax import Robot, model_path
@@ -136,15 +152,25 @@ class Collider:
         exclude: geom or obstacle names left out of every pair (e.g. a pushed box).
         only: keep just these ``(robot geom, other)`` pairs (names as in
             `pair_names`; None: every pair).
+        rounded: check the round geometry (module doc): the moving geoms as
+            capsules that hold them, the still ones as closed-form shapes that
+            hold them; never more lenient, at most `excess` stricter.
 
     Attributes:
         pairs: (n_pairs, 2) geom-table indices (internal; see `pair_names`).
         pair_names: (n_pairs,) ``(robot geom, other geom or obstacle)`` names.
         pair_types: (n_pairs,) their geom types.
-        error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms.
+        error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms
+            (of the shapes checked: with ``rounded`` float32 round-off).
+        excess: (n_pairs,) numpy: how much smaller (m) a pair's distance may be
+            than its geoms' (``rounded``; 0 otherwise): their shapes' reach
+            beyond them (`cgda_jax.sim.geoms.cover_excess`; meshes beyond their
+            bounding boxes not counted).
+        rounded: whether the round geometry is checked.
         n_pairs: number of pairs.
         skipped: names of geoms left out for an unsupported type.
-        geom_names: (G,) names of the rows of `geom_frames`.
+        geom_names: (G,) names of the rows of `geom_frames` (with ``rounded``
+            its pieces: ``"r_hand[0]"``, ...).
         pair_reach: (n_pairs, DoF) numpy: how far (m) any point of either geom of
             a pair can move per unit change of each gene (radian / metre), an upper
             bound over every posture (the chain's lengths from the joint to the

@@ -8,6 +8,13 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
 - **penetration**: the worst signed distance between the robot's collision geoms
   and themselves / the world / the scene's obstacles (the paint board) along the
   move (`cgda_jax.sim.collision.Collider`), against ``penetration`` (default 5 mm).
+  By default (``geometry="round"``) the moves are judged on the round geometry
+  (`Collider` with ``rounded``): the moving geoms as capsules that hold them (TEO's
+  hand box: two capsules), the still ones as closed-form shapes that hold them, so
+  every pair is closed form and costs a few tens of nanoseconds; never more
+  lenient than the geoms, at most `Collider.excess` stricter (37.5 mm for the
+  hand, 0 for capsule pairs).  ``collider`` stays the exact one: the
+  independent check of a result (`cgda_jax.sim.motion_check`) judges the geoms.
   The distances are taken at ``samples + 1`` postures equally spaced along the
   move (both ends included), and must stay ``margin`` (default 2 mm) above the
   limit, for what may pass between two samples: a move is infeasible when its
