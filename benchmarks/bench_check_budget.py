@@ -24,7 +24,13 @@ experiment.  This measures, per experiment (as `cgda run` builds it):
   vectorized capsule-capsule (clamped segment-segment) distance over a batch of
   `FLOOR_PAIRS` random pairs in the same process (``floor_ns``).
 
+With ``--search`` it times instead the feasible search itself (the experiment's
+strategy as `cgda run` builds it, seed 0) with each geometry, built and compiled
+apart and then run alternately in one process (median of ``--repeats``): the run
+time before (``exact``) and after (``round``), and each result's error.
+
     python benchmarks/bench_check_budget.py [--only clean_ie ...] [--repeats 3]
+    python benchmarks/bench_check_budget.py --search --only clean_ie paint_iet
 """
 
 from __future__ import annotations
@@ -123,12 +129,38 @@ def check_parts(name: str, repeats: int) -> dict:
     return out
 
 
+def search_times(name: str, repeats: int) -> dict:
+    """Median search time (s) of the experiment with each check geometry, run
+    alternately in one process, and each run's largest point error."""
+    built = {g: _build(name, [f"feasibility.geometry={g}"]) for g in ("exact", "round")}
+    runs: dict[str, list] = {g: [] for g in built}
+    for g, (cfg, goal, sim) in built.items():
+        _run(cfg, sim, goal)  # compile
+    for _ in range(repeats):
+        for g, (cfg, goal, sim) in built.items():
+            runs[g].append(_run(cfg, sim, goal))
+    out = {"experiment": name}
+    for g, rs in runs.items():
+        out[f"{g}_search_s"] = float(np.median([r.wall_time_s for r in rs]))
+        out[f"{g}_error"] = float(rs[-1].max_point_error)
+        out[f"{g}_success"] = bool(rs[-1].success)
+    out["speedup"] = out["exact_search_s"] / out["round_search_s"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--search", action="store_true",
+                    help="time the feasible search with each geometry instead")
     args = ap.parse_args()
     os.environ.setdefault("CGDA_XGNITIVE_DIR", "../shared/data/xgnitive")
+    if args.search:
+        rows = [search_times(n, args.repeats) for n in args.only or EXPERIMENTS]
+        print_table(rows, list(rows[0]))
+        write_json("bench_check_budget_search", {"rows": rows})
+        return
     rows = []
     for name in args.only or EXPERIMENTS:
         u, c = unconstrained(name, args.repeats), check_parts(name, args.repeats)
