@@ -117,7 +117,7 @@ def test_round_never_more_lenient_than_mujoco(which, teo, meshed, capsys):
     kinds = {t for pair in col.pair_types for t in pair}
     assert kinds >= ({"capsule", "box", "cylinder", "sphere", "plane"} if which == "teo"
                      else {"box", "cylinder"})
-    diff, ref = _excess_over_mujoco(robot, col, n=150)
+    diff, ref = _excess_over_mujoco(robot, col, n=100)
     # never larger than the geoms' distance (float32 round-off aside) where the
     # verdict hangs on it; deeper than the tolerated penetration, MuJoCo's depth
     # (the shortest separating translation) may exceed ours (the deepest core
@@ -131,7 +131,7 @@ def test_round_never_more_lenient_than_mujoco(which, teo, meshed, capsys):
     # misses a thin capsule that pierces right through a box (collision.py;
     # tests/test_collision.py checks the exact check there by brute force): such
     # postures are overlaps, not separations
-    exact = _excess_over_mujoco(robot, Collider(robot), n=150)[0] + ref
+    exact = _excess_over_mujoco(robot, Collider(robot), n=100)[0] + ref
     sep = (ref > 0) & (exact > 0)
     bad = np.argwhere(sep & (exact - (ref + diff) > col.excess + 1e-4))
     assert not len(bad), [(col.pair_names[k], exact[i, k], ref[i, k] + diff[i, k])
@@ -177,5 +177,5 @@ def test_a_too_small_capsule_is_caught(meshed, monkeypatch):
 
     monkeypatch.setattr(geoms, "_box_capsules", thin)
     col = Collider(meshed, rounded=True)
-    diff, ref = _excess_over_mujoco(meshed, col, n=150)
+    diff, ref = _excess_over_mujoco(meshed, col, n=100)
     assert diff[ref > 0].max() > 1e-3
