@@ -438,7 +438,7 @@ class BuiltExecution:
     """An execution run's objects, built once: by its checks
     (`cgda_jax.experiment.validate.check_and_build`), then used by the run
     (`cgda_jax.experiment.compute.compute_execution`,
-    `cgda_jax.experiment.trials.trial_records`).
+    `cgda_jax.experiment.success_rate.trial_records`).
 
     Attributes:
         goal: (N, F) the goal; demos: its demonstrations ([] without);
