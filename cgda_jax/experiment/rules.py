@@ -138,6 +138,11 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
             raise ConfigError(f"key 'feasibility.{key}' must be a number > 0, got {v}")
     if f.samples < 1:
         raise ConfigError(f"key 'feasibility.samples' must be >= 1, got {f.samples}")
+    from cgda_jax.sim.feasibility import GEOMETRIES
+
+    if f.geometry not in GEOMETRIES:
+        raise ConfigError(f"key 'feasibility.geometry' must be one of "
+                          f"{list(GEOMETRIES)}, got {f.geometry!r}")
     if not (math.isfinite(f.margin) and 0 <= f.margin < f.penetration):
         raise ConfigError(f"key 'feasibility.margin' must be >= 0 and below "
                           f"'feasibility.penetration' ({f.penetration:g} m), got "

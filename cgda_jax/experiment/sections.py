@@ -280,7 +280,9 @@ class FeasibilityConfig:
     what passes between samples; ``certify``: bound the distance between samples
     instead (a guarantee, far stricter on long moves near obstacles);
     ``max_step_deg``: the largest change of a joint between two waypoints (a larger
-    one is flailing; the approach from the start posture excepted).
+    one is flailing; the approach from the start posture excepted); ``geometry``:
+    "round" (the robot's moving geoms as capsules that hold them: closed-form
+    pairs, never more lenient) or "exact" (the geoms themselves).
     """
 
     penetration: float = 0.005
@@ -292,6 +294,7 @@ class FeasibilityConfig:
     margin: float = 0.002
     certify: bool = False
     max_step_deg: float = 90.0
+    geometry: str = "round"
 
 
 @dataclasses.dataclass
