@@ -58,6 +58,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
+from cgda_jax.strategies.fitness import distances
 from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.settings import Settings, option
 
@@ -480,7 +481,7 @@ class IEPlan(PlanBase):
             return new, (state, feats, new.move_violation)
 
         _, (states, feats, violation) = jax.lax.scan(body, start, self.joints(best_u))
-        errors = self.penalize(jnp.linalg.norm(feats - self.goal, axis=-1), violation)
+        errors = self.penalize(distances(feats, self.goal), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
     def judged_generation(self, evo, best_u: jax.Array, states):
@@ -495,7 +496,7 @@ class IEPlan(PlanBase):
         feats, violation = jax.vmap(
             lambda st, c: self.sharded(lambda u: self.point_outcome(st, u))(c)
         )(states, cands)
-        errors = self.penalize(jnp.linalg.norm(feats[:, 0] - self.goal, axis=-1),
+        errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
         fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
                                                  violation[:, 1:], self.goal)

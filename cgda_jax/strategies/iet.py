@@ -33,6 +33,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
+from cgda_jax.strategies.fitness import squared_error, total_error
 from cgda_jax.strategies.ie import LOCAL_STD, RESTART_SAMPLES, STAGNATION
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.settings import Settings, option
@@ -295,7 +296,7 @@ class IETPlan(PlanBase):
         q = self.joints(best_u)
         # the move was judged in the evaluation that found it (best_f)
         sim_state, feats = self.advance(tree_at(s.sim_states, i), q)
-        own_sq = jnp.sum((feats - self.goal[i]) ** 2)
+        own_sq = squared_error(feats, self.goal[i])
         met = own_sq < self.aim_tolerance**2
         found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try
         can_restart = s.restart < self.restarts
@@ -419,7 +420,7 @@ class IETPlan(PlanBase):
             fitness_history=hist,
             evaluations=final["point_evaluations"].sum(),
             generations=gens.sum(),
-            final_fitness=np.linalg.norm(final["features"] - np.asarray(self.goal)),
+            final_fitness=total_error(final["features"], np.asarray(self.goal)),
             complete=int(final["point"]) >= self.n_points,
             invalid_evaluations=final["point_invalid"].sum(),
             point_invalid=final["point_invalid"].tolist(),
