@@ -42,13 +42,24 @@ from cgda_jax.strategies.evolution import (
     screen as screen,
     to_joints as to_joints,
 )
-from cgda_jax.strategies.fitness import distances, penalized, point_fitness
+from cgda_jax.strategies.fitness import (
+    distances,
+    judge_best,
+    judged_round,
+    penalized,
+    point_fitness,
+)
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.settings import (
     Settings,
     check_config as check_config,
     points_independent as points_independent,
 )
+
+
+#: The algorithms whose update reads only the ranks of a generation's fitness,
+#: its best `num_elites` with positive weights (`PlanBase.judge_ranks`).
+RANKED_ALGORITHMS = ("CMA_ES",)
 
 
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
@@ -115,6 +126,16 @@ class PlanBase:
             algorithm_kwargs=kwargs,
             algorithm_params=settings.algorithm_params,
         )
+        #: with feasibility and ``judge="ranked"`` (`Settings`): how many of a
+        #: generation's best ranks must be exact (CMA-ES: its ``num_elites``, the
+        #: candidates with positive weights); only those are sure to be judged
+        #: (`ranked_outcome`). None: every candidate is judged.
+        self.judge_ranks = None
+        if (getattr(settings, "judge", "all") == "ranked"
+                and self.feasibility is not None and sharding is None
+                and algorithm_name(algorithm) in RANKED_ALGORITHMS
+                and hasattr(self.sim, "judge")):
+            self.judge_ranks = int(self.algo.num_elites)
         self.info = {
             "algorithm": algorithm_name(algorithm),
             "population_size": int(population_size),
@@ -231,6 +252,8 @@ class PlanBase:
         """
 
         def fitness_u(pop):
+            if self.judge_ranks is not None:
+                return self.ranked_outcome(state, pop, goal_point, prefix_sq)[0]
             feats, violation = self.point_outcome(state, pop)
             return self.outcome_fitness(state, pop, feats, violation, goal_point,
                                         prefix_sq)
@@ -248,6 +271,27 @@ class PlanBase:
             None if feas is None else feas.penalty,
             motion=None if feas is None else self.motion(state, pop_u),
             aim=self.aim_tolerance, prefix_sq=prefix_sq)
+
+    def ranked_outcome(self, state: Any, pop_u: jax.Array, goal_point: jax.Array,
+                       prefix_sq: jax.Array | None = None
+                       ) -> tuple[jax.Array, jax.Array]:
+        """`outcome_fitness` (P,) of the postures ``pop_u`` (P, DoF) stepped to
+        from `state`, with only the moves whose rank matters judged
+        (`judge_ranks` of them at least; `cgda_jax.strategies.fitness.judge_best`
+        says why the best ranks are exact), and the moves' violations (P,; NaN
+        where not judged).  Every candidate is stepped once, unjudged; the
+        judged ones' moves are judged from those steps (`Simulator.judge`)."""
+        q = self.joints(pop_u)
+        news, feats = self.map_population(lambda w: self.advance(state, w), q)
+        fitness = self.outcome_fitness(state, pop_u, feats, None, goal_point, prefix_sq)
+
+        def judge(idx):
+            picked = jax.tree.map(lambda x: x[idx], news)
+            return jax.vmap(lambda new: self.sim.judge(state, new).move_violation)(
+                picked)
+
+        return judge_best(fitness, judge, self.feasibility.penalty, self.judge_ranks,
+                          judged_round(self.judge_ranks))
 
     def stop(self, evo: Evolution) -> jax.Array:
         """Per-point stop: error below the aim (``aim * tolerance``) or

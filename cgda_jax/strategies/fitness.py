@@ -16,7 +16,9 @@ disagree:
   infeasible candidate behind every feasible one;
 - `point_fitness`: a point's fitness from the three (the plans' `outcome_fitness`);
 - `polish_loss`: the loss a gradient polish descends (squared error plus the
-  move's penalty).
+  move's penalty);
+- `judge_best`: the penalty of only the candidates whose rank matters (the
+  collision check is the costly part of a feasible candidate).
 
 Functions of arrays only (NumPy in gives NumPy out where noted, else traced JAX):
 the plans (`cgda_jax.strategies.base.PlanBase`) hold the settings they are
@@ -34,7 +36,8 @@ from jax import Array
 
 from cgda_jax.strategies.evolution import to_joints
 
-__all__ = ["distances", "feasibility_penalty", "least_motion", "ordered_point_errors",
+__all__ = ["distances", "feasibility_penalty", "judge_best", "judged_round",
+           "least_motion", "ordered_point_errors",
            "penalized", "point_errors", "point_fitness", "polish_loss",
            "squared_error", "total_error"]
 
@@ -153,3 +156,73 @@ def polish_loss(sim: Any, state: Any, goal_point: Array, lower, upper):
         return squared_error(feats, goal_point) + pen
 
     return loss
+
+
+def judged_round(ranks: int) -> int:
+    """How many candidates `judge_best` judges in one round when the best
+    ``ranks`` must be exact: ``ranks`` and a quarter more (rounded up), so that a
+    few infeasible among the best rarely need a second round."""
+    return int(ranks) + -(-int(ranks) // 4)
+
+
+def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
+               size: int) -> tuple[Array, Array]:
+    """The `penalized` fitness of a population where only the candidates whose
+    rank matters are judged (traced; fixed shapes).
+
+    ``fitness`` (P,) is the candidates' fitness without the penalty (non-finite:
+    invalid, whatever the move); ``judge(idx)`` gives the violations (size,) of
+    the candidates ``idx`` (size,) (int32; may repeat one). Candidates are judged
+    in rounds of ``size``, best ``fitness`` first, until ``ranks`` of the judged
+    have a penalized fitness no worse than the best unjudged ``fitness``, or every
+    finite candidate is judged (at most ``ceil(P / size)`` rounds, a
+    `lax.while_loop`).  A candidate never judged is given ``fitness + penalty``.
+
+    Why the best ``ranks`` are exact (the same set, the same order and values as
+    judging every candidate; ``penalty`` > 0): the penalty only adds, so an
+    unjudged candidate's true fitness is at least its ``fitness`` >= ``m``, the
+    best unjudged ``fitness`` (candidates are judged in ``fitness`` order).  The
+    loop stops with ``ranks`` judged candidates at or below ``m``, so the
+    ``ranks`` best true values are all among the judged (told their true
+    value), and every unjudged one is told ``fitness + penalty`` > ``m``: after
+    them, as its true value is.  So is every judged feasible candidate: its
+    value is its ``fitness`` <= ``m``.  The order among the candidates after
+    the best ``ranks`` may differ from judging all (an unjudged candidate may be
+    feasible, or infeasible by more): an algorithm that uses those ranks
+    (evosax's CMA-ES gives them negative weights in its covariance update) then
+    takes a slightly different step; the best, the mean update and the stop
+    tests are exact.
+
+    Returns:
+        ``(fitness (P,), violation (P,))``: penalized fitness as above; the
+        judged candidates' violations, NaN where not judged.
+    """
+    n = fitness.shape[0]
+    size = min(int(size), n)
+    rounds = -(-n // size)
+    key = jnp.where(jnp.isfinite(fitness), fitness, jnp.inf)
+    order = jnp.argsort(key)  # best first (stable: ties by index)
+    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (rounds * size - n,))])
+    need = min(int(ranks), n)
+
+    def told(violation, judged):
+        return jnp.where(judged, penalized(fitness, violation, penalty),
+                         fitness + penalty)
+
+    def enough(carry):
+        r, violation, judged = carry
+        left = judged | ~jnp.isfinite(fitness)
+        m = jnp.min(jnp.where(left, jnp.inf, key))
+        ok = judged & (told(violation, judged) <= m)
+        return (jnp.sum(ok) >= need) | jnp.all(left)
+
+    def body(carry):
+        r, violation, judged = carry
+        idx = jax.lax.dynamic_slice(order, (r * size,), (size,)).astype(jnp.int32)
+        v = jnp.asarray(judge(idx), jnp.float32)
+        return r + 1, violation.at[idx].set(v), judged.at[idx].set(True)
+
+    carry = (jnp.int32(0), jnp.full((n,), jnp.nan, jnp.float32), jnp.zeros((n,), bool))
+    _, violation, judged = jax.lax.while_loop(
+        lambda c: (c[0] < rounds) & ~enough(c), body, carry)
+    return told(violation, judged), violation

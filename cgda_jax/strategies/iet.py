@@ -361,9 +361,13 @@ class IETPlan(PlanBase):
         that also keeps its best's move violation (``evo_violation``)."""
         state = tree_at(s.sim_states, p)
         pop, algo_state = evolution_ask(self.algo, self.params, s.evo)
-        feats, violation = self.sharded(lambda u: self.point_outcome(state, u))(pop)
-        fitness = self.outcome_fitness(state, pop, feats, violation,
-                                       self._goal(s.point), prefix_sq)
+        if self.judge_ranks is None:
+            feats, violation = self.sharded(lambda u: self.point_outcome(state, u))(pop)
+            fitness = self.outcome_fitness(state, pop, feats, violation,
+                                           self._goal(s.point), prefix_sq)
+        else:  # the best's move is judged (`ranked_outcome`)
+            fitness, violation = self.ranked_outcome(state, pop, self._goal(s.point),
+                                                     prefix_sq)
         evo, metrics = evolution_tell(self.algo, self.params, s.evo, pop, algo_state,
                                       fitness, self._stop(prefix_sq))
         kept = jnp.where(metrics["improved"], violation[metrics["best_index"]],
