@@ -53,6 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.data import Demonstration
+from cgda_jax.numerics import min_jerk_np
 from cgda_jax.recognition import METRICS, ActionLibrary
 from cgda_jax.sizes import check_recognition
 
@@ -383,12 +384,6 @@ def segment(
     return refine_boundaries(recording, found) if refine else found
 
 
-def _min_jerk(u: np.ndarray) -> np.ndarray:
-    """Minimum-jerk progress ``10 u^3 - 15 u^4 + 6 u^5`` of ``u`` clipped to [0, 1]."""
-    u = np.clip(u, 0.0, 1.0)
-    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
-
-
 def _fit_gap(t, y, end, start, box_end, box_start):
     """The (end, start) times of least residual around one gap.
 
@@ -436,9 +431,9 @@ def _best_pair(tt, yy, end, start, c1, c0):
         a, b = t1[i:i + _PAIRS_PER_CHUNK], t0[i:i + _PAIRS_PER_CHUNK]
         cols = [np.ones((a.size, tt.size))]
         if end:
-            cols.append(_min_jerk((a[:, None] - tt[None]) / end[1]))
+            cols.append(min_jerk_np((a[:, None] - tt[None]) / end[1]))
         if start:
-            cols.append(_min_jerk((tt[None] - b[:, None]) / start[1]))
+            cols.append(min_jerk_np((tt[None] - b[:, None]) / start[1]))
         x = np.stack(cols, -1)  # (pairs, samples, basis)
         xt = x.transpose(0, 2, 1)
         gram = xt @ x + 1e-12 * np.eye(x.shape[-1])

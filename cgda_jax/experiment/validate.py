@@ -47,6 +47,7 @@ from cgda_jax.sizes import (
     check_recognition,
     check_samples,
     samples_estimate,
+    sim_estimate,
 )
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
@@ -153,19 +154,29 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
 
 
 def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
-    from cgda_jax.experiment.build import synthetic_demos
+    from cgda_jax.experiment.build import recognition_demos
 
     d = cfg.data
     if d.source == "video":  # the folders were checked; tracking is the run's
         from cgda_jax.experiment.locate import video_folders
 
         return {"actions": len(video_folders(cfg))}
-    demos = synthetic_demos(cfg)
-    for reps in demos.values():
-        check_interval_count(reps[: d.n_train], d.interval_s, d.method)
-        for t in reps[d.n_train:]:
+    demos = recognition_demos(cfg)
+    loo = cfg.recognition.split == "leave_one_out"
+    for action, reps in demos.items():
+        n_train = len(reps) - 1 if loo else d.n_train
+        if loo and n_train < 1:
+            raise ConfigError(f"key 'recognition.split': leave_one_out needs at least "
+                              f"2 repetitions an action; {action!r} has {len(reps)}")
+        if not 1 <= n_train < len(reps):
+            raise ConfigError(f"key 'data.n_train'={d.n_train}: {action!r} has "
+                              f"{len(reps)} repetitions; need 1 <= n_train < "
+                              f"{len(reps)} (or recognition.split = 'leave_one_out')")
+        check_interval_count(reps[:n_train], d.interval_s, d.method)
+        for t in reps[n_train:] if not loo else reps:
             check_interval_count([t], d.interval_s, d.method)
-    queries = sum(len(reps) - d.n_train for reps in demos.values())
+    queries = sum(len(reps) if loo else len(reps) - d.n_train
+                  for reps in demos.values())
     features = len(next(iter(demos.values()))[0].feature_names)
     try:
         check_recognition(queries, len(demos), cfg.recognition.n_samples, features,
@@ -270,22 +281,13 @@ def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
 
 
 def _sampled_postures(cfg: ExperimentConfig, sim) -> tuple[int, str]:
-    """Postures the strategy samples once per trial and the option that sets them
-    (the plans' own rule: `cgda_jax.strategies.runner.plan_estimate`)."""
-    from cgda_jax.strategies.base import points_independent
+    """Postures the strategy samples once per trial and the option that sets them:
+    the plan's own rule (`cgda_jax.strategies.base.PlanBase.sampled_postures`)."""
     from cgda_jax.strategies import STRATEGIES
 
-    s = cfg.strategy
-    opts = {**STRATEGIES[s.name].settings.defaults(), **s.options}
-    if s.name == "fte":
-        init = opts["init"]
-        if init == "auto":
-            init = "reach" if points_independent(sim) else "sampled"
-        return (int(opts["init_samples"]) if init in ("sampled", "reach") else 0,
-                "init_samples")
-    if s.name in ("ie", "iet") and points_independent(sim) and int(opts["restarts"]):
-        return int(opts["restart_samples"]), "restart_samples"
-    return 0, ""
+    entry = STRATEGIES[cfg.strategy.name]
+    return entry.plan.sampled_postures(entry.settings.of(None, **cfg.strategy.options),
+                                       sim)
 
 
 def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
@@ -308,10 +310,9 @@ def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
 
 def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | None,
                     processes: int, local: bool) -> None:
-    """What the run will hold at once (`cgda_jax.strategies.runner.sim_estimate`)
+    """What the run will hold at once (`cgda_jax.sizes.sim_estimate`)
     within XLA's 32-bit sizes and the memory of each process; `processes` against
     the cores."""
-    from cgda_jax.strategies.runner import sim_estimate
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)
