@@ -148,9 +148,14 @@ def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
             t0 = time.perf_counter()
             res = run_trials(s.name, sim, goal, n, seed=seeds[0], judge="ranked", **kw)
             whole = time.perf_counter() - t0
+        # the same seeds' single runs, summed: the work the batch shares
+        done = {r["seed"]: r["run_s"] for r in rows if r["judge"] == "ranked"}
+        singles = sum(done[k] if k in done else float(once("ranked", k).wall_time_s)
+                      for k in range(seeds[0], seeds[0] + trials))
         rows.append({"experiment": name, "judge": "ranked", "seed": f"{trials} trials",
                      "success": sum(bool(r.success) for r in res),
                      "run_s": float(res[0].wall_time_s), "whole_s": whole,
+                     "sum_of_singles_s": singles,
                      "batching": res[0].info.get("batching"),
                      "batch_sizes": res[0].info.get("batch_sizes")})
         print(rows[-1], flush=True)
@@ -165,6 +170,7 @@ def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
         per = {j: [r for r in rows if r["experiment"] == name and r["judge"] == j
                    and isinstance(r["seed"], int)] for j in ("all", "ranked")}
         t = {j: float(np.sum([r["run_s"] for r in per[j]])) for j in per}
+        gens = {j: max(1, int(np.sum([r["generations"] for r in per[j]]))) for j in per}
         single = [r["run_s"] for r in per["ranked"] if r["seed"] == seeds[0]]
         pooled = [r for r in rows if r["experiment"] == name
                   and not isinstance(r["seed"], int)]
@@ -172,12 +178,20 @@ def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
             "experiment": name, "seeds": len(seeds),
             "all_run_s": t["all"], "ranked_run_s": t["ranked"],
             "ratio": t["all"] / max(t["ranked"], 1e-9),
+            # the search paths differ (see judge_best): the cost of a generation
+            "ms_per_generation_all": 1e3 * t["all"] / gens["all"],
+            "ms_per_generation_ranked": 1e3 * t["ranked"] / gens["ranked"],
+            "generation_ratio": (t["all"] / gens["all"]) / max(t["ranked"] / gens["ranked"],
+                                                               1e-12),
             "success_all": sum(r["success"] for r in per["all"]),
             "success_ranked": sum(r["success"] for r in per["ranked"]),
             "checked_ranked": sum(bool(r["checked"]) for r in per["ranked"]),
             "trials_run_s": pooled[0]["run_s"] if pooled else None,
             "trials_over_one_seed": (pooled[0]["run_s"] / max(single[0], 1e-9)
-                                     if pooled and single else None)})
+                                     if pooled and single else None),
+            "trials_over_sum_of_singles": (
+                pooled[0]["run_s"] / max(pooled[0]["sum_of_singles_s"], 1e-9)
+                if pooled else None)})
     print_table(summary, list(summary[0]))
     write_json("feasibility_judge", {"rows": rows, "summary": summary})
 
