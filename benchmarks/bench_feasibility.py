@@ -162,8 +162,67 @@ def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
     return rows
 
 
+def evaluation_cost(name: str, repeats: int = 15) -> dict:
+    """One generation's evaluation, judging all vs ranked, timed alone: for each
+    point of a feasible run's result (seed 0, ``judge = "all"``), from where the
+    earlier points leave the arm, a population around its posture (CMA-ES's
+    32, std 0.05 in normalized genes); both compiled first, then timed in turn
+    (``repeats``, median). Independent of the search path."""
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.strategies import STRATEGIES, run as run_strategy
+    from cgda_jax.strategies.evolution import from_joints
+
+    cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
+    goal, demos, _ = build_goal(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    s = cfg.strategy
+    kw = dict(algorithm=s.algorithm, population_size=s.population_size,
+              tolerance=s.tolerance, max_generations=s.max_generations,
+              chunk_size=s.chunk_size, **s.options)
+    res = run_strategy(s.name, sim, goal, seeds=(0,), batching="single", judge="all",
+                       **kw)[0]
+    plan_cls, settings_cls = STRATEGIES[s.name].plan, STRATEGIES[s.name].settings
+    plans = {j: plan_cls(sim, jnp.asarray(goal), settings_cls(**{**kw, "judge": j}))
+             for j in ("all", "ranked")}
+    joints = jnp.asarray(np.nan_to_num(res.joints), jnp.float32)
+    states = jax.lax.scan(lambda st, w: (sim.step(st, w)[0], st), sim.init_state(),
+                          joints)[1]
+    u = from_joints(joints, sim.lower, sim.upper)
+    key = jax.random.key(1)
+    pops = u[:, None] + 0.05 * jax.random.normal(key, (len(u), int(s.population_size),
+                                                       u.shape[1]))
+    goal = jnp.asarray(goal, jnp.float32)
+
+    def fit(plan):
+        def all_points(states, pops):
+            return jax.vmap(lambda st, pop, g: plan.point_fitness(st, g)(pop))(
+                states, pops, goal)
+        return jax.jit(all_points)
+
+    fns = {j: fit(p) for j, p in plans.items()}
+    out = {j: jax.block_until_ready(f(states, pops)) for j, f in fns.items()}
+    times = {j: [] for j in fns}
+    for _ in range(repeats):
+        for j, f in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(states, pops))
+            times[j].append(time.perf_counter() - t0)
+    med = {j: float(np.median(v)) for j, v in times.items()}
+    best = np.sort(np.asarray(out["all"]), axis=1)[:, :16]
+    same = np.allclose(best, np.sort(np.asarray(out["ranked"]), axis=1)[:, :16],
+                       rtol=1e-5)
+    return {"experiment": name, "points": len(u), "population": int(s.population_size),
+            "all_ms": 1e3 * med["all"], "ranked_ms": 1e3 * med["ranked"],
+            "ratio": med["all"] / max(med["ranked"], 1e-12),
+            "best_half_same": bool(same)}
+
+
 def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
     """``--judge``: the rows of every experiment, then the ratios."""
+    cost = [evaluation_cost(name) for name in names]
+    print_table(cost, list(cost[0]))
     rows = [row for name in names for row in judge_costs(name, seeds, trials)]
     summary = []
     for name in names:
@@ -193,7 +252,9 @@ def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
                 pooled[0]["run_s"] / max(pooled[0]["sum_of_singles_s"], 1e-9)
                 if pooled else None)})
     print_table(summary, list(summary[0]))
-    write_json("feasibility_judge", {"rows": rows, "summary": summary})
+    print_table(cost, list(cost[0]))
+    write_json("feasibility_judge", {"evaluation": cost, "rows": rows,
+                                     "summary": summary})
 
 
 def main() -> None:
@@ -207,9 +268,16 @@ def main() -> None:
     ap.add_argument("--judge", action="store_true",
                     help="judge='all' vs 'ranked' back to back (see the docstring)")
     ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2, 3])
+    ap.add_argument("--cost-only", action="store_true",
+                    help="with --judge: only the evaluation cost (no runs)")
     args = ap.parse_args()
     if args.judge:
-        judge_main(args.only or ["clean_ie", "paint_iet"], args.seeds, args.trials)
+        names = args.only or ["clean_ie", "paint_iet"]
+        if args.cost_only:
+            cost = [evaluation_cost(name) for name in names]
+            print_table(cost, list(cost[0]))
+            return
+        judge_main(names, args.seeds, args.trials)
         return
     names = args.only or EXPERIMENTS
     if "iron_ie_xgnitive" in names and not os.environ.get("CGDA_XGNITIVE_DIR"):
