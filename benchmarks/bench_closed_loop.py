@@ -73,7 +73,7 @@ def tiny() -> None:
     from cgda_jax.reality.control_trajectory import trajectory_of
     from cgda_jax.reality.protocol import measure
     from cgda_jax.strategies import run_oet
-    from cgda_jax.strategies.oet import ordered_point_errors
+    from cgda_jax.strategies.fitness import ordered_point_errors
 
     robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
                             "marker")

@@ -22,8 +22,20 @@ back as JSON and replays it on MuJoCo C 4 x finer, as ``cgda run`` does
 the run's tolerance on 10 of 10 seeds of every execution experiment. ``--on-only``
 skips the unconstrained runs.
 
+``--judge`` measures what judging only the candidates whose rank matters saves
+(issue 39; ``strategy.judge``, `cgda_jax.strategies.fitness.judge_best`): for each
+experiment (default clean_ie and paint_iet) the single runs of seeds 0-3 (``--seeds``)
+with ``judge = "all"`` (every candidate's move judged) and ``"ranked"`` back to back
+in one process, each compiled before it is timed (its first run not counted): run
+time (the result's, compile apart), success, the independent motion check on every
+success, the ratio all / ranked; then ``--trials`` seeds in one ``run_trials`` call
+against one seed's single run (``judge = "ranked"``, the pooled-trials target: within
+3x of one seed).
+
     python benchmarks/bench_feasibility.py [--trials 10] [--only paint_iet ...]
         [--export] [--on-only]
+    python benchmarks/bench_feasibility.py --judge [--seeds 0 1 2 3] [--trials 10]
+        [--only clean_ie paint_iet]
 """
 
 from __future__ import annotations
@@ -101,6 +113,150 @@ def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
     }
 
 
+def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
+    """The ``--judge`` rows of experiment ``name`` (see the module docstring)."""
+    from cgda_jax.strategies import run as run_strategy
+
+    cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
+    goal, demos, _ = build_goal(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    s = cfg.strategy
+    kw = dict(algorithm=s.algorithm, population_size=s.population_size,
+              tolerance=s.tolerance, max_generations=s.max_generations,
+              chunk_size=s.chunk_size, **s.options)
+
+    def once(judge, seed):
+        return run_strategy(s.name, sim, goal, seeds=(seed,), batching="single",
+                            judge=judge, **kw)[0]
+
+    rows = []
+    for judge in ("all", "ranked"):  # compiled before anything is timed
+        once(judge, seeds[0])
+    for seed in seeds:
+        for judge in ("all", "ranked"):
+            r = once(judge, seed)
+            check = motion_report(sim, np.asarray(r.joints)) if r.success else None
+            rows.append({"experiment": name, "judge": judge, "seed": seed,
+                         "success": bool(r.success),
+                         "checked": None if check is None else bool(check["feasible"]),
+                         "run_s": float(r.wall_time_s),
+                         "generations": int(r.generations),
+                         "max_point_error": float(np.max(r.point_errors))})
+            print(rows[-1], flush=True)
+    if trials > 1:  # pooled trials vs one seed, compiled first
+        for n in (trials, trials):  # the second call is the timed one
+            t0 = time.perf_counter()
+            res = run_trials(s.name, sim, goal, n, seed=seeds[0], judge="ranked", **kw)
+            whole = time.perf_counter() - t0
+        # the same seeds' single runs, summed: the work the batch shares
+        done = {r["seed"]: r["run_s"] for r in rows if r["judge"] == "ranked"}
+        singles = sum(done[k] if k in done else float(once("ranked", k).wall_time_s)
+                      for k in range(seeds[0], seeds[0] + trials))
+        rows.append({"experiment": name, "judge": "ranked", "seed": f"{trials} trials",
+                     "success": sum(bool(r.success) for r in res),
+                     "run_s": float(res[0].wall_time_s), "whole_s": whole,
+                     "sum_of_singles_s": singles,
+                     "batching": res[0].info.get("batching"),
+                     "batch_sizes": res[0].info.get("batch_sizes")})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def evaluation_cost(name: str, repeats: int = 15) -> dict:
+    """One generation's evaluation, judging all vs ranked, timed alone: for each
+    point of a feasible run's result (seed 0, ``judge = "all"``), from where the
+    earlier points leave the arm, a population around its posture (CMA-ES's
+    32, std 0.05 in normalized genes); both compiled first, then timed in turn
+    (``repeats``, median). Independent of the search path."""
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.strategies import STRATEGIES, run as run_strategy
+    from cgda_jax.strategies.evolution import from_joints
+
+    cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
+    goal, demos, _ = build_goal(cfg)
+    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+    s = cfg.strategy
+    kw = dict(algorithm=s.algorithm, population_size=s.population_size,
+              tolerance=s.tolerance, max_generations=s.max_generations,
+              chunk_size=s.chunk_size, **s.options)
+    res = run_strategy(s.name, sim, goal, seeds=(0,), batching="single", judge="all",
+                       **kw)[0]
+    plan_cls, settings_cls = STRATEGIES[s.name].plan, STRATEGIES[s.name].settings
+    plans = {j: plan_cls(sim, jnp.asarray(goal), settings_cls(**{**kw, "judge": j}))
+             for j in ("all", "ranked")}
+    joints = jnp.asarray(np.nan_to_num(res.joints), jnp.float32)
+    states = jax.lax.scan(lambda st, w: (sim.step(st, w)[0], st), sim.init_state(),
+                          joints)[1]
+    u = from_joints(joints, sim.lower, sim.upper)
+    key = jax.random.key(1)
+    pops = u[:, None] + 0.05 * jax.random.normal(key, (len(u), int(s.population_size),
+                                                       u.shape[1]))
+    goal = jnp.asarray(goal, jnp.float32)
+
+    def fit(plan):
+        def all_points(states, pops):
+            return jax.vmap(lambda st, pop, g: plan.point_fitness(st, g)(pop))(
+                states, pops, goal)
+        return jax.jit(all_points)
+
+    fns = {j: fit(p) for j, p in plans.items()}
+    out = {j: jax.block_until_ready(f(states, pops)) for j, f in fns.items()}
+    times = {j: [] for j in fns}
+    for _ in range(repeats):
+        for j, f in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(f(states, pops))
+            times[j].append(time.perf_counter() - t0)
+    med = {j: float(np.median(v)) for j, v in times.items()}
+    best = np.sort(np.asarray(out["all"]), axis=1)[:, :16]
+    same = np.allclose(best, np.sort(np.asarray(out["ranked"]), axis=1)[:, :16],
+                       rtol=1e-5)
+    return {"experiment": name, "points": len(u), "population": int(s.population_size),
+            "all_ms": 1e3 * med["all"], "ranked_ms": 1e3 * med["ranked"],
+            "ratio": med["all"] / max(med["ranked"], 1e-12),
+            "best_half_same": bool(same)}
+
+
+def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
+    """``--judge``: the rows of every experiment, then the ratios."""
+    cost = [evaluation_cost(name) for name in names]
+    print_table(cost, list(cost[0]))
+    rows = [row for name in names for row in judge_costs(name, seeds, trials)]
+    summary = []
+    for name in names:
+        per = {j: [r for r in rows if r["experiment"] == name and r["judge"] == j
+                   and isinstance(r["seed"], int)] for j in ("all", "ranked")}
+        t = {j: float(np.sum([r["run_s"] for r in per[j]])) for j in per}
+        gens = {j: max(1, int(np.sum([r["generations"] for r in per[j]]))) for j in per}
+        single = [r["run_s"] for r in per["ranked"] if r["seed"] == seeds[0]]
+        pooled = [r for r in rows if r["experiment"] == name
+                  and not isinstance(r["seed"], int)]
+        summary.append({
+            "experiment": name, "seeds": len(seeds),
+            "all_run_s": t["all"], "ranked_run_s": t["ranked"],
+            "ratio": t["all"] / max(t["ranked"], 1e-9),
+            # the search paths differ (see judge_best): the cost of a generation
+            "ms_per_generation_all": 1e3 * t["all"] / gens["all"],
+            "ms_per_generation_ranked": 1e3 * t["ranked"] / gens["ranked"],
+            "generation_ratio": (t["all"] / gens["all"]) / max(t["ranked"] / gens["ranked"],
+                                                               1e-12),
+            "success_all": sum(r["success"] for r in per["all"]),
+            "success_ranked": sum(r["success"] for r in per["ranked"]),
+            "checked_ranked": sum(bool(r["checked"]) for r in per["ranked"]),
+            "trials_run_s": pooled[0]["run_s"] if pooled else None,
+            "trials_over_one_seed": (pooled[0]["run_s"] / max(single[0], 1e-9)
+                                     if pooled and single else None),
+            "trials_over_sum_of_singles": (
+                pooled[0]["run_s"] / max(pooled[0]["sum_of_singles_s"], 1e-9)
+                if pooled else None)})
+    print_table(summary, list(summary[0]))
+    print_table(cost, list(cost[0]))
+    write_json("feasibility_judge", {"evaluation": cost, "rows": rows,
+                                     "summary": summary})
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=10)
@@ -109,7 +265,20 @@ def main() -> None:
                     help="replay each trial's exported trajectory on MuJoCo C")
     ap.add_argument("--on-only", action="store_true",
                     help="only the feasible runs (no unconstrained baseline)")
+    ap.add_argument("--judge", action="store_true",
+                    help="judge='all' vs 'ranked' back to back (see the docstring)")
+    ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2, 3])
+    ap.add_argument("--cost-only", action="store_true",
+                    help="with --judge: only the evaluation cost (no runs)")
     args = ap.parse_args()
+    if args.judge:
+        names = args.only or ["clean_ie", "paint_iet"]
+        if args.cost_only:
+            cost = [evaluation_cost(name) for name in names]
+            print_table(cost, list(cost[0]))
+            return
+        judge_main(names, args.seeds, args.trials)
+        return
     names = args.only or EXPERIMENTS
     if "iron_ie_xgnitive" in names and not os.environ.get("CGDA_XGNITIVE_DIR"):
         print("iron_ie_xgnitive skipped: set CGDA_XGNITIVE_DIR to the xgnitive data")

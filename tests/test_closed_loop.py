@@ -12,7 +12,7 @@ from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
 from cgda_jax.reality.protocol import Measurement, RealityError, measure
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop
 from cgda_jax.strategies import run_oet
-from cgda_jax.strategies.oet import ordered_point_errors
+from cgda_jax.strategies.fitness import ordered_point_errors
 
 JOINTS = ["yaw", "shoulder", "elbow"]
 WAYPOINTS = np.array([[0.1, 0.2, 0.1], [0.3, 0.4, 0.2], [0.5, 0.5, 0.3]], np.float32)

@@ -8,7 +8,8 @@ import pytest
 
 import cgda_jax as cg
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
-from cgda_jax.sim.feasibility import Feasibility, penalized
+from cgda_jax.sim.feasibility import Feasibility
+from cgda_jax.strategies.fitness import penalized
 from cgda_jax.sim.limits import read_limits
 from cgda_jax.sim.motion_check import motion_profile, motion_report
 

@@ -206,7 +206,7 @@ def test_oet_reaches_every_goal_point(sim, goal):
 
 
 def test_oet_success_needs_the_goal_in_order_and_its_end():
-    from cgda_jax.strategies.oet import ordered_point_errors
+    from cgda_jax.strategies.fitness import ordered_point_errors
 
     goal = np.array([[0.0], [1.0], [2.0], [3.0]])
 

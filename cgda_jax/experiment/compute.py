@@ -26,6 +26,7 @@ from cgda_jax.experiment.build import (
 from cgda_jax.experiment.config import ExperimentConfig
 from cgda_jax.experiment.rules import strategy_function
 from cgda_jax.experiment.validate import check_and_build
+from cgda_jax.strategies.fitness import point_errors
 
 #: What a run computes: the result dict (final but for its outputs' keys), the
 #: arrays (as in ``arrays.npz``) and, for an execution, the simulator.
@@ -161,20 +162,6 @@ def replayed_features(sim, joints) -> np.ndarray:
 
 #: The control rate of the exported trajectory a run checks [Hz].
 EXPORT_RATE = 100.0
-
-
-def point_errors(strategy: str, features: np.ndarray, goal: np.ndarray,
-                 tolerance: float) -> np.ndarray:
-    """Each goal point's error as ``strategy`` judges it: IE / IET / FTE the
-    distance of point i's features to goal point i; OET the goal followed in order
-    by its executed steps (`cgda_jax.strategies.oet.ordered_point_errors`)."""
-    features, goal = np.asarray(features, np.float64), np.asarray(goal, np.float64)
-    if strategy == "oet":
-        from cgda_jax.strategies.oet import ordered_point_errors
-
-        dist = np.linalg.norm(goal[:, None, :] - features[None, :, :], axis=-1)
-        return ordered_point_errors(dist, tolerance)
-    return np.linalg.norm(features - goal, axis=-1)
 
 
 def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4,

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import os
 
-from cgda_jax.experiment.compute import EXPORT_RATE, point_errors
+from cgda_jax.experiment.compute import EXPORT_RATE
+from cgda_jax.strategies.fitness import point_errors
 from cgda_jax.experiment.load import Run, load_run
 
 __all__ = ["check_exported", "export_trajectory"]

@@ -37,8 +37,9 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
 
 The violation of a move is a finite, dimensionless number, 0 when feasible:
 ``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
-penetration, relu(max |dq| / max_step - 1))``.  The strategies add ``penalty * (1 + violation)`` to an infeasible
-candidate's fitness (`penalized`), so evolution is pushed back into the feasible
+penetration, relu(max |dq| / max_step - 1))``.  The strategies add ``penalty * (1 +
+violation)`` to an infeasible candidate's fitness
+(`cgda_jax.strategies.fitness.penalized`), so evolution is pushed back into the feasible
 region and an infeasible candidate never meets a tolerance.
 
 Pairs are chosen once (`relevant_pairs`): a pair that already overlaps in the start
@@ -69,7 +70,7 @@ import numpy as np
 from jax import Array
 
 __all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION", "GEOMETRIES",
-           "Feasibility", "penalized", "relevant_pairs", "scene_obstacles"]
+           "Feasibility", "relevant_pairs", "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -84,13 +85,6 @@ GEOMETRIES = ("round", "exact")
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
-
-
-def penalized(fitness: Array, violation: Array, penalty: float) -> Array:
-    """``fitness + penalty * (1 + violation)`` where ``violation > 0``, else
-    ``fitness`` (shapes broadcast).  Finite for finite inputs."""
-    v = jnp.asarray(violation, jnp.float32)
-    return jnp.where(v > 0, fitness + penalty * (1.0 + v), fitness)
 
 
 def scene_obstacles(scene) -> list[dict]:

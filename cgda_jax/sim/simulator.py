@@ -289,6 +289,13 @@ class Simulator(Executions):
         return new.replace(violation=state.violation + v, move_violation=v,
                            first=jnp.bool_(False))
 
+    def judge(self, state: SimState, new: SimState) -> SimState:
+        """``new``, a `step` from ``state`` with ``judge=False``, with its move
+        judged: the state that `step` with ``judge=True`` returns, without
+        stepping again (a caller that judges only some of its moves, e.g.
+        `cgda_jax.strategies.fitness.judge_best`)."""
+        return self._judge(state, new)
+
     def step(self, state: SimState, waypoint: Array, *,
              judge: bool = True) -> tuple[SimState, Array]:
         """Move to one waypoint.

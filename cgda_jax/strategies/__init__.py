@@ -236,7 +236,7 @@ def run_oet(sim: Any, goal: Any, *, seed: int = 0,
     ``settings``: `cgda_jax.strategies.oet.OETSettings`'s fields (its defaults
     otherwise). Returns an `ExecutionResult` with joints (S, DoF) / features
     (S, F) the executed steps; point_errors (N,) = each goal point's error when the
-    goal must be followed in order (`cgda_jax.strategies.oet.ordered_point_errors`);
+    goal must be followed in order (`cgda_jax.strategies.fitness.ordered_point_errors`);
     success = all of them < tolerance, i.e. every point reached in order, the last
     one included.
     """

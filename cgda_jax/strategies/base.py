@@ -44,12 +44,24 @@ from cgda_jax.strategies.evolution import (
     screen as screen,
     to_joints as to_joints,
 )
+from cgda_jax.strategies.fitness import (
+    distances,
+    judge_best,
+    judged_round,
+    penalized,
+    point_fitness,
+)
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.settings import (
     Settings,
     check_config as check_config,
     points_independent as points_independent,
 )
+
+
+#: The algorithms whose update reads only the ranks of a generation's fitness,
+#: its best `num_elites` with positive weights (`PlanBase.judge_ranks`).
+RANKED_ALGORITHMS = ("CMA_ES",)
 
 
 def ragged_rows(rows: list[np.ndarray]) -> np.ndarray:
@@ -116,6 +128,16 @@ class PlanBase:
             algorithm_kwargs=kwargs,
             algorithm_params=settings.algorithm_params,
         )
+        #: with feasibility and ``judge="ranked"`` (`Settings`): how many of a
+        #: generation's best ranks must be exact (CMA-ES: its ``num_elites``, the
+        #: candidates with positive weights); only those are sure to be judged
+        #: (`ranked_outcome`). None: every candidate is judged.
+        self.judge_ranks = None
+        if (getattr(settings, "judge", "all") == "ranked"
+                and self.feasibility is not None and sharding is None
+                and algorithm_name(algorithm) in RANKED_ALGORITHMS
+                and hasattr(self.sim, "judge")):
+            self.judge_ranks = int(self.algo.num_elites)
         self.info = {
             "algorithm": algorithm_name(algorithm),
             "population_size": int(population_size),
@@ -185,23 +207,12 @@ class PlanBase:
         without feasibility)."""
         if self.feasibility is None or violation is None:
             return fitness
-        from cgda_jax.sim.feasibility import penalized
-
         return penalized(fitness, violation, self.feasibility.penalty)
 
-    def least_motion(self, state: Any, pop_u: jax.Array, error: jax.Array) -> jax.Array:
-        """With feasibility: a point's ``error`` (P,) where it meets the aim
-        (``aim_tolerance``, the tolerance unless ``aim`` < 1) replaced by
-        ``aim_tolerance * m / (m + 1)``, ``m`` the joint motion (radians,
-        Euclidean) from the state's posture: every candidate that meets the
-        aim still does, and the one that moves least ranks first (no
-        flailing: the committed posture is the nearest good one the generation
-        found).  Without feasibility: ``error`` as is (the paper's fitness)."""
-        if self.feasibility is None:
-            return error
-        m = jnp.linalg.norm(self.joints(pop_u) - state.genes, axis=-1)
-        aim = self.aim_tolerance
-        return jnp.where(error < aim, aim * m / (m + 1.0), error)
+    def motion(self, state: Any, pop_u: jax.Array) -> jax.Array:
+        """The joint motion (P,) (radians, Euclidean) from the state's posture to
+        each posture of ``pop_u`` (P, DoF)."""
+        return distances(self.joints(pop_u), state.genes)
 
     def point_outcome(self, state: Any, pop_u: jax.Array) -> tuple[jax.Array, Any]:
         """Features (P, F) and the move's violation (P,) (None without
@@ -237,11 +248,14 @@ class PlanBase:
 
         The Euclidean distance of its features to `goal_point` (F,); with `prefix_sq`
         (the summed squared error of earlier points) ``sqrt(prefix_sq + error^2)``;
-        with feasibility below the tolerance ranked by joint motion
-        (`least_motion`) and penalized where infeasible (`penalize`).
+        with feasibility below the aim ranked by joint motion (`motion`,
+        `cgda_jax.strategies.fitness.least_motion`) and penalized where
+        infeasible (`cgda_jax.strategies.fitness.penalized`).
         """
 
         def fitness_u(pop):
+            if self.judge_ranks is not None:
+                return self.ranked_outcome(state, pop, goal_point, prefix_sq)[0]
             feats, violation = self.point_outcome(state, pop)
             return self.outcome_fitness(state, pop, feats, violation, goal_point,
                                         prefix_sq)
@@ -253,10 +267,33 @@ class PlanBase:
                         prefix_sq: jax.Array | None = None) -> jax.Array:
         """`point_fitness` (P,) of the postures ``pop_u`` (P, DoF) from their
         `point_outcome` ``(feats, violation)``."""
-        err = self.least_motion(state, pop_u,
-                                jnp.linalg.norm(feats - goal_point, axis=-1))
-        f = err if prefix_sq is None else jnp.sqrt(prefix_sq + err**2)
-        return self.penalize(f, violation)
+        feas = self.feasibility
+        return point_fitness(
+            distances(feats, goal_point), violation,
+            None if feas is None else feas.penalty,
+            motion=None if feas is None else self.motion(state, pop_u),
+            aim=self.aim_tolerance, prefix_sq=prefix_sq)
+
+    def ranked_outcome(self, state: Any, pop_u: jax.Array, goal_point: jax.Array,
+                       prefix_sq: jax.Array | None = None
+                       ) -> tuple[jax.Array, jax.Array]:
+        """`outcome_fitness` (P,) of the postures ``pop_u`` (P, DoF) stepped to
+        from `state`, with only the moves whose rank matters judged
+        (`judge_ranks` of them at least; `cgda_jax.strategies.fitness.judge_best`
+        says why the best ranks are exact), and the moves' violations (P,; NaN
+        where not judged).  Every candidate is stepped once, unjudged; the
+        judged ones' moves are judged from those steps (`Simulator.judge`)."""
+        q = self.joints(pop_u)
+        news, feats = self.map_population(lambda w: self.advance(state, w), q)
+        fitness = self.outcome_fitness(state, pop_u, feats, None, goal_point, prefix_sq)
+
+        def judge(idx):
+            picked = jax.tree.map(lambda x: x[idx], news)
+            return jax.vmap(lambda new: self.sim.judge(state, new).move_violation)(
+                picked)
+
+        return judge_best(fitness, judge, self.feasibility.penalty, self.judge_ranks,
+                          judged_round(self.judge_ranks))
 
     def stop(self, evo: Evolution) -> jax.Array:
         """Per-point stop: error below the aim (``aim * tolerance``) or
@@ -372,7 +409,7 @@ class PlanBase:
         """
         goal = np.asarray(self.goal)
         if point_errors is None:
-            point_errors = np.linalg.norm(final["features"] - goal, axis=-1)
+            point_errors = distances(final["features"], goal)
         point_errors = np.where(np.isfinite(point_errors), point_errors, np.inf)
         if final_fitness is None:
             final_fitness = point_errors.max()

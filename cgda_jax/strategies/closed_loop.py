@@ -47,7 +47,8 @@ from cgda_jax.reality.control_trajectory import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.base import check_config
-from cgda_jax.strategies.oet import OETPlan, OETSettings, ordered_point_errors
+from cgda_jax.strategies.fitness import distances, ordered_point_errors
+from cgda_jax.strategies.oet import OETPlan, OETSettings
 from cgda_jax.strategies.result import ExecutionResult
 from cgda_jax.strategies.runner import seed_keys
 
@@ -315,7 +316,7 @@ def run_oet_closed_loop(
         target = int(new.targets[n - 1])
         steps["planning_s"].append(planning)
         steps["execution_s"].append(execution)
-        steps["error"].append(float(np.linalg.norm(feats - goal_np[target])))
+        steps["error"].append(float(distances(feats, goal_np[target])))
         steps["predicted_features"].append(np.asarray(new.features[n - 1]).tolist())
         steps["measured_joints"].append(got.joints[-1].tolist())
         steps["commanded_joints"].append(traj.q[-1].tolist())
@@ -340,7 +341,7 @@ def run_oet_closed_loop(
               "trials_in_batch": 1}
     res = plan.to_result(final, history, timing)
     if step_tolerance is not None:  # judged at the run's tolerance, not the step's
-        dist = np.linalg.norm(goal_np[:, None] - res.features[None], axis=-1)
+        dist = distances(goal_np[:, None], res.features[None])
         errors = ordered_point_errors(dist, tolerance)
         res = dataclasses.replace(
             res, point_errors=errors, tolerance=float(tolerance),

@@ -63,12 +63,12 @@ from cgda_jax.strategies.base import (
     from_joints,
     points_independent,
 )
+from cgda_jax.strategies.fitness import distances, polish_loss
 from cgda_jax.strategies.refine import (
     REFINE,
     descended_candidates,
     nearest_in_pool,
     pick_candidate,
-    point_loss,
     polish_trajectory,
     sample_pool,
 )
@@ -288,7 +288,7 @@ class FTEPlan(PlanBase):
     def _errors(self, u_flat):
         """(N,) pointwise errors of executing `u_flat` (inf where not finite)."""
         feats = self.executed_features(self._trajectory(u_flat))
-        e = jnp.linalg.norm(feats - self.goal, axis=-1)
+        e = distances(feats, self.goal)
         return jnp.where(jnp.isfinite(e), e, jnp.inf)
 
     # ---- tries
@@ -339,7 +339,7 @@ class FTEPlan(PlanBase):
             return (u, f, *empty[2:], evals, bad)
         cand_u, cand_err = descended_candidates(
             u, f, self.goal,
-            lambda g: point_loss(self.sim, state, g, self.lower, self.upper),
+            lambda g: polish_loss(self.sim, state, g, self.lower, self.upper),
             n_starts=REACH_STARTS, steps=REACH_STEPS)
         return (*empty[:2], cand_u, cand_err, evals, bad)
 

@@ -58,6 +58,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
+from cgda_jax.strategies.fitness import distances
 from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.settings import Settings, option
 
@@ -486,7 +487,7 @@ class IEPlan(PlanBase):
             return new, (state, feats, new.move_violation)
 
         _, (states, feats, violation) = jax.lax.scan(body, start, self.joints(best_u))
-        errors = self.penalize(jnp.linalg.norm(feats - self.goal, axis=-1), violation)
+        errors = self.penalize(distances(feats, self.goal), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
     def judged_generation(self, evo, best_u: jax.Array, states):
@@ -497,14 +498,20 @@ class IEPlan(PlanBase):
         fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`."""
         pops, algo_states = jax.vmap(
             lambda e: evolution_ask(self.algo, self.params, e))(evo)
-        cands = jnp.concatenate([best_u[:, None], pops], axis=1)  # (N, P + 1, D)
-        feats, violation = jax.vmap(
-            lambda st, c: self.sharded(lambda u: self.point_outcome(st, u))(c)
-        )(states, cands)
-        errors = self.penalize(jnp.linalg.norm(feats[:, 0] - self.goal, axis=-1),
+        if self.judge_ranks is None:
+            cands = jnp.concatenate([best_u[:, None], pops], axis=1)  # (N, P + 1, D)
+            feats, violation = jax.vmap(
+                lambda st, c: self.sharded(lambda u: self.point_outcome(st, u))(c)
+            )(states, cands)
+            fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
+                                                     violation[:, 1:], self.goal)
+        else:  # the bests judged, the candidates where their rank matters
+            feats, violation = jax.vmap(
+                lambda st, u: self.point_outcome(st, u[None]))(states, best_u)
+            fitness = jax.vmap(lambda st, pop, g: self.ranked_outcome(st, pop, g)[0])(
+                states, pops, self.goal)
+        errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
-        fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
-                                                 violation[:, 1:], self.goal)
         return (jnp.where(jnp.isfinite(errors), errors, jnp.inf), violation[:, 0],
                 (pops, algo_states, fitness))
 

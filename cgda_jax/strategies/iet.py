@@ -33,6 +33,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
+from cgda_jax.strategies.fitness import squared_error, total_error
 from cgda_jax.strategies.ie import LOCAL_STD, RESTART_SAMPLES, STAGNATION, IEPlan
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.settings import Settings, option
@@ -299,7 +300,7 @@ class IETPlan(PlanBase):
         q = self.joints(best_u)
         # the move was judged in the evaluation that found it (best_f)
         sim_state, feats = self.advance(tree_at(s.sim_states, i), q)
-        own_sq = jnp.sum((feats - self.goal[i]) ** 2)
+        own_sq = squared_error(feats, self.goal[i])
         met = own_sq < self.aim_tolerance**2
         found = jnp.isfinite(best_f)  # best_u was evaluated (valid) in some try
         can_restart = s.restart < self.restarts
@@ -364,9 +365,13 @@ class IETPlan(PlanBase):
         that also keeps its best's move violation (``evo_violation``)."""
         state = tree_at(s.sim_states, p)
         pop, algo_state = evolution_ask(self.algo, self.params, s.evo)
-        feats, violation = self.sharded(lambda u: self.point_outcome(state, u))(pop)
-        fitness = self.outcome_fitness(state, pop, feats, violation,
-                                       self._goal(s.point), prefix_sq)
+        if self.judge_ranks is None:
+            feats, violation = self.sharded(lambda u: self.point_outcome(state, u))(pop)
+            fitness = self.outcome_fitness(state, pop, feats, violation,
+                                           self._goal(s.point), prefix_sq)
+        else:  # the best's move is judged (`ranked_outcome`)
+            fitness, violation = self.ranked_outcome(state, pop, self._goal(s.point),
+                                                     prefix_sq)
         evo, metrics = evolution_tell(self.algo, self.params, s.evo, pop, algo_state,
                                       fitness, self._stop(prefix_sq))
         kept = jnp.where(metrics["improved"], violation[metrics["best_index"]],
@@ -423,7 +428,7 @@ class IETPlan(PlanBase):
             fitness_history=hist,
             evaluations=final["point_evaluations"].sum(),
             generations=gens.sum(),
-            final_fitness=np.linalg.norm(final["features"] - np.asarray(self.goal)),
+            final_fitness=total_error(final["features"], np.asarray(self.goal)),
             complete=int(final["point"]) >= self.n_points,
             invalid_evaluations=final["point_invalid"].sum(),
             point_invalid=final["point_invalid"].tolist(),

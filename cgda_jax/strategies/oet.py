@@ -29,6 +29,7 @@ from cgda_jax.strategies.base import (
     from_joints,
     ragged_rows,
 )
+from cgda_jax.strategies.fitness import distances, ordered_point_errors
 from cgda_jax.strategies.settings import Settings, option
 
 
@@ -65,37 +66,6 @@ class OETState:
     try_invalid: jax.Array
     step_tries: jax.Array
     bias: jax.Array
-
-
-def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
-    """Each goal point's error when the goal must be followed IN ORDER.
-
-    Goal point j counts as reached by the first executed step, no earlier than the
-    step that reached point j-1, within `tolerance` of it (one step may reach
-    several close points); its error is that step's. A point not reached that way
-    gets its smallest error over the steps from there on (inf when none is left),
-    which is >= tolerance, so success (every error < tolerance) means every point
-    was reached in order, the last one included.
-
-    Args:
-        dist: (N, S) distances between goal point j and executed step i's features.
-        tolerance: the reach threshold.
-
-    Returns:
-        (N,) errors.
-    """
-    n_points, n_steps = dist.shape
-    out = np.full(n_points, np.inf)
-    start = 0
-    for j in range(n_points):
-        d = dist[j, start:]
-        hit = np.flatnonzero(d < tolerance)
-        if hit.size:
-            out[j] = d[hit[0]]
-            start += int(hit[0])
-        elif d.size:
-            out[j] = d.min()
-    return out
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -227,7 +197,7 @@ class OETPlan(PlanBase):
         the previous localized step ``k``."""
         window = jnp.arange(self.n_points)
         inside = (window >= jnp.maximum(k, 0)) & (window <= k + self.lookahead)
-        dist = jnp.linalg.norm(self.goal - feats, axis=-1)
+        dist = distances(self.goal, feats)
         return jnp.argmin(jnp.where(inside, dist, jnp.inf)).astype(jnp.int32)
 
     def relocalize(self, s: OETState, prev_k: jax.Array, sim_state: Any,
@@ -332,7 +302,7 @@ class OETPlan(PlanBase):
         goal = np.asarray(self.goal)
         n = int(final["steps"])
         feats = final["features"][:n]
-        dist = np.linalg.norm(goal[:, None, :] - feats[None, :, :], axis=-1)
+        dist = distances(goal[:, None, :], feats[None, :, :])
         stuck = bool(final["stuck"])
         gens = final["step_generations"][:n + stuck]  # the stuck evolution ran too
         executed = {"joints": final["joints"][:n], "features": feats}

@@ -42,6 +42,7 @@ import numpy as np
 import optax
 
 from cgda_jax.strategies.base import to_joints
+from cgda_jax.strategies.fitness import distances, feasibility_penalty, polish_loss
 
 __all__ = ["REFINE", "descend", "descended_candidates", "nearest_in_pool",
            "nearest_samples", "pick_candidate", "polish", "polish_trajectory",
@@ -112,31 +113,6 @@ def descend(
     return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
 
 
-def feasibility_penalty(sim: Any, violation: Any) -> jax.Array:
-    """The fitness penalty of ``violation`` on ``sim`` (0 without feasibility):
-    added to a polish's loss and score, so that a polished candidate that leaves
-    the feasible region is never kept."""
-    feas = getattr(sim, "feasibility", None)
-    if feas is None or violation is None:
-        return jnp.float32(0.0)
-    from cgda_jax.sim.feasibility import penalized
-
-    return penalized(jnp.float32(0.0), violation, feas.penalty)
-
-
-def point_loss(sim: Any, state: Any, goal_point: jax.Array, lower, upper):
-    """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``
-    (plus the feasibility penalty of the move; no gradient flows through it)."""
-
-    def loss(u):
-        new, feats = sim.step(state, to_joints(u, lower, upper))
-        violation = getattr(new, "move_violation", None)
-        pen = jax.lax.stop_gradient(feasibility_penalty(sim, violation))
-        return jnp.sum((feats - goal_point) ** 2) + pen
-
-    return loss
-
-
 def polish(
     sim: Any,
     best_u: jax.Array,
@@ -153,7 +129,7 @@ def polish(
     state = sim.init_state()
 
     def one(u, g):
-        u, sq = descend(point_loss(sim, state, g, lower, upper), u, method=method,
+        u, sq = descend(polish_loss(sim, state, g, lower, upper), u, method=method,
                         steps=steps, learning_rate=learning_rate)
         return u, jnp.sqrt(sq)
 
@@ -181,7 +157,7 @@ def nearest_samples(
     """
     u = jax.random.uniform(key, (int(n_samples), int(n_genes)), minval=-1.0,
                            maxval=1.0)
-    dist = jnp.linalg.norm(goal[:, None, :] - features_u(u)[None], axis=-1)  # (N, S)
+    dist = distances(goal[:, None, :], features_u(u)[None])  # (N, S)
     dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
     neg, idx = jax.lax.top_k(-dist, int(k))  # (N, k)
     return u[idx], -neg
@@ -221,7 +197,7 @@ def reachability(
                 to_joints(u, lower, upper)), goal, key, sim.n_dof, n_samples, n_starts)
 
         def refine(g, starts):
-            loss = point_loss(sim, state, g, lower, upper)
+            loss = polish_loss(sim, state, g, lower, upper)
             us, sq = jax.vmap(lambda s: descend(loss, s, steps=steps,
                                                 learning_rate=0.05))(starts)
             i = jnp.argmin(sq)
@@ -371,13 +347,13 @@ def nearest_in_pool(
         ``(genes (N, D), distance (N,))``; where every candidate is excluded the
         plain nearest is taken.
     """
-    dist = jnp.linalg.norm(goal[:, None, :] - features[None, :, :], axis=-1)  # (N, S)
+    dist = distances(goal[:, None, :], features[None, :, :])  # (N, S)
     dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
     out = jnp.zeros(dist.shape, bool)
     if key is not None:
         out = out | ~jax.random.bernoulli(key, keep, (1, genes.shape[0]))
     if avoid is not None:
-        gap = jnp.linalg.norm(genes[None, :, :] - avoid[:, None, :], axis=-1)
+        gap = distances(genes[None, :, :], avoid[:, None, :])
         out = out | (gap <= radius)  # NaN rows: never near
     out = out & ~jnp.all(out | ~jnp.isfinite(dist), axis=1, keepdims=True)
     i = jnp.argmin(jnp.where(out, jnp.inf, dist), axis=1)
@@ -408,7 +384,7 @@ def descended_candidates(
         ``(genes (N, K, D), errors (N, K))``: K = `n_starts` local minima (or
         near them) per point, their Euclidean errors (inf where not finite).
     """
-    dist = jnp.linalg.norm(goal[:, None, :] - features[None, :, :], axis=-1)
+    dist = distances(goal[:, None, :], features[None, :, :])
     dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
     _, idx = jax.lax.top_k(-dist, min(int(n_starts), genes.shape[0]))  # (N, K)
 
@@ -437,7 +413,7 @@ def pick_candidate(
     ok = errors < tolerance
     away = jnp.ones(errors.shape, bool)
     if avoid is not None:
-        away = ~(jnp.linalg.norm(genes - avoid[:, None, :], axis=-1) <= radius)
+        away = ~(distances(genes, avoid[:, None, :]) <= radius)
     pref = ok & away
     for alt in (ok, away, jnp.isfinite(errors)):
         pref = jnp.where(jnp.any(pref, axis=1, keepdims=True), pref, alt)

@@ -116,6 +116,9 @@ class Settings:
             repeating the last candidate, whose results are dropped), batched
             trials split the trials; same results as unsharded. Multi-host: see
             `cgda_jax.sharding`.
+        judge: with feasibility, "ranked" (default): judge only the moves whose
+            rank matters (CMA-ES: its best half, exact; the rest told a bound;
+            `cgda_jax.strategies.fitness.judge_best`), "all": every candidate.
     """
 
     algorithm: Any = option("CMA_ES")
@@ -127,6 +130,7 @@ class Settings:
     algorithm_kwargs: dict | None = option(None, "table", none=True)
     algorithm_params: dict | None = option(None, "table", none=True)
     devices: int | str | None = option(None, "devices", none=True)
+    judge: str = option("ranked", "choice", ("ranked", "all"))
 
     def __post_init__(self):
         self.check()

@@ -1,0 +1,228 @@
+"""The fitness of the execution strategies, in one place: how far an execution is
+from its goal, and what feasibility adds to it.
+
+Every strategy, restart, polish and result computes its distance to the goal here,
+so that the search, the polish and the reported point errors cannot quietly
+disagree:
+
+- `distances`: each point's Euclidean feature error to its goal point (the
+  paper's IE / IET fitness, the result's point errors, OET's localization);
+  `squared_error` its square, `total_error` the Euclidean norm over all points;
+- `ordered_point_errors` and `point_errors`: the errors a result reports (OET:
+  the goal followed in order by the executed steps);
+- `least_motion`: with feasibility, the candidates that meet the aim ranked by
+  their joint motion instead (no flailing);
+- `penalized` and `feasibility_penalty`: the feasibility penalty, pushing an
+  infeasible candidate behind every feasible one;
+- `point_fitness`: a point's fitness from the three (the plans' `outcome_fitness`);
+- `polish_loss`: the loss a gradient polish descends (squared error plus the
+  move's penalty);
+- `judge_best`: the penalty of only the candidates whose rank matters (the
+  collision check is the costly part of a feasible candidate).
+
+Functions of arrays only (NumPy in gives NumPy out where noted, else traced JAX):
+the plans (`cgda_jax.strategies.base.PlanBase`) hold the settings they are
+called with.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import Array
+
+from cgda_jax.strategies.evolution import to_joints
+
+__all__ = ["distances", "feasibility_penalty", "judge_best", "judged_round",
+           "least_motion", "ordered_point_errors",
+           "penalized", "point_errors", "point_fitness", "polish_loss",
+           "squared_error", "total_error"]
+
+
+def distances(features: Any, goal: Any) -> Any:
+    """Each point's Euclidean error ``|features - goal|`` over the last axis
+    (shapes broadcast: (N, F) and (N, F) -> (N,), (P, F) and (F,) -> (P,)).
+    NumPy arrays in (both): NumPy out in their precision; else traced (jnp)."""
+    if isinstance(features, np.ndarray) and isinstance(goal, np.ndarray):
+        return np.linalg.norm(features - goal, axis=-1)
+    return jnp.linalg.norm(features - goal, axis=-1)
+
+
+def squared_error(features: Array, goal_point: Array) -> Array:
+    """The summed squared feature error over the last axis (traced)."""
+    return jnp.sum((features - goal_point) ** 2, axis=-1)
+
+
+def total_error(features: np.ndarray, goal: np.ndarray) -> np.floating:
+    """The Euclidean norm of every point's error together (N, F) -> scalar, NumPy
+    (IET's fitness over the whole trajectory)."""
+    return np.linalg.norm(features - goal)
+
+
+def ordered_point_errors(dist: np.ndarray, tolerance: float) -> np.ndarray:
+    """Each goal point's error when the goal must be followed IN ORDER.
+
+    Goal point j counts as reached by the first executed step, no earlier than the
+    step that reached point j-1, within `tolerance` of it (one step may reach
+    several close points); its error is that step's. A point not reached that way
+    gets its smallest error over the steps from there on (inf when none is left),
+    which is >= tolerance, so success (every error < tolerance) means every point
+    was reached in order, the last one included.
+
+    Args:
+        dist: (N, S) distances between goal point j and executed step i's features.
+        tolerance: the reach threshold.
+
+    Returns:
+        (N,) errors.
+    """
+    n_points, n_steps = dist.shape
+    out = np.full(n_points, np.inf)
+    start = 0
+    for j in range(n_points):
+        d = dist[j, start:]
+        hit = np.flatnonzero(d < tolerance)
+        if hit.size:
+            out[j] = d[hit[0]]
+            start += int(hit[0])
+        elif d.size:
+            out[j] = d.min()
+    return out
+
+
+def point_errors(strategy: str, features: np.ndarray, goal: np.ndarray,
+                 tolerance: float) -> np.ndarray:
+    """Each goal point's error (float64) as ``strategy`` judges it: IE / IET / FTE
+    the distance of point i's features to goal point i; OET the goal followed in
+    order by its executed steps (`ordered_point_errors`)."""
+    features, goal = np.asarray(features, np.float64), np.asarray(goal, np.float64)
+    if strategy == "oet":
+        return ordered_point_errors(distances(goal[:, None, :], features[None, :, :]),
+                                    tolerance)
+    return distances(features, goal)
+
+
+def least_motion(error: Array, motion: Array, aim: float) -> Array:
+    """``error`` where it misses the aim, else ``aim * motion / (motion + 1)``:
+    every candidate that meets the aim still does, and the one that moves least
+    (``motion``, radians, Euclidean) ranks first."""
+    return jnp.where(error < aim, aim * motion / (motion + 1.0), error)
+
+
+def penalized(fitness: Array, violation: Array, penalty: float) -> Array:
+    """``fitness + penalty * (1 + violation)`` where ``violation > 0``, else
+    ``fitness`` (shapes broadcast).  Finite for finite inputs."""
+    v = jnp.asarray(violation, jnp.float32)
+    return jnp.where(v > 0, fitness + penalty * (1.0 + v), fitness)
+
+
+def point_fitness(error: Array, violation: Any = None, penalty: float | None = None,
+                  *, motion: Array | None = None, aim: float | None = None,
+                  prefix_sq: Array | None = None) -> Array:
+    """A point's fitness from its ``error`` (P,): ranked by ``motion`` below the
+    ``aim`` (`least_motion`, where given), with ``prefix_sq`` (the summed squared
+    error of earlier points) ``sqrt(prefix_sq + error^2)``, and `penalized` by
+    ``violation`` (where given with a ``penalty``)."""
+    if motion is not None:
+        error = least_motion(error, motion, aim)
+    f = error if prefix_sq is None else jnp.sqrt(prefix_sq + error**2)
+    if violation is None or penalty is None:
+        return f
+    return penalized(f, violation, penalty)
+
+
+def feasibility_penalty(sim: Any, violation: Any) -> Array:
+    """The fitness penalty of ``violation`` on ``sim`` (0 without feasibility):
+    added to a polish's loss and score, so that a polished candidate that leaves
+    the feasible region is never kept."""
+    feas = getattr(sim, "feasibility", None)
+    if feas is None or violation is None:
+        return jnp.float32(0.0)
+    return penalized(jnp.float32(0.0), violation, feas.penalty)
+
+
+def polish_loss(sim: Any, state: Any, goal_point: Array, lower, upper):
+    """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``
+    (plus the feasibility penalty of the move; no gradient flows through it): the
+    loss of normalized genes ``u`` (D,) a polish descends."""
+
+    def loss(u):
+        new, feats = sim.step(state, to_joints(u, lower, upper))
+        violation = getattr(new, "move_violation", None)
+        pen = jax.lax.stop_gradient(feasibility_penalty(sim, violation))
+        return squared_error(feats, goal_point) + pen
+
+    return loss
+
+
+def judged_round(ranks: int) -> int:
+    """How many candidates `judge_best` judges in one round when the best
+    ``ranks`` must be exact: ``ranks`` and a quarter more (rounded up), so that a
+    few infeasible among the best rarely need a second round."""
+    return int(ranks) + -(-int(ranks) // 4)
+
+
+def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
+               size: int) -> tuple[Array, Array]:
+    """The `penalized` fitness of a population where only the candidates whose
+    rank matters are judged (traced; fixed shapes).
+
+    ``fitness`` (P,) is the candidates' fitness without the penalty (non-finite:
+    invalid, whatever the move); ``judge(idx)`` gives the violations (size,) of
+    the candidates ``idx`` (size,) (int32; may repeat one). Candidates are judged
+    in rounds of ``size``, best ``fitness`` first, until ``ranks`` of the judged
+    have a penalized fitness no worse than the best unjudged ``fitness``, or every
+    finite candidate is judged (at most ``ceil(P / size)`` rounds, a
+    `lax.while_loop`).  A candidate never judged is given ``fitness + penalty``.
+
+    Why the best ``ranks`` are exact (the same set, the same order and values as
+    judging every candidate; ``penalty`` > 0): the penalty only adds, so an
+    unjudged candidate's true fitness is at least its ``fitness`` >= ``m``, the
+    best unjudged ``fitness`` (candidates are judged in ``fitness`` order).  The
+    loop stops with ``ranks`` judged candidates at or below ``m``, so the
+    ``ranks`` best true values are all among the judged (told their true
+    value), and every unjudged one is told ``fitness + penalty`` > ``m``: after
+    them, as its true value is.  So is every judged feasible candidate: its
+    value is its ``fitness`` <= ``m``.  The order among the candidates after
+    the best ``ranks`` may differ from judging all (an unjudged candidate may be
+    feasible, or infeasible by more): an algorithm that uses those ranks
+    (evosax's CMA-ES gives them negative weights in its covariance update) then
+    takes a slightly different step; the best, the mean update and the stop
+    tests are exact.
+
+    Returns:
+        ``(fitness (P,), violation (P,))``: penalized fitness as above; the
+        judged candidates' violations, NaN where not judged.
+    """
+    n = fitness.shape[0]
+    size = min(int(size), n)
+    rounds = -(-n // size)
+    key = jnp.where(jnp.isfinite(fitness), fitness, jnp.inf)
+    order = jnp.argsort(key)  # best first (stable: ties by index)
+    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (rounds * size - n,))])
+    need = min(int(ranks), n)
+
+    def told(violation, judged):
+        return jnp.where(judged, penalized(fitness, violation, penalty),
+                         fitness + penalty)
+
+    def enough(carry):
+        r, violation, judged = carry
+        left = judged | ~jnp.isfinite(fitness)
+        m = jnp.min(jnp.where(left, jnp.inf, key))
+        ok = judged & (told(violation, judged) <= m)
+        return (jnp.sum(ok) >= need) | jnp.all(left)
+
+    def body(carry):
+        r, violation, judged = carry
+        idx = jax.lax.dynamic_slice(order, (r * size,), (size,)).astype(jnp.int32)
+        v = jnp.asarray(judge(idx), jnp.float32)
+        return r + 1, violation.at[idx].set(v), judged.at[idx].set(True)
+
+    carry = (jnp.int32(0), jnp.full((n,), jnp.nan, jnp.float32), jnp.zeros((n,), bool))
+    _, violation, judged = jax.lax.while_loop(
+        lambda c: (c[0] < rounds) & ~enough(c), body, carry)
+    return told(violation, judged), violation
