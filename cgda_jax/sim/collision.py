@@ -141,6 +141,21 @@ def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
     return R, p
 
 
+def _take(x: Array, idx: np.ndarray) -> Array:
+    """``x[idx]`` for constant indices ``idx`` into the first axis of ``x``, as a
+    product with a constant one-hot matrix (exact: each entry is one value times 1
+    plus zeros).  Under nested ``vmap`` (a population's moves, each move's
+    postures) XLA on the CPU runs a gather with two batch dimensions about 7x
+    slower than the same values in one flat batch; a small dense product keeps
+    its speed (`benchmarks/bench_check_budget.py`)."""
+    idx = np.asarray(idx)
+    hot = np.zeros((idx.size, x.shape[0]), np.float32)
+    hot[np.arange(idx.size), idx.reshape(-1)] = 1.0
+    flat = x.reshape(x.shape[0], -1)
+    out = jnp.matmul(hot, flat, precision=jax.lax.Precision.HIGHEST)
+    return out.reshape(idx.shape + x.shape[1:])
+
+
 class Collider:
     """Signed distances between the robot's moving geoms and the rest, from genes.
 
@@ -470,17 +485,18 @@ class Collider:
         for b, r, ops in self._body_plan:
             frames[b] = _frame_apply(ops, genes, *frames[r])
         if plan["n_mov"]:
-            bR = jnp.stack([frames[b][0] for b in self._bodies])[plan["bodies"]]
-            bp = jnp.stack([frames[b][1] for b in self._bodies])[plan["bodies"]]
+            bR = _take(jnp.stack([frames[b][0] for b in self._bodies]), plan["bodies"])
+            bp = _take(jnp.stack([frames[b][1] for b in self._bodies]), plan["bodies"])
             e0 = jnp.concatenate([bp + mat_vec3(bR, plan["c0"]), plan["s0"]])
             e1 = jnp.concatenate([bp + mat_vec3(bR, plan["c1"]), plan["s1"]])
         else:
             e0, e1 = jnp.asarray(plan["s0"]), jnp.asarray(plan["s1"])
         out = []
         for row in plan["rows"]:
-            a0, a1 = e0[row["a"]].T, e1[row["a"]].T  # (3, rows)
+            a0, a1 = _take(e0, row["a"]).T, _take(e1, row["a"]).T  # (3, rows)
             if row["kind"] == "capsule":
-                d = segment_segment(a0, a1, e0[row["b"]].T, e1[row["b"]].T) - row["rb"]
+                d = segment_segment(a0, a1, _take(e0, row["b"]).T,
+                                    _take(e1, row["b"]).T) - row["rb"]
             elif row["kind"] == "box":
                 R, p = row["R"], row["p"]
                 d = segment_box_min(row["size"].T, to_local(R.transpose(1, 2, 0), p.T, a0),
@@ -550,9 +566,9 @@ class Collider:
         """Each pair's distance from its rows' (in group order): a union of pieces
         the nearest, a still geom's bounds the farthest."""
         if self._reduce is None:
-            return rows[self._inverse]
+            return _take(rows, self._inverse)
         idx, valid, join_max = self._reduce
-        d = rows[idx]  # (pairs, pieces a, pieces b)
+        d = _take(rows, idx)  # (pairs, pieces a, pieces b)
         inner = jnp.where(join_max[:, None],
                           jnp.max(jnp.where(valid, d, -jnp.inf), axis=-1),
                           jnp.min(jnp.where(valid, d, jnp.inf), axis=-1))
