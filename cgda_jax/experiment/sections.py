@@ -270,6 +270,10 @@ class FeasibilityConfig:
     instead (a guarantee, far stricter on long moves near obstacles);
     ``max_step_deg``: the largest change of a joint between two waypoints (a larger
     one is flailing; the approach from the start posture excepted).
+    Dynamic mode, what the physics executed (`Feasibility.executed`):
+    ``tracking_deg`` [deg; a slide: mm]: the largest error of an evolved joint
+    from its commanded posture at any physics step; ``saturation``: the largest
+    share of a move's physics steps with an evolved joint at its force limit.
     """
 
     penetration: float = 0.005
@@ -281,6 +285,8 @@ class FeasibilityConfig:
     margin: float = 0.002
     certify: bool = False
     max_step_deg: float = 90.0
+    tracking_deg: float = 30.0
+    saturation: float = 0.75
 
 
 @dataclasses.dataclass

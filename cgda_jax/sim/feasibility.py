@@ -26,11 +26,20 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
 - **no flailing**: no joint changes by more than ``max_step`` (90 degrees) between
   two waypoints (the approach excepted);
 - **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
-  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`).
+  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`);
+- **what the physics executed** (dynamic mode, `executed`): the simulated postures
+  of the move (``2 * samples + 1`` of its physics steps) against penetration as
+  above, the tracking error of the evolved joints (simulated against commanded
+  posture at every step) against ``tracking_deg`` and the share of the move's
+  steps with an evolved joint's actuator force at its limit against
+  ``saturation``: a commanded path can be clear while the arm, sagging or
+  lagging behind it, passes through the board.
 
 The violation of a move is a finite, dimensionless number, 0 when feasible:
 ``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
-penetration, relu(max |dq| / max_step - 1))``.  The strategies add ``penalty * (1 + violation)`` to an infeasible
+penetration, relu(max |dq| / max_step - 1))``, in dynamic mode also ``relu(depth'
+- penetration) / penetration``, ``relu(tracking / tracking_deg - 1)`` and
+``relu(share - saturation) / saturation`` of the executed motion.  The strategies add ``penalty * (1 + violation)`` to an infeasible
 candidate's fitness (`penalized`), so evolution is pushed back into the feasible
 region and an infeasible candidate never meets a tolerance.
 
@@ -60,7 +69,8 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION", "Feasibility",
+__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
+           "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "Feasibility",
            "penalized", "relevant_pairs", "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
@@ -71,6 +81,12 @@ DEFAULT_PENETRATION = 0.005
 #: How far (m) the sampled distances must stay above the penetration limit, for
 #: what passes between two samples (`Feasibility`, ``certify=False``).
 DEFAULT_MARGIN = 0.002
+#: Dynamic mode: the largest tracking error of an evolved joint (simulated against
+#: commanded posture at any physics step) [deg; a slide: mm] (`Feasibility.executed`).
+DEFAULT_TRACKING_DEG = 30.0
+#: Dynamic mode: the largest share of a move's physics steps at which an evolved
+#: joint's actuator force may sit at its limit (`Feasibility.executed`).
+DEFAULT_SATURATION = 0.75
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -116,6 +132,10 @@ class Feasibility:
         physics_contacts: leave out the pairs that MuJoCo's physics collides
             (``contype``/``conaffinity``: a dynamic simulation keeps them apart
             itself, e.g. the hand pushing a box); False: every pair.
+        tracking_deg: dynamic mode: the largest tracking error of an evolved
+            joint [deg; a slide: mm] (`executed`).
+        saturation: dynamic mode: the largest share of a move's physics steps
+            with an evolved joint's force at its limit, in [0, 1] (`executed`).
 
     Attributes:
         limits: the `cgda_jax.sim.limits.JointLimits` judged against.
@@ -144,6 +164,8 @@ class Feasibility:
         max_step: float = math.pi / 2,
         margin: float = DEFAULT_MARGIN,
         certify: bool = False,
+        tracking_deg: float = DEFAULT_TRACKING_DEG,
+        saturation: float = DEFAULT_SATURATION,
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
 
@@ -171,6 +193,7 @@ class Feasibility:
                              f"penetration ({penetration:g} m), got {margin}")
         self.margin = float(margin)
         self.certify = bool(certify)
+        self._executed_limits(robot, tracking_deg, saturation)
         # as given (`cgda_jax.sim.description` writes them into a config)
         self.obstacles = list(obstacles)
         self.collisions, self.self_collision = bool(collisions), bool(self_collision)
@@ -260,6 +283,43 @@ class Feasibility:
         flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
         return jnp.maximum(jnp.maximum(self.limit_violation(dq, duration), over), flail)
+
+    # -- the executed motion (dynamic mode: what the physics did) ----------------
+    def _executed_limits(self, robot, tracking_deg: float, saturation: float):
+        if not (np.isfinite(tracking_deg) and tracking_deg > 0):
+            raise ValueError(f"feasibility tracking_deg must be > 0, got "
+                             f"{tracking_deg}")
+        if not (np.isfinite(saturation) and 0 <= saturation <= 1):
+            raise ValueError(f"feasibility saturation must be in [0, 1], got "
+                             f"{saturation}")
+        self.tracking_deg, self.saturation = float(tracking_deg), float(saturation)
+        slide = np.asarray(robot.mj_model.jnt_type)[np.asarray(robot.joint_ids)] \
+            == int(mujoco.mjtJoint.mjJNT_SLIDE)
+        #: per evolved joint: radians (metres) -> degrees (millimetres)
+        self.tracking_scale = np.where(slide, 1e3, 180.0 / np.pi).astype(np.float32)
+
+    def postures(self, path: Array) -> Array:
+        """Minus the smallest signed distance (m) of the pairs at the postures
+        ``path`` (K, DoF) (-inf without pairs): > 0 penetrates."""
+        if self.collider is None:
+            return jnp.float32(-jnp.inf)
+        d = jax.vmap(lambda q: self.collider.distances(q, exact=False))(path)
+        return -jnp.min(d)
+
+    def executed(self, path: Array, tracking: Array, saturation: Array) -> Array:
+        """Violation (scalar, 0 = feasible) of what the physics executed in one
+        move: its simulated postures ``path`` (K, DoF) against penetration (as
+        `move` judges the commanded ones), the tracking error (DoF,) [rad or m]
+        against ``tracking_deg`` and the share of its steps at the force limit
+        against ``saturation``; each a normalized excess, their max."""
+        over = (jnp.maximum(self.postures(path) - self.allowed, 0.0)
+                / self.penetration)
+        worst = jnp.max(tracking * jnp.asarray(self.tracking_scale))
+        track = jnp.maximum(worst / self.tracking_deg - 1.0, 0.0)
+        # (a share of 1 may come out 1 + 1e-7 in float32)
+        sat = jnp.maximum(saturation - self.saturation - 1e-6, 0.0) / max(
+            self.saturation, 1e-3)
+        return jnp.maximum(jnp.maximum(over, track), sat)
 
 
 def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:
