@@ -35,6 +35,7 @@ __all__ = [
     "load_xgnitive",
     "load_xgnitive_force",
     "xgnitive_clock_offsets",
+    "XGNITIVE_ACTIONS",
     "XGNITIVE_COLUMNS",
 ]
 
@@ -352,7 +353,8 @@ XGNITIVE_COLUMNS: dict[str, tuple[str, ...]] = {
     "teo/leftArm": ("flag", "t", "X", "Y", "Z", "ax", "ay", "az", "angle"),
     "teo/rightArm": ("flag", "t", "X", "Y", "Z", "ax", "ay", "az", "angle"),
 }
-_ACTIONS = ("paint", "iron")
+#: The actions recorded in the xgnitive ICRA 2018 data.
+XGNITIVE_ACTIONS = ("paint", "iron")
 
 
 def _xgnitive_dir(root: pathlib.Path, action: str, stream: str) -> pathlib.Path:
@@ -446,8 +448,8 @@ def _xgnitive_tables(root: PathLike, action: str, stream: str, reduced: bool,
 
 
 def _check_stream(action: str, stream: str) -> None:
-    if action not in _ACTIONS:
-        raise ValueError(f"unknown action {action!r}; expected one of {_ACTIONS}")
+    if action not in XGNITIVE_ACTIONS:
+        raise ValueError(f"unknown action {action!r}; expected one of {XGNITIVE_ACTIONS}")
     if stream not in XGNITIVE_COLUMNS:
         raise ValueError(
             f"unknown stream {stream!r}; expected one of {tuple(XGNITIVE_COLUMNS)}"

@@ -210,10 +210,35 @@ def csv_demos(cfg: ExperimentConfig) -> list:
     return out
 
 
+def xgnitive_demos(cfg: ExperimentConfig) -> dict:
+    """The real TEO recordings of both xgnitive actions, action -> repetitions:
+    ``data.stream``'s ``data.columns`` (with ``data.force_columns``: the jr3
+    columns beside them on the arm's clock, `cgda_jax.data.load_xgnitive_force`)."""
+    from cgda_jax.data import XGNITIVE_ACTIONS, load_xgnitive, load_xgnitive_force
+
+    d, root = cfg.data, resolve_data_dir(cfg)
+    out = {}
+    for action in XGNITIVE_ACTIONS:
+        try:
+            if d.force_columns:
+                out[action] = load_xgnitive_force(root, action, d.columns,
+                                                  d.force_columns, stream=d.stream)
+            else:
+                out[action] = load_xgnitive(root, action, d.stream, d.columns)
+        except (KeyError, ValueError) as err:
+            raise ConfigError(f"section 'data' (xgnitive {action!r}): "
+                              f"{err.args[0] if err.args else err}") from None
+    return out
+
+
 def recognition_demos(cfg: ExperimentConfig) -> dict:
-    """A recognition run's demonstrations, action -> repetitions: synthetic or
-    tracked from video."""
-    return video_demos(cfg) if cfg.data.source == "video" else synthetic_demos(cfg)
+    """A recognition run's demonstrations, action -> repetitions: synthetic,
+    tracked from video or the real TEO recordings (xgnitive)."""
+    if cfg.data.source == "video":
+        return video_demos(cfg)
+    if cfg.data.source == "xgnitive":
+        return xgnitive_demos(cfg)
+    return synthetic_demos(cfg)
 
 
 def scene_feature_names(cfg: ExperimentConfig) -> list[str]:
@@ -231,7 +256,9 @@ def feature_labels(cfg: ExperimentConfig, names) -> list[str]:
     """The feature names of a run with their units (``"X [m]"``)."""
     from cgda_jax.plotting import units
 
-    if cfg.kind == "recognition":
+    if cfg.kind == "recognition" and cfg.data.source == "xgnitive":
+        table = units.XGNITIVE_UNITS
+    elif cfg.kind == "recognition":
         table = units.ARM_UNITS if cfg.data.features == "arm" else units.MARKER_UNITS
     else:
         table = units.SIM_UNITS  # the goal is in the simulated scene's features

@@ -40,18 +40,42 @@ def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
     d, r = cfg.data, cfg.recognition
     t0 = time.perf_counter()
     demos = recognition_demos(cfg)
-    train, selection = selected_demos(
-        cfg, {a: v[: d.n_train] for a, v in demos.items()})
-    library = ActionLibrary.from_demonstrations(train, d.interval_s, d.method)
-    names = list(library.names)
-    kept = library.feature_names
-    tests = [(a, t.select(kept)) for a, v in demos.items() for t in v[d.n_train:]]
-    if r.query == "reduced":
-        reduced = [generalize([t], d.interval_s, d.method) for _, t in tests]
-        queries = list(np.asarray(sample_actions(reduced, r.n_samples)))
+
+    def library_of(train: dict) -> tuple[Any, dict, Any]:
+        """The library generalized from ``train`` (after ``[selection]``), the
+        demonstrations it kept and what was selected."""
+        train, selection = selected_demos(cfg, train)
+        return (ActionLibrary.from_demonstrations(train, d.interval_s, d.method),
+                train, selection)
+
+    def costs_of(library, tests: list) -> np.ndarray:
+        """The (action, demonstration) ``tests``' costs against ``library``."""
+        if r.query == "reduced":
+            reduced = [generalize([t], d.interval_s, d.method) for _, t in tests]
+            queries = list(np.asarray(sample_actions(reduced, r.n_samples)))
+        else:
+            queries = [t for _, t in tests]
+        return np.asarray(cost_matrix(queries, library, r.metric, r.n_samples), float)
+
+    if r.split == "leave_one_out":  # each repetition the query of its own library
+        library, train, selection = library_of(demos)
+        tests, rows = [], []
+        for a, reps in demos.items():
+            for k, t in enumerate(reps):
+                rest = {b: [u for j, u in enumerate(v) if (b, j) != (a, k)]
+                        for b, v in demos.items()}
+                lib_k = library_of(rest)[0]
+                tests.append((a, t.select(lib_k.feature_names)))
+                order = [list(lib_k.names).index(n) for n in library.names]
+                rows.append(costs_of(lib_k, tests[-1:])[0, order])
+        costs = np.stack(rows)
     else:
-        queries = [t for _, t in tests]
-    costs = np.asarray(cost_matrix(queries, library, r.metric, r.n_samples), float)
+        library, train, selection = library_of(
+            {a: v[: d.n_train] for a, v in demos.items()})
+        tests = [(a, t.select(library.feature_names)) for a, v in demos.items()
+                 for t in v[d.n_train:]]
+        costs = costs_of(library, tests)
+    names = list(library.names)
     recognized = [names[i] for i in costs.argmin(axis=1)]
     truth = [a for a, _ in tests]
     accuracy = float(np.mean([p == t for p, t in zip(recognized, truth)]))
@@ -61,6 +85,7 @@ def compute_recognition(cfg: ExperimentConfig, out: pathlib.Path) -> Computed:
         "features": list(library.feature_names),
         "feature_labels": feature_labels(cfg, library.feature_names),
         "metric": r.metric,
+        "split": r.split,
         "actions": names,
         "queries": [t.name for _, t in tests],
         "truth": truth,

@@ -244,7 +244,8 @@ DATA_KEYS: dict[str, tuple[str, ...]] = {
     "synthetic": ("features", "n_repetitions", "n_train", "seed", *_GENERALIZE),
     "clean_circle": ("centre", "diameter", "n_demos", "seed", *_GENERALIZE),
     "paint_ramp": ("goal_points", "scale"),
-    "xgnitive": ("data_dir", "action", "stream", "columns", *_GENERALIZE),
+    "xgnitive": ("data_dir", "action", "stream", "columns", "force_columns", "n_train",
+                 *_GENERALIZE),
     "csv": ("data_dir", "columns", *_GENERALIZE),
     "video": ("data_dir", "features", "color", "n_train", *_GENERALIZE),
     "move_box": ("n_demos", "seed", "start", "end", "curve", "object", "duration_s",
@@ -272,7 +273,9 @@ def applicable_keys(cfg: ExperimentConfig, table: dict) -> dict:
         for section in ("robot", "world", "scene", "strategy", "feasibility",
                         "reality"):
             out.pop(section, None)
+        out["data"].pop("action", None)  # xgnitive: both actions
         return out
+    out["data"].pop("n_train", None)
     out.pop("recognition", None)
     if cfg.robot.mode != "dynamic":
         out["robot"] = {k: v for k, v in table["robot"].items()

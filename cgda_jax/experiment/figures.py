@@ -48,8 +48,11 @@ def _recognition_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
     unit = error_unit(labels)
     metric = r["metric"].upper()
     written = [out / "cost_matrix.png"]
+    rows = [q.lower() for q in r["truth"]]
+    if r.get("split") == "leave_one_out":  # every repetition a row: number them
+        rows = [f"{q} {rows[:k].count(q) + 1}" for k, q in enumerate(rows)]
     plot_cost_matrix(
-        run.arrays["cost_matrix"], [q.lower() for q in r["truth"]], r["actions"],
+        run.arrays["cost_matrix"], rows, r["actions"],
         label=f"{metric} cost [{unit or 'mixed units'}]",
         title=f"{run.name}: {metric} cost, test (rows) vs generalized\n"
               + textwrap.fill(f"{len(labels)} features: {', '.join(r['features'])}",

@@ -347,17 +347,22 @@ def report_markdown(cfg: ExperimentConfig, result: dict,
         lines += [cfg.description, ""]
     if result["kind"] == "recognition":
         acts = result["actions"]
+        loo = result.get("split") == "leave_one_out"
         lines += [
             f"Recognition, {len(result['features'])} features "
-            f"({', '.join(result['features'])}), metric {result['metric']}.",
+            f"({', '.join(result['features'])}), metric {result['metric']}"
+            + (", leave one out: each repetition recognized against the actions "
+               "generalized from all the others." if loo else "."),
             "",
             "| test \\ generalized | " + " | ".join(acts) + " |",
             "|---" * (len(acts) + 1) + "|",
         ]
-        for q, row in zip(result["truth"], np.asarray(result["cost_matrix"])):
+        for k, (q, row) in enumerate(zip(result["truth"],
+                                         np.asarray(result["cost_matrix"]))):
             best = int(np.argmin(row))
             cells = [f"**{v:.4g}**" if j == best else f"{v:.4g}" for j, v in enumerate(row)]
-            lines.append(f"| {q.lower()} | " + " | ".join(cells) + " |")
+            name = f"{q.lower()} ({result['queries'][k]})" if loo else q.lower()
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
         lines += ["", f"Accuracy: {result['accuracy']:.0%}."]
         lines += selection_rows(result.get("selection"))
     else:

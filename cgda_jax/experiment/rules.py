@@ -51,14 +51,17 @@ def validate_config(cfg: ExperimentConfig) -> None:
         raise ConfigError(f"key 'data.interval_s' must be > 0, got {cfg.data.interval_s}")
     _validate_selection(cfg)
     if cfg.kind == "recognition":
-        if cfg.data.source not in ("synthetic", "video"):
-            raise ConfigError("key 'data.source': recognition runs on 'synthetic' or "
-                              "'video' data")
+        if cfg.data.source not in ("synthetic", "video", "xgnitive"):
+            raise ConfigError("key 'data.source': recognition runs on 'synthetic', "
+                              "'video' or 'xgnitive' data")
         if cfg.data.source == "video":
             _choice(cfg.data.features, ("marker", "spatial", "image"), "data.features")
             video_folders(cfg)
+        elif cfg.data.source == "xgnitive":
+            resolve_data_dir(cfg)
         else:
             _choice(cfg.data.features, ("marker", "spatial", "arm"), "data.features")
+        _choice(cfg.recognition.split, ("first", "leave_one_out"), "recognition.split")
         _choice(cfg.recognition.metric, ("dtw", "dtw_multi", "euclidean"),
                 "recognition.metric")
         _choice(cfg.recognition.query, ("reduced", "raw"), "recognition.query")

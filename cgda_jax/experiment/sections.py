@@ -33,7 +33,9 @@ class DataConfig:
             (X_m, Y_m, Z_m) or "image" (the features without depth).
         color: video: the object's colour range (``"HLO-HHI,SMIN,VMIN"``) or "auto".
         n_repetitions, n_train: synthetic: repetitions per action; the first
-            ``n_train`` generalize, the rest are test queries.
+            ``n_train`` generalize, the rest are test queries (video and xgnitive
+            recognition: ``n_train`` likewise, of the recordings there are;
+            ``recognition.split = "leave_one_out"`` uses every one in turn).
         seed: seed of the synthetic demonstrations.
         interval_s, method: generalization interval (s) and method ("paper" |
             "xgnitive").
@@ -43,8 +45,10 @@ class DataConfig:
             folder of action folders (recognition) or of recordings (execution);
             csv: the folder of CSV files.
         action, stream, columns: xgnitive action ("paint" | "iron"), stream and
-            feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``); csv: the
-            feature columns to keep, in order (e.g. ``["X_m", "Y_m", "Z_m"]``).
+            feature columns (see ``cgda_jax.data.XGNITIVE_COLUMNS``; a recognition
+            run reads ``stream`` and ``columns`` of both actions, paint and iron,
+            and no ``action``); csv: the feature columns to keep, in order (e.g.
+            ``["X_m", "Y_m", "Z_m"]``).
         force_columns: xgnitive: wrist force/torque (jr3) columns put after
             ``columns`` (e.g. ``["Fz"]``; `cgda_jax.data.load_xgnitive_force`,
             each stream generalized on its own clock); empty: none.
@@ -95,11 +99,18 @@ class RecognitionConfig:
     ``query = "reduced"`` compares the test repetition after the same interval
     averaging as the generalized actions (the paper's "reduced test actions");
     ``"raw"`` compares the raw test samples.
+
+    ``split``: which repetitions are test queries.  ``"first"``: the first
+    ``data.n_train`` of each action generalize it, the rest are queries (the
+    paper's split); ``"leave_one_out"``: every repetition in turn is the query and
+    its action is generalized from all its other repetitions (the other actions
+    from all theirs): for few recordings, as the real TEO ones (4 an action).
     """
 
     metric: str = "dtw"
     query: str = "reduced"
     n_samples: int = 100
+    split: str = "first"
 
 
 @dataclasses.dataclass

@@ -153,19 +153,29 @@ def _check_static(cfg: ExperimentConfig, trials: int | None = None) -> None:
 
 
 def _check_recognition(cfg: ExperimentConfig) -> dict[str, Any]:
-    from cgda_jax.experiment.build import synthetic_demos
+    from cgda_jax.experiment.build import recognition_demos
 
     d = cfg.data
     if d.source == "video":  # the folders were checked; tracking is the run's
         from cgda_jax.experiment.locate import video_folders
 
         return {"actions": len(video_folders(cfg))}
-    demos = synthetic_demos(cfg)
-    for reps in demos.values():
-        check_interval_count(reps[: d.n_train], d.interval_s, d.method)
-        for t in reps[d.n_train:]:
+    demos = recognition_demos(cfg)
+    loo = cfg.recognition.split == "leave_one_out"
+    for action, reps in demos.items():
+        n_train = len(reps) - 1 if loo else d.n_train
+        if loo and n_train < 1:
+            raise ConfigError(f"key 'recognition.split': leave_one_out needs at least "
+                              f"2 repetitions an action; {action!r} has {len(reps)}")
+        if not 1 <= n_train < len(reps):
+            raise ConfigError(f"key 'data.n_train'={d.n_train}: {action!r} has "
+                              f"{len(reps)} repetitions; need 1 <= n_train < "
+                              f"{len(reps)} (or recognition.split = 'leave_one_out')")
+        check_interval_count(reps[:n_train], d.interval_s, d.method)
+        for t in reps[n_train:] if not loo else reps:
             check_interval_count([t], d.interval_s, d.method)
-    queries = sum(len(reps) - d.n_train for reps in demos.values())
+    queries = sum(len(reps) if loo else len(reps) - d.n_train
+                  for reps in demos.values())
     features = len(next(iter(demos.values()))[0].feature_names)
     try:
         check_recognition(queries, len(demos), cfg.recognition.n_samples, features,
