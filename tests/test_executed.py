@@ -108,9 +108,8 @@ def test_each_executed_limit_alone_makes_a_move_infeasible(arms):
     assert float(feas.executed(clear, bad, 0.0)) == pytest.approx(0.5, rel=1e-5)
     assert float(feas.executed(clear, ok, 0.25)) == pytest.approx(1.5, rel=1e-4)
     assert float(feas.executed(clear, ok, 1.0)) == pytest.approx(9.0, rel=1e-4)
-    loose = Feasibility(arms["weak"], LIMITS, [PLATE], physics_contacts=True,
-                        tracking_deg=10.0, saturation=1.0)
-    assert float(loose.executed(clear, bad, 1.0)) == 0.0
+    feas.tracking_deg, feas.saturation = 10.0, 1.0  # as the constructor sets them
+    assert float(feas.executed(clear, bad, 1.0)) == 0.0
     with pytest.raises(ValueError, match="tracking_deg must be > 0"):
         Feasibility(arms["weak"], LIMITS, tracking_deg=0.0)
     with pytest.raises(ValueError, match=r"saturation must be in \[0, 1\]"):
