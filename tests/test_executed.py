@@ -101,15 +101,17 @@ def test_each_executed_limit_alone_makes_a_move_infeasible(arms):
     clear = np.zeros((3, 2), np.float32)  # held horizontal, 9 cm above the plate
     low = np.array([[0.0, 0.0], [0.0, 0.6], [0.0, 0.0]], np.float32)  # sagged
     ok = np.full(2, np.radians(4.0), np.float32)
-    assert float(feas.executed(clear, ok, 0.1)) == 0.0
+    keep = 0.95  # the search keeps 5 % of each limit in hand (EXECUTED_MARGIN)
+    assert float(feas.executed(clear, ok, 0.09)) == 0.0
     assert float(feas.executed(low, ok, 0.0)) > 1.0  # into the plate
     bad = ok.copy()
     bad[1] = np.radians(7.5)
-    assert float(feas.executed(clear, bad, 0.0)) == pytest.approx(0.5, rel=1e-5)
-    assert float(feas.executed(clear, ok, 0.25)) == pytest.approx(1.5, rel=1e-4)
-    assert float(feas.executed(clear, ok, 1.0)) == pytest.approx(9.0, rel=1e-4)
+    assert float(feas.executed(clear, bad, 0.0)) == pytest.approx(7.5 / (keep * 5) - 1,
+                                                                  rel=1e-5)
+    assert float(feas.executed(clear, ok, 0.25)) == pytest.approx(
+        (0.25 - keep * 0.1) / (keep * 0.1), rel=1e-4)
     feas.tracking_deg, feas.saturation = 10.0, 1.0  # as the constructor sets them
-    assert float(feas.executed(clear, bad, 1.0)) == 0.0
+    assert float(feas.executed(clear, bad, 0.9)) == 0.0
     with pytest.raises(ValueError, match="tracking_deg must be > 0"):
         Feasibility(arms["weak"], LIMITS, tracking_deg=0.0)
     with pytest.raises(ValueError, match=r"saturation must be in \[0, 1\]"):
