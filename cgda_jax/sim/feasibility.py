@@ -83,12 +83,12 @@ DEFAULT_PENETRATION = 0.005
 DEFAULT_MARGIN = 0.002
 #: Dynamic mode: the largest tracking error of an evolved joint (simulated against
 #: commanded posture at any physics step) [deg; a slide: mm] (`Feasibility.executed`).
-#: TEO's 30 N m servos lag 17.6-25.2 deg behind the paint task's 0.6 s moves (the
+#: TEO's 30 N m servos lag 17.6-26.2 deg behind the paint task's 0.6 s moves (the
 #: limits bound a runaway; the simulated path's penetration is the safety check).
 DEFAULT_TRACKING_DEG = 30.0
 #: Dynamic mode: the largest share of a move's physics steps at which an evolved
 #: joint's actuator force may sit at its limit (`Feasibility.executed`); TEO's
-#: paint task: 49-69 % of its worst move.
+#: paint task: 49-72 % of its worst move.
 DEFAULT_SATURATION = 0.75
 #: Dynamic mode: the share of the tracking and saturation limits the search keeps
 #: in hand (`Feasibility.executed`; the independent replay checks the full limits).
