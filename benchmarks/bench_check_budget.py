@@ -15,14 +15,28 @@ experiment.  This measures, per experiment (as `cgda run` builds it):
 - from these, how many postures a move could be checked at if the whole extra
   time a 2x run allows went to the check (``budget`` = one unconstrained
   evaluation's cost / one posture's check): the check looks at
-  ``samples + 1`` (11) postures a move.
+  ``samples + 1`` (11) postures a move;
+- the same posture's check and a whole move's (`Feasibility.move`, over a batch
+  of random moves) with both geometries of `Feasibility`: ``exact`` (the geoms,
+  ``Collider.distances(exact=False)``: box pairs by separating axes and feature
+  searches) and ``round`` (the default: capsules that hold the moving geoms,
+  closed-form pairs), per posture and per pair, against the floor of a plain
+  vectorized capsule-capsule (clamped segment-segment) distance over a batch of
+  `FLOOR_PAIRS` random pairs in the same process (``floor_ns``).
+
+With ``--search`` it times instead the feasible search itself (the experiment's
+strategy as `cgda run` builds it, seed 0) with each geometry, built and compiled
+apart and then run alternately in one process (median of ``--repeats``): the run
+time before (``exact``) and after (``round``), and each result's error.
 
     python benchmarks/bench_check_budget.py [--only clean_ie ...] [--repeats 3]
+    python benchmarks/bench_check_budget.py --search --only clean_ie paint_iet
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 
 import jax
@@ -37,6 +51,10 @@ from cgda_jax.experiment.compute import strategy_function
 
 EXPERIMENTS = ["clean_ie", "iron_ie_xgnitive", "paint_iet"]
 POSTURES = 4096
+#: Moves of the whole-move timing (each ``samples + 1`` postures).
+MOVES = 1024
+#: Random capsule pairs of the capsule-capsule floor.
+FLOOR_PAIRS = 65536
 
 
 def _build(name: str, overrides: list[str]):
@@ -68,28 +86,81 @@ def unconstrained(name: str, repeats: int) -> dict:
             "per_eval_us": 1e6 * run_s / evaluated}
 
 
+def capsule_floor_ns(repeats: int) -> float:
+    """Nanoseconds a pair of a plain vmapped capsule-capsule distance (clamped
+    segment-segment minus the radii) over `FLOOR_PAIRS` random pairs."""
+    from cgda_jax.sim.primitive_distances import segment_segment
+
+    x = jnp.asarray(np.random.default_rng(1).normal(size=(FLOOR_PAIRS, 4, 3)),
+                    jnp.float32)
+    r = jnp.full((FLOOR_PAIRS, 2), 0.05, jnp.float32)
+    f = jax.jit(jax.vmap(lambda s, r: segment_segment(s[0], s[1], s[2], s[3])
+                         - r[0] - r[1]))
+    return 1e9 * median_time(lambda: f(x, r), repeats=max(5, repeats)) / FLOOR_PAIRS
+
+
 def check_parts(name: str, repeats: int) -> dict:
     _, _, sim = _build(name, [])
     feas = sim.feasibility
-    col = feas.collider
+    col = feas.check
     lo, hi = np.asarray(sim.lower), np.asarray(sim.upper)
-    q = jnp.asarray(np.random.default_rng(0).uniform(lo, hi, (POSTURES, sim.n_dof)),
-                    jnp.float32)
+    rng = np.random.default_rng(0)
+    q = jnp.asarray(rng.uniform(lo, hi, (POSTURES, sim.n_dof)), jnp.float32)
     frames = jax.jit(jax.vmap(col.geom_frames))
-    dist = jax.jit(jax.vmap(lambda g: col.distances(g, exact=False)))
     t_frames = median_time(lambda: frames(q), repeats=max(5, repeats))
-    t_dist = median_time(lambda: dist(q), repeats=max(5, repeats))
-    return {"pairs": col.n_pairs, "samples": feas.samples + 1,
-            "frames_us": 1e6 * t_frames / POSTURES,
-            "posture_us": 1e6 * t_dist / POSTURES}
+    out = {"pairs": col.n_pairs, "samples": feas.samples + 1,
+           "frames_us": 1e6 * t_frames / POSTURES}
+    q0 = jnp.asarray(rng.uniform(lo, hi, (MOVES, sim.n_dof)), jnp.float32)
+    dq = jnp.asarray(rng.uniform(lo, hi, (MOVES, sim.n_dof)), jnp.float32) - q0
+    dur = jnp.full((MOVES,), float(sim.move_s), jnp.float32)
+    exact = copy.copy(feas)  # the same check on the geoms themselves
+    exact.check, exact.geometry = feas.collider, "exact"
+    for label, f in (("exact", exact), ("round", feas)):
+        dist = jax.jit(jax.vmap(lambda g, c=f.check: c.distances(g, exact=False)))
+        move = jax.jit(jax.vmap(lambda a, b, t, f=f: f.move(a, b, t)))
+        t_dist = median_time(lambda: dist(q), repeats=max(5, repeats))
+        t_move = median_time(lambda: move(q0, dq, dur), repeats=max(5, repeats))
+        out[f"{label}_posture_us"] = 1e6 * t_dist / POSTURES
+        out[f"{label}_pair_ns"] = 1e9 * t_dist / POSTURES / col.n_pairs
+        out[f"{label}_move_us"] = 1e6 * t_move / MOVES
+    out["posture_us"] = out["round_posture_us"]
+    out["floor_ns"] = capsule_floor_ns(repeats)
+    out["speedup"] = out["exact_move_us"] / out["round_move_us"]
+    return out
+
+
+def search_times(name: str, repeats: int) -> dict:
+    """Median search time (s) of the experiment with each check geometry, run
+    alternately in one process, and each run's largest point error."""
+    built = {g: _build(name, [f"feasibility.geometry={g}"]) for g in ("exact", "round")}
+    runs: dict[str, list] = {g: [] for g in built}
+    for g, (cfg, goal, sim) in built.items():
+        _run(cfg, sim, goal)  # compile
+    for _ in range(repeats):
+        for g, (cfg, goal, sim) in built.items():
+            runs[g].append(_run(cfg, sim, goal))
+    out = {"experiment": name}
+    for g, rs in runs.items():
+        out[f"{g}_search_s"] = float(np.median([r.wall_time_s for r in rs]))
+        out[f"{g}_error"] = float(rs[-1].max_point_error)
+        out[f"{g}_success"] = bool(rs[-1].success)
+    out["speedup"] = out["exact_search_s"] / out["round_search_s"]
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--search", action="store_true",
+                    help="time the feasible search with each geometry instead")
     args = ap.parse_args()
     os.environ.setdefault("CGDA_XGNITIVE_DIR", "../shared/data/xgnitive")
+    if args.search:
+        rows = [search_times(n, args.repeats) for n in args.only or EXPERIMENTS]
+        print_table(rows, list(rows[0]))
+        write_json("bench_check_budget_search", {"rows": rows})
+        return
     rows = []
     for name in args.only or EXPERIMENTS:
         u, c = unconstrained(name, args.repeats), check_parts(name, args.repeats)
@@ -101,6 +172,9 @@ def main() -> None:
         print_table(rows[-1:], list(rows[-1]))
     print_table(rows, ["experiment", "run_s", "evaluated", "per_eval_us", "pairs",
                        "frames_us", "posture_us", "move_check_us", "budget_postures"])
+    print_table(rows, ["experiment", "pairs", "exact_posture_us", "round_posture_us",
+                       "exact_pair_ns", "round_pair_ns", "floor_ns", "exact_move_us",
+                       "round_move_us", "speedup"])
     write_json("bench_check_budget", {"rows": rows})
 
 

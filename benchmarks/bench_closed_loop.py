@@ -70,7 +70,7 @@ def scaled_table(table: dict, level: float) -> dict:
 
 def tiny() -> None:
     from cgda_jax import MarkerScene, Robot, Simulator, model_path
-    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.control_trajectory import trajectory_of
     from cgda_jax.reality.protocol import measure
     from cgda_jax.strategies import run_oet
     from cgda_jax.strategies.oet import ordered_point_errors

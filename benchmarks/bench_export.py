@@ -28,7 +28,7 @@ from _common import machine, median_time, print_table, write_json  # noqa: E402
 from cgda_jax.builtin import experiment_path  # noqa: E402
 from cgda_jax.experiment import load_config  # noqa: E402
 from cgda_jax.experiment.build import build_simulator  # noqa: E402
-from cgda_jax.reality.export import trajectory_of  # noqa: E402
+from cgda_jax.reality.control_trajectory import trajectory_of  # noqa: E402
 from cgda_jax.reality.files import load_trajectory, save_trajectory  # noqa: E402
 from cgda_jax.reality.replay import replay_trajectory  # noqa: E402
 

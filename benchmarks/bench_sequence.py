@@ -11,10 +11,13 @@ two-action sequence executed on TEO.
 2. ``execute_sequence`` on TEO (the clean_ie experiment's robot, scene and
    feasibility checks): MOVE (a 15 cm stroke down to the top of the clean circle)
    then CLEAN (the generalized 30 cm circle), each by Individual Evolution, CLEAN's
-   goal starting where MOVE left the marker; success, worst point error, the
-   motion check (feasible) per action, and a figure of goal vs executed.
+   goal starting where MOVE left the marker and its run where MOVE left the arm;
+   success, worst point error, MOVE's motion check, both runs replayed as one
+   rollout (same features? feasible?), and a figure of goal vs executed.
+3. ``--paint``: PAINT then PAINT on TEO by IET (the paint_iet experiment), the
+   second run starting on the wall the first left.
 
-    python benchmarks/bench_sequence.py [--recordings 10] [--no-teo] [--out DIR]
+    python benchmarks/bench_sequence.py [--recordings 10] [--seed 1000] [--no-teo] [--out DIR]
 """
 
 from __future__ import annotations
@@ -35,13 +38,13 @@ from cgda_jax.segmentation import segment
 SETTINGS = {"step_s": 0.2, "durations_s": (1.0, 15.0)}
 
 
-def segmentation(n: int, out: pathlib.Path) -> dict:
+def segmentation(n: int, out: pathlib.Path, first_seed: int = 1000) -> dict:
     library = ActionLibrary.from_demonstrations(synthetic_actions(6, seed=0))
     rows, errs, times = [], [], []
     right = total = 0
     for pause in ((0.0, 0.0), (0.5, 2.0)):
         for k in range(n):
-            seq = synthetic_sequence(seed=1000 + k, pause_s=pause)
+            seq = synthetic_sequence(seed=first_seed + k, pause_s=pause)
             t0 = time.perf_counter()
             segs = segment(seq.recording, library, **SETTINGS)
             dt = time.perf_counter() - t0
@@ -49,14 +52,14 @@ def segmentation(n: int, out: pathlib.Path) -> dict:
                 times.append(dt)
             total += len(seq.truth)
             if len(segs) != len(seq.truth):
-                rows.append({"pauses": str(pause), "seed": 1000 + k,
+                rows.append({"pauses": str(pause), "seed": first_seed + k,
                              "actions": len(seq.truth), "found": len(segs)})
                 continue
             e = [max(abs(s.start - t0_), abs(s.end - t1)) / (t1 - t0_)
                  for s, (_, t0_, t1) in zip(segs, seq.truth)]
             r = sum(s.action == a for s, (a, _, _) in zip(segs, seq.truth))
             right, errs = right + r, errs + e
-            rows.append({"pauses": str(pause), "seed": 1000 + k,
+            rows.append({"pauses": str(pause), "seed": first_seed + k,
                          "actions": len(seq.truth), "found": len(segs), "right": r,
                          "worst boundary %": round(100 * max(e), 1), "s": round(dt, 2)})
             if k == 0:
@@ -109,7 +112,8 @@ def teo_sequence(out: pathlib.Path) -> dict:
     wall = time.perf_counter() - t0
     rows, summary = [], {"wall_s": wall, "actions": []}
     for name, res in zip(("MOVE", "CLEAN"), results):
-        motion = motion_check(sim, res)
+        # CLEAN starts where MOVE left the arm: judged below, in the whole replay
+        motion = motion_check(sim, res) if name == "MOVE" else None
         feasible = None if motion is None else bool(motion[0].get("feasible"))
         rows.append({"action": name, "points": len(res.goal), "success": res.success,
                      "worst error mm": round(1000 * float(res.point_errors.max()), 1),
@@ -125,6 +129,60 @@ def teo_sequence(out: pathlib.Path) -> dict:
                           path=out / "teo_move_clean.png")
     summary["start_matches"] = bool(np.allclose(results[1].goal[0],
                                                 results[0].features[-1]))
+    joints = np.vstack([r.joints for r in results]).astype(np.float32)
+    summary["replay_matches"] = bool(np.allclose(np.asarray(sim.rollout(joints)[0]),
+                                                 executed, atol=1e-5))
+    summary["replay_violation"] = float(sim.violation(joints))
+    print(summary)
+    return summary
+
+
+def paint_sequence(out: pathlib.Path) -> dict:
+    """Two PAINT actions on TEO's wall (the paint_iet experiment's robot, scene,
+    feasibility and IET settings): paint half the wall, then the second half,
+    the second execution starting from the first's wall and posture."""
+    from cgda_jax.builtin import experiment_path
+    from cgda_jax.experiment import load_config
+    from cgda_jax.experiment.build import build_simulator
+    from cgda_jax.experiment.compute import motion_check
+    from cgda_jax.plotting import plot_goal_vs_executed
+    from cgda_jax.segmentation import execute_sequence
+    from cgda_jax.strategies import run_iet
+
+    cfg = load_config(experiment_path("paint_iet"))
+    half = np.linspace(0.0, 50.0, 9)[:, None]  # each PAINT: 8 of the 16 squares
+    sim = build_simulator(cfg, None, np.vstack([half, half + 50.0]))
+    s = cfg.strategy
+    t0 = time.perf_counter()
+    results = execute_sequence(sim, [half, half], run_iet, algorithm=s.algorithm,
+                               population_size=s.population_size,
+                               tolerance=s.tolerance,
+                               max_generations=s.max_generations, seed=s.seed,
+                               **s.options)
+    wall = time.perf_counter() - t0
+    # the whole sequence replayed in one rollout from the start state
+    joints = np.vstack([r.joints for r in results]).astype(np.float32)
+    replay = np.asarray(sim.rollout(joints)[0])
+    rows, summary = [], {"wall_s": wall, "actions": []}
+    for k, res in enumerate(results):
+        motion = motion_check(sim, res) if k == 0 else None
+        rows.append({"action": f"PAINT {k + 1}", "goal %": f"{res.goal[0, 0]:g}-"
+                     f"{res.goal[-1, 0]:g}", "executed %": f"{res.features[0, 0]:g}-"
+                     f"{res.features[-1, 0]:g}", "success": res.success,
+                     "worst error %": round(float(res.point_errors.max()), 2),
+                     "feasible": None if motion is None
+                     else bool(motion[0].get("feasible")),
+                     "compile s": round(res.compile_time_s, 1),
+                     "search s": round(res.wall_time_s, 2)})
+        summary["actions"].append(rows[-1])
+    print_table(rows, list(rows[0]))
+    executed = np.vstack([r.features for r in results])
+    summary["replay_matches"] = bool(np.allclose(replay, executed))
+    summary["replay_violation"] = float(sim.violation(joints))
+    plot_goal_vs_executed(np.vstack([r.goal for r in results]), executed,
+                          ["painted [%]"], tolerance=s.tolerance, tolerance_unit="%",
+                          title="TEO: PAINT (points 1-9) then PAINT (10-18), IET, "
+                          "the wall carried", path=out / "teo_paint_paint.png")
     print(summary)
     return summary
 
@@ -133,14 +191,22 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--recordings", type=int, default=10,
                    help="recordings per pause setting")
+    p.add_argument("--seed", type=int, default=1000,
+                   help="first recording's seed (1000: the seeds the refinement was "
+                   "tuned on; 2000: fresh ones)")
     p.add_argument("--no-teo", action="store_true")
+    p.add_argument("--paint", action="store_true",
+                   help="also the two-PAINT sequence on TEO (IET)")
     p.add_argument("--out", default="results/bench_sequence")
     args = p.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    payload = {"segmentation": segmentation(args.recordings, out)}
+    payload = ({"segmentation": segmentation(args.recordings, out, args.seed)}
+               if args.recordings > 0 else {})
     if not args.no_teo:
         payload["teo"] = teo_sequence(out)
+    if args.paint:
+        payload["paint"] = paint_sequence(out)
     write_json("sequence", payload)
 
 

@@ -18,7 +18,7 @@ or its parent), each with seeds 0-3
   from the config, the strategy function of `cgda_jax.experiment.rules` with the
   config's settings), without the replays, figures and reports;
 - batched: one `cgda_jax.strategies.run_seeds` call over seeds 0-3, as
-  ``cgda run CONFIG --trials 4`` calls it (`cgda_jax.experiment.trials`).
+  ``cgda run CONFIG --trials 4`` calls it (`cgda_jax.experiment.success_rate`).
 
 Stored per run: every `ExecutionResult` array (joints, features, goal, point
 errors, fitness history), its counts (generations, evaluations, invalid

@@ -50,9 +50,9 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     # experiments and their results folders
     "cgda_jax.experiment": ("ExperimentConfig", "load_config", "run_experiment"),
     "cgda_jax.experiment.load": ("Run", "load_run"),
-    "cgda_jax.experiment.export": ("export_trajectory", "check_exported"),
+    "cgda_jax.experiment.trajectory_file": ("export_trajectory", "check_exported"),
     # from simulation to a robot: export, replay, a mismatched world
-    "cgda_jax.reality.export": ("ExportedTrajectory", "time_parameterize"),
+    "cgda_jax.reality.control_trajectory": ("ExportedTrajectory", "time_parameterize"),
     "cgda_jax.reality.files": ("load_trajectory", "save_trajectory"),
     "cgda_jax.reality.replay": ("replay_trajectory",),
     "cgda_jax.reality.protocol": ("Reality", "Measurement", "RealityError"),

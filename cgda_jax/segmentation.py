@@ -25,10 +25,14 @@ in which several library actions follow each other (with or without pauses) into
    so around each gap between two actions (and before the first, after the last)
    the samples are fitted by an explicit model of a human motion's ends: the object
    held still, then leaving (or, before, reaching) its rest along a minimum-jerk
-   profile (Flash & Hogan 1985) over the action's duration, each feature with its
-   own amplitude (linear least squares); the end and start times of least residual
-   are searched jointly, on every sample within a share of the action's duration of
-   the search's boundaries.
+   profile (Flash & Hogan 1985) over the action's duration; the end and start
+   times of least residual are searched jointly, on every sample within a share of
+   the action's duration of the search's boundaries. Where a feature changes
+   monotonically over an action (its net change is most of its range), that change
+   is the profile's amplitude: fixed, the profile's curvature places the onset (a
+   free amplitude lets a steep end pass for a longer, larger profile and the
+   boundary slide into the pause after it); a feature that goes and comes back
+   (CLEAN's circle) has its amplitude fitted (linear least squares).
 
 Rests are dropped from the result; each action segment says its start and end in
 the recording's time unit (seconds) and its cost.
@@ -44,6 +48,7 @@ References:
 
 from __future__ import annotations
 
+import copy
 import functools
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
@@ -53,6 +58,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.data import Demonstration
+from cgda_jax.numerics import min_jerk_np
 from cgda_jax.recognition import METRICS, ActionLibrary
 from cgda_jax.sizes import check_recognition
 
@@ -72,13 +78,19 @@ _STARTS_PER_CHUNK = 64
 #: `refine_boundaries`: a boundary moves at most this share of its action's
 #: (search) duration; the samples fitted reach this share into each action.
 _REACH = 0.25
-_INTO = 0.3
+_INTO = 0.2
 #: `refine_boundaries`: rounds of refitting (each centres its window on the last).
 _ROUNDS = 10
 #: (end, start) pairs of candidate times fitted in one vectorised step.
 _PAIRS_PER_CHUNK = 512
 #: `refine_boundaries`: candidate times per side in the coarse pass.
 _COARSE = 24
+#: `refine_boundaries`: an action's net change is measured on the samples within
+#: this share of its duration of each end (medians) ...
+_LEVEL = 0.05
+#: ... and fixed in the fit for the features whose net change is at least this
+#: share of their range over the action (the others go and come back: fitted).
+_MONOTONE = 0.8
 
 
 class Segment(NamedTuple):
@@ -361,7 +373,7 @@ def segment(
         >>> x = np.r_[np.minimum(t[:41], 2), 2 + np.minimum(t[1:41], 2)]  # up, up
         >>> segs = segment(Demonstration(t, x, ("x",)), lib, step_s=0.1)
         >>> [(s.action, round(s.start, 1), round(s.end, 1)) for s in segs]
-        [('up', 0.1, 1.7), ('up', 1.9, 3.7)]
+        [('up', 0.0, 2.1), ('up', 2.1, 4.0)]
     """
     grid_t, lengths, costs = segment_costs(
         recording, library, metric=metric, n_samples=n_samples, step_s=step_s,
@@ -383,23 +395,19 @@ def segment(
     return refine_boundaries(recording, found) if refine else found
 
 
-def _min_jerk(u: np.ndarray) -> np.ndarray:
-    """Minimum-jerk progress ``10 u^3 - 15 u^4 + 6 u^5`` of ``u`` clipped to [0, 1]."""
-    u = np.clip(u, 0.0, 1.0)
-    return u**3 * (10.0 - 15.0 * u + 6.0 * u**2)
-
-
 def _fit_gap(t, y, end, start, box_end, box_start):
     """The (end, start) times of least residual around one gap.
 
-    ``end``: (estimate, duration) of the action before the gap, or None (the gap
-    opens the recording); ``start``: the same for the action after it, or None (it
-    closes the recording). ``box_*``: (lowest, highest) allowed time. The samples
-    from ``_INTO`` durations before the end to ``_INTO`` after the start (1 s of
-    rest where a side is missing) are fitted by, per feature, a constant plus an
-    amplitude times the minimum-jerk descent ending at ``t1`` (over the previous
-    action's duration) plus one times the rise starting at ``t0``; ``t1 <= t0``.
-    Returns ``(t1, t0)``, None for a missing side.
+    ``end``: (estimate, duration, amplitudes (F,)) of the action before the gap,
+    or None (the gap opens the recording); ``start``: the same for the action
+    after it, or None (it closes the recording). ``box_*``: (lowest, highest)
+    allowed time. The samples from ``_INTO`` durations before the end to
+    ``_INTO`` after the start (1 s of rest where a side is missing) are fitted by,
+    per feature, a constant plus an amplitude times the minimum-jerk descent
+    ending at ``t1`` (over the previous action's duration) plus one times the rise
+    starting at ``t0``; ``t1 <= t0``. An amplitude is the given one (the action's
+    net change, negated for the descent) where that is finite, fitted where it
+    is NaN. Returns ``(t1, t0)``, None for a missing side.
     """
     lo = end[0] - _INTO * end[1] if end else start[0] - 1.0
     hi = start[0] + _INTO * start[1] if start else end[0] + 1.0
@@ -424,30 +432,62 @@ def _fit_gap(t, y, end, start, box_end, box_start):
 def _best_pair(tt, yy, end, start, c1, c0):
     """`_fit_gap`'s search over the candidate end times ``c1`` and start times
     ``c0`` (``[nan]`` for a missing side): the (t1, t0) of least residual, or None
-    when no pair is allowed."""
+    when no pair is allowed. The features are fitted in groups by which of their
+    amplitudes are fixed: the fixed profiles are subtracted, the constant and the
+    free amplitudes solved by least squares."""
     t1, t0 = (v.ravel() for v in np.meshgrid(c1, c0, indexing="ij"))
     ok = np.isnan(t1) | np.isnan(t0) | (t1 <= t0)
     t1, t0 = t1[ok], t0[ok]
     if t1.size == 0:
         return None
-    total = float(np.sum(yy**2))
     best, arg = np.inf, None
+    amp1 = end[2] if end else np.full(yy.shape[1], np.nan)
+    amp0 = start[2] if start else np.full(yy.shape[1], np.nan)
+    groups = [(f1, f0, np.flatnonzero((np.isnan(amp1) == f1) & (np.isnan(amp0) == f0)))
+              for f1 in (False, True) for f0 in (False, True)]
+    groups = [g for g in groups if g[2].size]
     for i in range(0, t1.size, _PAIRS_PER_CHUNK):
         a, b = t1[i:i + _PAIRS_PER_CHUNK], t0[i:i + _PAIRS_PER_CHUNK]
-        cols = [np.ones((a.size, tt.size))]
-        if end:
-            cols.append(_min_jerk((a[:, None] - tt[None]) / end[1]))
-        if start:
-            cols.append(_min_jerk((tt[None] - b[:, None]) / start[1]))
-        x = np.stack(cols, -1)  # (pairs, samples, basis)
-        xt = x.transpose(0, 2, 1)
-        gram = xt @ x + 1e-12 * np.eye(x.shape[-1])
-        rhs = xt @ yy[None]
-        residual = total - np.sum(rhs * np.linalg.solve(gram, rhs), axis=(1, 2))
+        m1 = (min_jerk_np((a[:, None] - tt[None]) / end[1]) if end
+              else np.zeros((a.size, tt.size)))
+        m0 = (min_jerk_np((tt[None] - b[:, None]) / start[1]) if start
+              else np.zeros((a.size, tt.size)))
+        residual = np.zeros(a.size)
+        for free1, free0, f in groups:
+            yf = yy[None, :, f]
+            if not free1 and end:
+                yf = yf - m1[:, :, None] * amp1[f]
+            if not free0 and start:
+                yf = yf - m0[:, :, None] * amp0[f]
+            cols = [np.ones((a.size, tt.size))]
+            if free1 and end:
+                cols.append(m1)
+            if free0 and start:
+                cols.append(m0)
+            x = np.stack(cols, -1)  # (pairs, samples, basis)
+            xt = x.transpose(0, 2, 1)
+            gram = xt @ x + 1e-12 * np.eye(x.shape[-1])
+            rhs = xt @ yf
+            residual += (np.sum(yf**2, axis=(1, 2))
+                         - np.sum(rhs * np.linalg.solve(gram, rhs), axis=(1, 2)))
         j = int(np.argmin(residual))
         if residual[j] < best:
             best, arg = residual[j], (a[j], b[j])
     return arg
+
+
+def _amplitude(t, y, start, end, duration):
+    """(F,) each feature's net change over the action ``start .. end`` (medians of
+    the samples within ``_LEVEL`` of its duration of each end), NaN for a feature
+    whose net change is below ``_MONOTONE`` of its range over the action (it goes
+    and comes back: its amplitude is fitted)."""
+    half = _LEVEL * duration
+    before = np.median(y[(t >= start - half) & (t <= start)], axis=0)
+    after = np.median(y[(t >= end) & (t <= end + half)], axis=0)
+    inside = y[(t >= start) & (t <= end)]
+    delta = after - before
+    span = np.ptp(inside, axis=0) if inside.shape[0] else np.abs(delta)
+    return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
 def refine_boundaries(recording: Demonstration,
@@ -457,10 +497,15 @@ def refine_boundaries(recording: Demonstration,
     Each gap between two segments (and the stretches before the first and after
     the last) is fitted by the object at rest between a minimum-jerk end of the
     action before and a minimum-jerk start of the action after (`segment`, step
-    4), each feature in units of its noise; the end and start times (samples of the
-    recording, the end not after the start) within ``0.25`` of each action's
-    duration of the given boundaries are chosen jointly by least residual, the
-    window recentred and refitted until it settles (at most 10 rounds).
+    4), each feature in units of its noise, on the samples from 0.2 of the
+    actions' durations inside them; a feature's amplitude is the action's net
+    change (medians of the samples within 5 % of its duration of the given start
+    and end) where that is at least 80 % of the feature's range over the action,
+    fitted otherwise. The end and start times (samples of the recording, the end
+    not after the start) within ``0.25`` of each action's duration of the given
+    boundaries are chosen jointly by least residual, the window recentred and
+    refitted, with each action's duration and net change measured anew, until it
+    settles (at most 10 rounds).
 
     Args:
         recording: the recording the segments were found in.
@@ -482,10 +527,12 @@ def refine_boundaries(recording: Demonstration,
     starts = [s.start for s in segments]
     ends = [s.end for s in segments]
     for _ in range(_ROUNDS):
+        dur = [b - a for a, b in zip(starts, ends)]  # the profiles' durations
+        amp = [_amplitude(t, y, a, b, d) for a, b, d in zip(starts, ends, dur)]
         new_starts, new_ends = list(starts), list(ends)
         for g in range(n + 1):
-            before = (ends[g - 1], dur[g - 1]) if g > 0 else None
-            after = (starts[g], dur[g]) if g < n else None
+            before = (ends[g - 1], dur[g - 1], -amp[g - 1]) if g > 0 else None
+            after = (starts[g], dur[g], amp[g]) if g < n else None
             t1, t0 = _fit_gap(t, y, before, after,
                               box[g - 1][2:] if g > 0 else None,
                               box[g][:2] if g < n else None)
@@ -504,6 +551,8 @@ def execute_sequence(
     sim: Any,
     goals: Sequence[Any],
     run: Callable[..., Any] | Sequence[Callable[..., Any]],
+    *,
+    carry_state: bool = True,
     **settings: Any,
 ) -> list[Any]:
     """Execute goals one after another, each starting where the previous left the
@@ -511,7 +560,13 @@ def execute_sequence(
 
     Goal ``k > 0`` is moved (every point by the same offset) so that its first point
     is the last feature point that execution ``k - 1`` reached; the first goal is
-    executed as given. A thin composition: each goal is one call of a strategy.
+    executed as given. With ``carry_state`` (the default), execution ``k > 0`` also
+    starts from the simulator state in which execution ``k - 1`` ended: its posture
+    and its scene's state (the paint wall's painted squares), so a second PAINT
+    goes on painting the wall the first one left, from where the arm stands. That
+    state is what the strategy's simulator gives as `init_state()`, where every
+    strategy starts its executions. A thin composition: each goal is one call of
+    a strategy.
 
     Args:
         sim: the simulator every goal is executed on (same features as the goals).
@@ -519,6 +574,9 @@ def execute_sequence(
             recognized actions (``library[s.action].knots`` for each `Segment`).
         run: a strategy function (`cgda_jax.strategies.run_ie`, ``run_iet``, ...)
             called as ``run(sim, goal, **settings)``, or one per goal.
+        carry_state: start each execution after the first from the previous one's
+            final state (its joints replayed on the simulator); False: every
+            execution starts from ``sim.init_state()``.
         **settings: passed to every call (population_size, tolerance, seed, ...).
 
     Returns:
@@ -542,11 +600,31 @@ def execute_sequence(
                 n_features is not None and g.shape[1] != n_features):
             raise ValueError(f"execute_sequence: goal {k} has shape {g.shape}; "
                              f"expected (N, {n_features}) for this simulator")
-    results, here = [], None
+    results, here, current = [], None, sim
     for goal, fn in zip(goals, runs):
         if here is not None:
             goal = goal - goal[0] + here
-        result = fn(sim, goal, **settings)
+        result = fn(current, goal, **settings)
         results.append(result)
         here = np.asarray(result.features)[-1]
+        joints = np.asarray(result.joints)
+        if carry_state and np.all(np.isfinite(joints)):
+            final = current.rollout(joints, current.init_state())[1]
+            current = _continued(sim, final)
     return results
+
+
+def _continued(sim: Any, state: Any) -> Any:
+    """A shallow copy of ``sim`` whose `init_state()` (no posture given) is
+    ``state``, a previous execution's final state, with its feasibility
+    violations cleared (each execution is judged on its own moves)."""
+    if getattr(state, "violation", None) is not None:
+        zero = jnp.float32(0.0)
+        state = state.replace(violation=zero, move_violation=zero)
+    other = copy.copy(sim)
+
+    def init_state(genes0=None):
+        return state if genes0 is None else sim.init_state(genes0)
+
+    other.init_state = init_state
+    return other

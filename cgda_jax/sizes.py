@@ -23,6 +23,7 @@ gives the estimate and the largest value that would fit. The estimates:
   init (TEO, 9 points, 4096 samples) 1.02 MB measured; with feasibility on the
   generation chunk holds the most: clean_ie 15.3 MB measured, 18.0 MB estimated;
   paint_iet 2.0 / 3.3 MB; iron_ie_xgnitive 33.9 / 54.2 MB (`PAIR_FLOATS`).
+  `sim_estimate` reads its widths from a simulator.
 - `recognition_estimate`: Q queries x A actions compared at n samples (the DTW
   diagonals of every pair at once, 8 x F x n per pair) and its work, Q x A x F x n**2
   DTW cells (`MAX_DTW_CELLS`).
@@ -38,6 +39,7 @@ import dataclasses
 import math
 import os
 import pathlib
+from typing import Any
 
 __all__ = [
     "BYTES_PER_PROCESS",
@@ -61,6 +63,7 @@ __all__ = [
     "recognition_estimate",
     "run_estimate",
     "samples_estimate",
+    "sim_estimate",
 ]
 
 #: XLA indexes array elements and dimensions with signed 32-bit integers.
@@ -293,6 +296,31 @@ def dynamic_width(mj_model) -> int:
     sensors), a floor of what ``mjx.make_data`` holds."""
     m = mj_model
     return int(24 * m.nbody + 12 * m.ngeom + 4 * (m.nq + m.nv) + m.nsensordata)
+
+
+def sim_estimate(sim: Any, *, trials: int, population: int, points: int,
+                 strategy: str, samples: int = 0) -> Estimate:
+    """What `trials` trials on `sim` in one batch hold at once (`run_estimate`):
+    the widths read from the simulator (its bodies, physics state and motion
+    check). The one rule for a plan
+    (`cgda_jax.strategies.base.PlanBase.estimate`) and for a config's checks
+    (``cgda run --dry-run``)."""
+    robot = getattr(sim, "robot", None)
+    model = getattr(robot, "mj_model", None)
+    backend = getattr(getattr(sim, "backend", None), "name", None)
+    feas = getattr(sim, "feasibility", None)
+    collider = getattr(feas, "collider", None)
+    return run_estimate(
+        trials=trials, population=population, points=points,
+        features=int(sim.n_features), dof=int(sim.n_dof),
+        bodies=int(model.nbody) if model is not None else 1, strategy=strategy,
+        samples=samples,
+        dynamic_width=(dynamic_width(model) if backend == "mjx" and model is not None
+                       else 0),
+        motion_width=0 if feas is None else motion_width(
+            feas.samples, 0 if collider is None else collider.n_pairs,
+            0 if collider is None or model is None else model.ngeom,
+            int(sim.n_dof)))
 
 
 def recognition_estimate(queries: int, actions: int, n_samples: int,

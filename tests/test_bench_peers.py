@@ -176,7 +176,8 @@ def test_c_feasibility_equals_ours_on_tiny_arm_with_obstacle():
         model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"], "marker")
     ball = {"name": "ball", "type": "sphere", "pos": (0.25, 0.0, 0.3),
             "size": (0.08,)}
-    feas = Feasibility(robot, {"velocity": 2.0}, obstacles=[ball])
+    # the twin measures the geoms themselves: the exact geometry's check
+    feas = Feasibility(robot, {"velocity": 2.0}, obstacles=[ball], geometry="exact")
     sim = Simulator(robot, MarkerScene(), substeps=4, feasibility=feas)
     twin = MujocoFeasibility.from_feasibility(feas, robot, [ball])
     assert ("link2", "ball") in twin.pair_names
@@ -200,7 +201,8 @@ def teo_paint_sim():
 
     cfg = ex.load_config(
         pathlib.Path(__file__).resolve().parents[1] / "experiments" / "paint_iet.toml",
-        ["robot.waypoint_s=1.0"])  # 0.6 s moves: the "too fast" postures below
+        ["robot.waypoint_s=1.0",  # 0.6 s moves: the "too fast" postures below
+         "feasibility.geometry=exact"])  # the twin measures the geoms themselves
     return ex.build_simulator(cfg)
 
 

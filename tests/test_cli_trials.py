@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgda_jax.cli import main
-from cgda_jax.experiment.trials import summarize, wilson_interval
+from cgda_jax.experiment.success_rate import summarize, wilson_interval
 
 EXPERIMENTS = pathlib.Path(__file__).resolve().parents[1] / "experiments"
 SMALL = ["--set", "strategy.population_size=8", "--set", "strategy.max_generations=12",

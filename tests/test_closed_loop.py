@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgda_jax import MarkerScene, Robot, Simulator, model_path
-from cgda_jax.reality.export import trajectory_of
+from cgda_jax.reality.control_trajectory import trajectory_of
 from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
 from cgda_jax.reality.protocol import Measurement, RealityError, measure
 from cgda_jax.strategies.closed_loop import run_oet_closed_loop

@@ -157,7 +157,7 @@ def test_the_demo_runs_the_experiment_files_of_the_same_name():
     would show users another run than the one documented)."""
     from cgda_jax.builtin import resolve_config
     from cgda_jax.experiment import load_config
-    from cgda_jax.experiment.demo import demo_configs
+    from cgda_jax.experiment.demo_suite import demo_configs
 
     for cfg in demo_configs():
         exp = load_config(resolve_config(cfg.name))

@@ -11,7 +11,7 @@ import pytest
 from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
 from cgda_jax.experiment.compute import export_check
 from cgda_jax.experiment.report import export_rows
-from cgda_jax.reality.export import time_parameterize, trajectory_of
+from cgda_jax.reality.control_trajectory import time_parameterize, trajectory_of
 from cgda_jax.reality.files import (
     from_json_dict,
     load_trajectory,

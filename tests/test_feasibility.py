@@ -89,14 +89,22 @@ def test_path_bound_is_below_the_dense_distance(teo_paint):
 
 def test_the_sampled_check_with_its_margin_lets_no_deep_move_through(teo_paint):
     """The default check: sampled distances 2 mm inside the limit.  A sample is a
-    posture of the move, so it never overstates the depth; of 600 random moves
-    (some through the board), none it accepts goes deeper than the limit on a
-    30 x denser path, and it accepts moves that the bound rejects."""
+    posture of the move, so on the exact geometry it never overstates the depth
+    (on the round one by at most its excess); of 600 random moves (some through
+    the board), none it accepts goes deeper than the limit on a 30 x denser path,
+    and it accepts moves that the bound rejects."""
     feas = teo_paint.feasibility
     assert not feas.certify and feas.allowed == pytest.approx(0.003)
+    assert feas.geometry == "round" and feas.check is not feas.collider
     q0, dq, true_depth = _random_moves(teo_paint, 600, seed=1)
     sampled = np.asarray(jax.jit(jax.vmap(feas.depth))(q0, dq))
-    assert np.all(sampled <= true_depth + 1e-6)
+    exact = Feasibility(teo_paint.robot, obstacles=[teo_paint.scene.board],
+                        geometry="exact")
+    on_geoms = np.asarray(jax.jit(jax.vmap(exact.depth))(q0, dq))
+    assert np.all(on_geoms <= true_depth + 1e-6)
+    # the round check is never more lenient: as deep, or past the tolerance too
+    assert np.all(np.minimum(on_geoms, feas.penetration) <= sampled + 1e-6)
+    assert np.all(sampled <= true_depth + feas.check.excess.max() + 1e-6)
     accepted = sampled <= feas.allowed
     assert np.all(true_depth[accepted] <= feas.penetration)
     assert np.sum(true_depth > 0.02) > 50 and np.sum(~accepted) > 50

@@ -274,7 +274,7 @@ def test_a_signal_to_any_process_ends_the_whole_job_at_once(case, env, tmp_path,
 SITECUSTOMIZE = '''
 import os
 if os.environ.get("CGDA_PROCESS_ID") is not None:  # the job's workers only
-    import cgda_jax.experiment.trials as trials
+    import cgda_jax.experiment.success_rate as trials
 
     def trial_records(cfg, seeds, progress_fn=None, built=None):
         if os.environ["CGDA_PROCESS_ID"] == os.environ["FAIL_ON"]:

@@ -189,6 +189,19 @@ def test_profile_and_its_derivatives_match_finite_differences():
     np.testing.assert_array_equal(np.asarray(min_jerk_d2(jnp.array([-1.0, 2.0]))), 0)
 
 
+def test_the_host_profile_is_the_traced_one():
+    """`cgda_jax.numerics.min_jerk_np` (NumPy, float64) and `min_jerk` (JAX,
+    float32): one profile, clipped alike outside [0, 1]."""
+    from cgda_jax.numerics import min_jerk_np
+
+    tau = np.linspace(-0.5, 1.5, 20_001)
+    s64 = np.clip(tau, 0, 1) ** 3 * (10 - 15 * np.clip(tau, 0, 1)
+                                     + 6 * np.clip(tau, 0, 1) ** 2)
+    np.testing.assert_allclose(min_jerk_np(tau), s64, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(min_jerk_np(tau), np.asarray(min_jerk(tau)), atol=1e-6)
+    assert min_jerk_np(tau).dtype == np.float64
+
+
 def test_move_peaks_are_the_closed_form_and_the_sampled_maxima():
     dq = np.array([0.7, -1.3, 0.0, 2.0])
     T = 0.8

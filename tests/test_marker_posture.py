@@ -16,7 +16,7 @@ from cgda_jax import MarkerScene, Robot, Simulator, model_path
 from cgda_jax.builtin import experiments_dir
 from cgda_jax.experiment.build import build_simulator
 from cgda_jax.experiment.config import ConfigError, ExperimentConfig, load_config
-from cgda_jax.experiment.demo import demo_configs
+from cgda_jax.experiment.demo_suite import demo_configs
 from cgda_jax.sim.marker import MARKER_POINT_SITE
 
 JOINTS = ["yaw", "shoulder", "elbow"]

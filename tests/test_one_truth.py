@@ -198,7 +198,7 @@ def test_an_unreachable_goal_fails_with_a_hint():
 
 def test_exported_trajectory_carries_the_fixed_joints_and_the_start(tmp_path):
     import cgda_jax as cg
-    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.control_trajectory import trajectory_of
     from cgda_jax.reality.files import load_trajectory, save_trajectory, to_json_dict
 
     joints = ["r_shoulder_flexion", "r_shoulder_abduction", "r_elbow"]

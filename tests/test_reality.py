@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cgda_jax import MarkerScene, Robot, Simulator, model_path
-from cgda_jax.reality.export import time_parameterize, trajectory_of
+from cgda_jax.reality.control_trajectory import time_parameterize, trajectory_of
 from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
 from cgda_jax.reality.protocol import Measurement, Reality, RealityError, measure
 

@@ -1,13 +1,14 @@
 """segment(): action sequences in one recording; the DP against a brute force; the
 costs against single `dtw` calls; execute_sequence on the tiny arm."""
 
+import functools
 import itertools
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from cgda_jax import MarkerScene, Robot, Simulator, model_path
+from cgda_jax import MarkerScene, PaintWall, Robot, Simulator, model_path
 from cgda_jax.data import Demonstration
 from cgda_jax.datasets import synthetic_actions, synthetic_sequence
 from cgda_jax.distance import dtw
@@ -21,7 +22,7 @@ from cgda_jax.segmentation import (
     segment,
     segment_costs,
 )
-from cgda_jax.strategies import run_ie
+from cgda_jax.strategies import ExecutionResult, run_ie, run_iet
 
 # the grid and duration range of the accuracy tests (actions last 3-12 s)
 SETTINGS = {"step_s": 0.2, "durations_s": (1.0, 15.0)}
@@ -136,11 +137,9 @@ def test_synthetic_sequences_are_segmented(library, pause_s):
     # the refinement is what brings the boundaries near the 10 % target: the
     # search alone is ~10 % off at the median (README, bench_sequence.py)
     assert np.median(errs) <= 0.05 < np.median(raw_errs), (errs, raw_errs)
-    # the target (every boundary within 10 %) is NOT met on every recording: here
-    # 21 of 22 actions, one at 43 % (seed 103 with pauses); the benchmark's 80
-    # actions: 91 % within 10 %, worst 38 %
-    assert np.mean(np.asarray(errs) <= 0.1) >= 0.9, errs
-    assert max(errs) <= 0.5, errs
+    # the target: every boundary within 10 % of its action's duration (the
+    # benchmark's 2 x 80 actions: all but one, worst 11.8 %)
+    assert max(errs) <= 0.1, errs
 
 
 def test_refinement_finds_minimum_jerk_ends_exactly():
@@ -239,6 +238,59 @@ def test_execute_sequence_starts_each_goal_where_the_last_ended():
         execute_sequence(sim, [first, first[:, :2]], run_ie)
     with pytest.raises(ValueError, match="2 strategies for 1 goals"):
         execute_sequence(sim, [first], [run_ie, run_ie])
+
+
+def _tiny_wall_sim():
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                            "marker")
+    wall = PaintWall(np.array([[0.3, 0.0, 0.3], [0.0, 0.3, 0.3], [-0.3, 0.0, 0.3],
+                               [0.0, -0.3, 0.3]]), radius=0.1, thickness=0.0)
+    return Simulator(robot, wall, substeps=2)
+
+
+def test_execute_sequence_carries_the_scene_state_and_the_posture():
+    # a stand-in strategy that executes fixed joints from the simulator's
+    # init_state(), as the incremental strategies start: with the state carried,
+    # the executions are one rollout of all their joints from the start state
+    sim = _tiny_wall_sim()
+    joints = np.random.default_rng(0).uniform(sim.lower, sim.upper, (9, 3))
+    parts = [joints[:4], joints[4:]]
+
+    def replay(s, goal, *, part):
+        features, final = s.rollout(parts[part].astype(np.float32), s.init_state())
+        return ExecutionResult(
+            strategy="replay", joints=parts[part], features=np.asarray(features),
+            goal=goal, point_errors=np.zeros(len(goal)), fitness_history=np.zeros(1),
+            evaluations=0, generations=0, wall_time_s=0.0, compile_time_s=0.0,
+            success=True, tolerance=1.0, final_fitness=0.0,
+            info={"start": np.asarray(s.init_state().genes)})
+
+    runs = [functools.partial(replay, part=0), functools.partial(replay, part=1)]
+    goals = [np.zeros((4, 1)), np.zeros((5, 1))]
+    whole = np.asarray(sim.rollout(joints.astype(np.float32))[0])
+    assert 0 < whole[3, 0] < whole[-1, 0]  # the first part paints, the second more
+    carried = execute_sequence(sim, goals, runs)
+    np.testing.assert_allclose(np.vstack([r.features for r in carried]), whole)
+    np.testing.assert_allclose(carried[1].info["start"], joints[3], atol=1e-6)
+    fresh = execute_sequence(sim, goals, runs, carry_state=False)
+    alone = np.asarray(sim.rollout(parts[1].astype(np.float32))[0])
+    np.testing.assert_allclose(fresh[1].features, alone)
+    assert not np.allclose(alone, whole[4:])
+
+
+@pytest.mark.slow
+def test_paint_then_paint_by_iet_goes_on_painting_the_same_wall():
+    # PAINT then PAINT (IET, tiny arm): the second run starts on the wall the
+    # first left; the bench's TEO run: benchmarks/bench_sequence.py --paint
+    sim = _tiny_wall_sim()
+    half = np.array([[0.0], [25.0], [50.0]])  # 2 of the 4 squares each
+    results = execute_sequence(sim, [half, half], run_iet, population_size=8,
+                               tolerance=3.0, max_generations=40)
+    assert all(r.success for r in results), [r.features for r in results]
+    np.testing.assert_allclose(results[1].features[:, 0], [50.0, 75.0, 100.0])
+    joints = np.vstack([r.joints for r in results]).astype(np.float32)
+    whole = np.asarray(sim.rollout(joints)[0])
+    np.testing.assert_allclose(whole, np.vstack([r.features for r in results]))
 
 
 def test_cli_segment_writes_the_table_and_the_figure(tmp_path, capsys):

@@ -86,6 +86,46 @@ def test_run_trials_refuses_before_compiling(sim, goal):
     assert time.perf_counter() - t0 < 20  # nothing compiled, nothing allocated
 
 
+def test_one_sampled_postures_rule_for_the_plan_its_size_and_the_config(sim, goal):
+    """The postures a trial samples are decided once (`PlanBase.sampled_postures`):
+    the plan uses it, its size estimate counts it and the config's checks ask it
+    (no copy of the rule in `cgda_jax.experiment.validate`). Nothing compiles."""
+    from cgda_jax.experiment import ConfigError, check_experiment, load_config
+    from cgda_jax.strategies import (
+        FTEPlan,
+        FTESettings,
+        IEPlan,
+        IESettings,
+        IETPlan,
+        IETSettings,
+        OETPlan,
+        OETSettings,
+    )
+
+    kin = jnp.asarray(goal, jnp.float32)
+    cases = [(FTEPlan, FTESettings(init="auto", init_samples=70), (70, "init_samples")),
+             (FTEPlan, FTESettings(init="start", init_samples=70), (0, "init_samples")),
+             (IEPlan, IESettings(restarts=2, restart_samples=50),
+              (50, "restart_samples")),
+             (IEPlan, IESettings(restarts=0, restart_samples=50),
+              (0, "restart_samples")),
+             (IETPlan, IETSettings(restarts=1, restart_samples=30),
+              (30, "restart_samples")),
+             (OETPlan, OETSettings(), (0, ""))]
+    for plan_cls, st, want in cases:
+        assert plan_cls.sampled_postures(st, sim) == want, (plan_cls, st)
+        plan = plan_cls(sim, kin, st)
+        assert plan.estimate(3) == sizes.sim_estimate(
+            sim, trials=3, population=st.population_size, points=kin.shape[0],
+            strategy=plan.name, samples=want[0])
+    # the config's checks name the option the rule names (FTE's init "auto" on a
+    # kinematic marker run samples init_samples postures)
+    cfg = load_config(EXP / "clean_fte.toml",
+                      ["strategy.options.init_samples=1000000000"])
+    with pytest.raises(ConfigError, match=r"strategy\.options\.init_samples"):
+        check_experiment(cfg)
+
+
 def test_seeds_outside_32_bits_are_refused_by_name(sim, goal):
     from cgda_jax import run_trials
 
@@ -270,7 +310,7 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
     --dry-run) must cover XLA's own count of the compiled programs (temporaries and
     outputs of init, chunk and finish) with feasibility on, and not by more than 3x."""
     from cgda_jax.strategies import IEPlan, IESettings
-    from cgda_jax.strategies.runner import compile_plan, plan_estimate, seed_keys
+    from cgda_jax.strategies.runner import compile_plan, seed_keys
 
     robot = Robot.from_mjcf(model_path("tiny_arm.xml"), JOINTS, "marker")
     sim = Simulator(robot, MarkerScene(), substeps=2, feasibility=True)
@@ -283,5 +323,5 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
         held[trials] = sum(p.memory_analysis().temp_size_in_bytes
                            + p.memory_analysis().output_size_in_bytes for p in progs)
     per_trial = (held[4] - held[2]) / 2
-    est = plan_estimate(plan, 1).nbytes
+    est = plan.estimate(1).nbytes
     assert per_trial <= est <= 3 * per_trial, (per_trial, est)

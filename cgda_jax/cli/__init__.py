@@ -8,9 +8,11 @@ package.
 Modules, in their import order (each imports only those above it; none imports
 this ``__init__``):
 
-- :mod:`~cgda_jax.cli.output`: what the commands share: `say` (progress lines on
-  stderr), the JAX compilation cache, exit statuses (``EXIT_*``), which errors are
-  bad input, signals, saved tracebacks, library warnings as lines.
+- :mod:`~cgda_jax.cli.output`: what the commands share: `Session` (what a process
+  holds besides its arguments: its results folder, its job, whether it is quiet),
+  `say` (progress lines on stderr), the JAX compilation cache, exit statuses
+  (``EXIT_*``), which errors are bad input, signals, saved tracebacks, library
+  warnings as lines.
 - :mod:`~cgda_jax.cli.list`: ``cgda list``.
 - :mod:`~cgda_jax.cli.plot`: ``cgda plot``.
 - :mod:`~cgda_jax.cli.segment`: ``cgda segment`` (the actions in one recording).

@@ -12,6 +12,7 @@ from cgda_jax.cli.export import add_export_parser, cmd_export
 from cgda_jax.cli.list import cmd_list
 from cgda_jax.cli.output import (
     JobFailed,
+    Session,
     Signals,
     enable_compilation_cache,
     failure,
@@ -98,38 +99,39 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _dispatch(args, signals: Signals) -> int:
+def _dispatch(args, session: Session, signals: Signals) -> int:
     try:
         if args.command == "list":
             return cmd_list(args)
         if args.command == "track":  # no JAX: no job, no compilation cache
-            return cmd_track(args)
+            return cmd_track(args, session)
         if args.command == "segment":  # one process, no job
-            return cmd_segment(args)
-        join_job(args)  # a multi-process --trials job: before any JAX work
+            return cmd_segment(args, session)
+        join_job(args, session)  # a multi-process --trials job: before any JAX work
         if not args.no_cache:
             enable_compilation_cache()
         if args.command == "run":
-            return cmd_run(args)
+            return cmd_run(args, session)
         if args.command == "plot":
-            return cmd_plot(args)
+            return cmd_plot(args, session)
         if args.command == "export":
-            return cmd_export(args)
+            return cmd_export(args, session)
         from cgda_jax.cli.demo import cmd_demo
 
-        return cmd_demo(args)
+        return cmd_demo(args, session)
     except KeyboardInterrupt as e:
-        return leave_job(args, interrupted(args, getattr(e, "signum", signal.SIGINT)))
+        return leave_job(session,
+                         interrupted(session, getattr(e, "signum", signal.SIGINT)))
     except JobFailed as e:  # a multi-process job: said here, or elsewhere
         if e.line:
             print(e.line, file=sys.stderr)
-        return leave_job(args, e.status)
+        return leave_job(session, e.status)
     except Exception as e:  # noqa: BLE001 - every failure: one line
         if signals.received is not None:  # an interrupt wrapped by a library
-            return leave_job(args, interrupted(args, signals.received))
-        status, line = failure(args, e)
+            return leave_job(session, interrupted(session, signals.received))
+        status, line = failure(session, e)
         print(line, file=sys.stderr)
-        return leave_job(args, status)
+        return leave_job(session, status)
     finally:
         signals.active = False  # a signal from here on only ends the process
 
@@ -146,8 +148,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt as e:
             return interrupted(None, getattr(e, "signum", signal.SIGINT))
         log_warnings()
-        args.argv = sys.argv[1:] if argv is None else list(argv)  # a job's workers
+        session = Session(argv=sys.argv[1:] if argv is None else list(argv),
+                          quiet=bool(getattr(args, "quiet", False)))  # not in list
         if job_member(args):
             signals.default()  # until the job's SignalWatcher (join_job)
-        return _dispatch(args, signals)
+        return _dispatch(args, session, signals)
 

@@ -10,7 +10,7 @@ import pathlib
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 
-from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
+from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, Session, say, say_chosen
 from cgda_jax.cli.run import start_one
 
 
@@ -85,7 +85,7 @@ def _done(value) -> Future:
     return future
 
 
-def cmd_demo(args) -> int:
+def cmd_demo(args, session: Session) -> int:
     from cgda_jax.experiment import RunFolder, check_and_build, demo_configs
 
     configs = demo_configs(small=args.small)
@@ -94,8 +94,8 @@ def cmd_demo(args) -> int:
     results = {}
     target = pathlib.Path(args.out or "results/demo").expanduser()
     with RunFolder(target, overwrite=args.overwrite, fresh=args.out is None) as rf:
-        args.run_folder = rf
-        say_chosen(args, "demo", rf)
+        session.run_folder = rf
+        say_chosen(session, "demo", rf)
         out = rf.work
         # one experiment's figures and video are drawn in a second thread while the
         # next one computes (XLA compiles and runs without the GIL)
@@ -104,7 +104,7 @@ def cmd_demo(args) -> int:
         try:
             drawn = []
             for cfg, objects in zip(configs, built):
-                pending = start_one(cfg, rf.path / cfg.name, out / cfg.name, args,
+                pending = start_one(cfg, rf.path / cfg.name, out / cfg.name, session,
                                     objects)
                 drawn.append(pool.submit(pending.finish) if in_thread
                              else _done(pending.finish()))
@@ -131,6 +131,6 @@ def cmd_demo(args) -> int:
         for name in results:
             report.append(demoted((out / name / "report.md").read_text(), name))
         (out / "report.md").write_text("\n".join(report))
-    say(args, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
+    say(session, f"demo {'succeeded' if success else 'finished, goals NOT all met'} "
                f"in {wall:.1f} s -> {rf.path / 'report.md'}")
     return EXIT_MET if success else EXIT_NOT_MET

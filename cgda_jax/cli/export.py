@@ -1,11 +1,11 @@
 """``cgda export RUN_FOLDER``: the run's result as a trajectory file a robot
 controller can take (CSV, JSON with a ROS ``JointTrajectory``, NPZ), checked by its
 replay on MuJoCo C.  Argument parsing and messages only; the trajectory is
-`cgda_jax.experiment.export`'s, its files `cgda_jax.reality.files`'."""
+`cgda_jax.experiment.trajectory_file`'s, its files `cgda_jax.reality.files`'."""
 
 from __future__ import annotations
 
-from cgda_jax.cli.output import check_out_file, say
+from cgda_jax.cli.output import Session, check_out_file, say
 
 EXPORT_EXAMPLES = """\
 examples:
@@ -58,14 +58,14 @@ def add_export_parser(sub, fmt) -> None:
                    help="do not use the persistent JAX compilation cache")
 
 
-def cmd_export(args) -> int:
+def cmd_export(args, session: Session) -> int:
     """Write the file; 0 when written (and its replay met the tolerance), 1 when
     the replay missed it (errors are raised and reported by `cgda_jax.cli`)."""
     import math
 
-    from cgda_jax.experiment.export import check_exported, export_trajectory
+    from cgda_jax.experiment.trajectory_file import check_exported, export_trajectory
     from cgda_jax.experiment.load import load_run
-    from cgda_jax.reality.export import RATE_RANGE
+    from cgda_jax.reality.control_trajectory import RATE_RANGE
     from cgda_jax.results_folder.rules import expand
     from cgda_jax.reality.files import load_trajectory, save_trajectory
 
@@ -95,16 +95,16 @@ def cmd_export(args) -> int:
     except OSError as err:
         raise OSError(f"{out} could not be written ({err.strerror or err}): nothing "
                       "written, an earlier file there is kept") from None
-    say(args, f"[{run.name}] {traj.n_samples} samples at {traj.rate:g} Hz, "
+    say(session, f"[{run.name}] {traj.n_samples} samples at {traj.rate:g} Hz, "
         f"{traj.duration:.2f} s, joints {', '.join(traj.joint_names)} -> {out}")
     for s in traj.info["stretched"]:
-        say(args, f"[{run.name}] move {s['move']} takes {s['export_s']:.2f} s, longer "
-            f"than the run's {s['run_s']:.2f} s: the robot's limits need it")
+        say(session, f"[{run.name}] move {s['move']} takes {s['export_s']:.2f} s, "
+            f"longer than the run's {s['run_s']:.2f} s: the robot's limits need it")
     if args.no_check:
         return 0
     check = check_exported(run, load_trajectory(out), sim=sim)
     unit = run.result.get("error_unit") or ""
-    say(args, f"[{run.name}] replayed on MuJoCo C: max point error "
+    say(session, f"[{run.name}] replayed on MuJoCo C: max point error "
         f"{check['max_point_error']:.4g} {unit} (tolerance {check['tolerance']:g}), "
         f"max feature difference from the run {check['max_feature_difference']:.3g}"
         f": {'met' if check['success'] else 'NOT met'}")

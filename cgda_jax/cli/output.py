@@ -7,6 +7,7 @@ compilation cache, exit statuses and failures: which errors are bad input
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import pathlib
@@ -16,6 +17,7 @@ import sys
 import tempfile
 import threading
 import traceback
+from typing import Any
 
 from cgda_jax.job import ENV_LAUNCHER_PID
 
@@ -30,6 +32,32 @@ EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
 EXIT_DIVERGED = EXIT_FAILURE
 #: Interrupted by a signal: 128 + its number.
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+@dataclasses.dataclass
+class Session:
+    """What one ``cgda`` process holds besides its arguments (``args`` stays what
+    the user typed): `~cgda_jax.cli.app.main` makes one and hands it to the
+    command.
+
+    Attributes:
+        argv: the command line (a ``--processes P`` job starts its workers with it).
+        quiet: no progress lines on stderr (`say`): ``--quiet``, or a process of a
+            multi-process job other than process 0 (`cgda_jax.cli.trials.join_job`).
+        run_folder: the results folder this process holds once it took it (a
+            `~cgda_jax.results_folder.writing.RunFolder`, or a
+            `~cgda_jax.cli.trials.FolderElsewhere` where another process of its job
+            holds it); None before. Until then a failure is bad input
+            (`user_error`); an interrupt abandons it (`SignalWatcher`) and names it
+            (`interrupted_text`).
+        job_open: a process of a multi-process job before the step all its
+            processes take together: ending alone, it exits at once (`leave_job`).
+    """
+
+    argv: list[str] = dataclasses.field(default_factory=list)
+    quiet: bool = False
+    run_folder: Any = None
+    job_open: bool = False
 
 
 def diverged(err: BaseException) -> bool:
@@ -124,10 +152,11 @@ def first_line(err: BaseException) -> str:
     return text.strip().splitlines()[0] if text.strip() else type(err).__name__
 
 
-def interrupted_text(args, signum: int) -> str:
-    """The line that says ``cgda`` was interrupted, and what became of the folder."""
+def interrupted_text(session: Session | None, signum: int) -> str:
+    """The line that says ``cgda`` was interrupted, and what became of the folder
+    (``session``: None before the arguments were read)."""
     name = signal.Signals(signum).name
-    rf = getattr(args, "run_folder", None)
+    rf = None if session is None else session.run_folder
     if rf is None or rf.path is None:
         where = ""
     elif rf.committed:
@@ -143,9 +172,9 @@ def launched_worker() -> bool:
     return bool(os.environ.get(ENV_LAUNCHER_PID, "").strip())
 
 
-def interrupted(args, signum: int) -> int:
+def interrupted(session: Session | None, signum: int) -> int:
     if not launched_worker():
-        print(interrupted_text(args, signum), file=sys.stderr)
+        print(interrupted_text(session, signum), file=sys.stderr)
     return EXIT_SIGNAL.get(signum, 128 + signum)
 
 
@@ -158,10 +187,10 @@ class JobFailed(Exception):
         self.status, self.line = status, line
 
 
-def failure(args, err: Exception) -> tuple[int, str]:
+def failure(session: Session, err: Exception) -> tuple[int, str]:
     """The exit status and the one line for ``err`` (an unexpected one's traceback
     saved to a log file named on the line)."""
-    if user_error(args, err):
+    if user_error(session, err):
         return EXIT_USAGE, f"cgda: error: {first_line(err)}"
     if diverged(err):
         return EXIT_DIVERGED, f"cgda: error: {first_line(err)}"
@@ -176,14 +205,14 @@ class SignalWatcher:
 
     The thread is woken through `signal.set_wakeup_fd` (the Python handlers left
     do nothing); it abandons the results folder this process holds
-    (``args.run_folder``: `~cgda_jax.results_folder.writing.RunFolder.abandon`), says the one
-    line unless ``quiet`` (a launched worker: its launcher speaks) and exits with
-    130 / 143 through `os._exit`, skipping JAX's exit-time shutdown, which would
-    wait for the other processes.
+    (`Session.run_folder`: `~cgda_jax.results_folder.writing.RunFolder.abandon`),
+    says the one line unless ``quiet`` (a launched worker: its launcher speaks) and
+    exits with 130 / 143 through `os._exit`, skipping JAX's exit-time shutdown,
+    which would wait for the other processes.
     """
 
-    def __init__(self, args, quiet: bool = False):
-        self.args, self.quiet = args, quiet
+    def __init__(self, session: Session, quiet: bool = False):
+        self.session, self.quiet = session, quiet
         self._recv, self._send = socket.socketpair()
 
     def start(self) -> None:
@@ -202,24 +231,24 @@ class SignalWatcher:
             if data[0] in EXIT_SIGNAL:
                 break
         signum = data[0]
-        rf = getattr(self.args, "run_folder", None)
+        rf = self.session.run_folder
         if rf is not None:
             rf.abandon()
         if not self.quiet:
             with contextlib.suppress(Exception):
-                sys.stderr.write(interrupted_text(self.args, signum) + "\n")
+                sys.stderr.write(interrupted_text(self.session, signum) + "\n")
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
         os._exit(EXIT_SIGNAL[signum])
 
 
-def leave_job(args, status: int) -> int:
+def leave_job(session: Session, status: int) -> int:
     """``status``; but a process of a multi-process job that ends alone, before
-    the step all its processes take together (``args.job_open``), exits here and
+    the step all its processes take together (`Session.job_open`), exits here and
     now (`os._exit`): JAX's exit-time shutdown would wait for the others, who wait
     at that step for it. Its launcher (or scheduler) then stops the others."""
-    if getattr(args, "job_open", False):
+    if session.job_open:
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
@@ -231,13 +260,13 @@ def _noted(signum, frame) -> None:
     """A Python-level handler that does nothing: `SignalWatcher` acts."""
 
 
-def user_error(args, err: Exception) -> bool:
+def user_error(session: Session, err: Exception) -> bool:
     """Bad input (status 2): before the run starts, any of `USER_ERRORS`; once it
     runs (everything was checked), only config and file errors, the rest is a
     failure (status 3, with its traceback)."""
     from cgda_jax.experiment.config import ConfigError
 
-    rf = getattr(args, "run_folder", None)
+    rf = session.run_folder
     if rf is None or rf.committed:
         return isinstance(err, USER_ERRORS)
     from cgda_jax.sizes import SizeError  # refused before it allocates
@@ -273,17 +302,17 @@ def check_out_file(path: pathlib.Path, flag: str = "--out",
     check_writable(path.parent, f"{flag} {path}: its folder")
 
 
-def say(args, text: str) -> None:
-    """``text`` as a line on stderr, unless ``--quiet``."""
-    if not args.quiet:
+def say(session: Session, text: str) -> None:
+    """``text`` as a line on stderr, unless quiet (`Session.quiet`)."""
+    if not session.quiet:
         print(text, file=sys.stderr, flush=True)
 
 
-def say_chosen(args, label: str, rf) -> None:
+def say_chosen(session: Session, label: str, rf) -> None:
     """Say where the results go when it is not the folder asked for (taken, or a
     symbolic link followed)."""
     if rf.note:
-        say(args, f"[{label}] {rf.note}")
+        say(session, f"[{label}] {rf.note}")
 
 
 def _cache_dir() -> pathlib.Path:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pathlib
 
-from cgda_jax.cli.output import say
+from cgda_jax.cli.output import Session, say
 
 PLOT_EXAMPLES = """\
 examples:
@@ -41,7 +41,8 @@ def add_plot_parser(sub, fmt) -> None:
                       help="do not use the persistent JAX compilation cache")
 
 
-def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
+def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args,
+              session: Session) -> list:
     from cgda_jax.experiment.figures import draw_figures, render_run
     from cgda_jax.experiment.load import load_run
     from cgda_jax.experiment.report import report_markdown
@@ -63,11 +64,11 @@ def _plot_one(folder: pathlib.Path, out: pathlib.Path | None, args) -> list:
                        if p.suffix == ".png")
         report = report_markdown(run.config, result, plots)
         (run.folder / "report.md").write_text(report)
-    say(args, f"[{run.name}] {len(written)} files -> {out}")
+    say(session, f"[{run.name}] {len(written)} files -> {out}")
     return written
 
 
-def cmd_plot(args) -> int:
+def cmd_plot(args, session: Session) -> int:
     """Redraw one results folder, or each experiment of a ``cgda demo`` folder;
     0 when done (errors are raised and reported by `cgda_jax.cli`)."""
     from cgda_jax.experiment.load import REQUIRED
@@ -82,7 +83,7 @@ def cmd_plot(args) -> int:
                       if p.is_dir() and all((p / f).is_file() for f in REQUIRED))
     if subs:
         for sub in subs:
-            _plot_one(sub, None if out is None else out / sub.name, args)
+            _plot_one(sub, None if out is None else out / sub.name, args, session)
     else:
-        _plot_one(folder, out, args)
+        _plot_one(folder, out, args, session)
     return 0

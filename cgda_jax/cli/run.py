@@ -7,7 +7,7 @@ import os
 import pathlib
 import time
 
-from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, say, say_chosen
+from cgda_jax.cli.output import EXIT_MET, EXIT_NOT_MET, Session, say, say_chosen
 from cgda_jax.cli.trials import check_processes, run_trials_command
 from cgda_jax.job import ENV_JOB_WORK
 
@@ -40,22 +40,24 @@ a headless Linux machine when unset).
 """
 
 
-def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None) -> dict:
+def _run_one(cfg, shown: pathlib.Path, work: pathlib.Path, session: Session,
+             built=None) -> dict:
     """Run ``cfg`` into ``work`` (the temporary folder that becomes ``shown``) on
     ``built``, what its checks built (`~cgda_jax.experiment.check_and_build`)."""
-    return start_one(cfg, shown, work, args, built).finish()
+    return start_one(cfg, shown, work, session, built).finish()
 
 
-def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None):
+def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, session: Session,
+              built=None):
     """`_run_one` up to its outputs (`~cgda_jax.experiment.run.Outputs`)."""
     from cgda_jax.experiment import start_run
     from cgda_jax.progress import ProgressLine
 
-    bar = ProgressLine(cfg.name, quiet=args.quiet)
+    bar = ProgressLine(cfg.name, quiet=session.quiet)
     t0 = time.perf_counter()
     what = (f"{cfg.strategy.name.upper()} execution" if cfg.kind == "execution"
             else "recognition")
-    say(args, f"[{cfg.name}] {what} ...")
+    say(session, f"[{cfg.name}] {what} ...")
     work.mkdir(exist_ok=True)
     try:
         pending = start_run(cfg, work, progress_fn=bar, built=built)
@@ -66,14 +68,14 @@ def start_one(cfg, shown: pathlib.Path, work: pathlib.Path, args, built=None):
     extra = (f"accuracy {result['accuracy']:.0%}" if cfg.kind == "recognition"
              else f"max point error {result['max_point_error']:.4g}"
              + (f" {result['error_unit']}" if result.get("error_unit") else ""))
-    say(args, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
+    say(session, f"[{cfg.name}] {verdict}: {extra} ({time.perf_counter() - t0:.1f} s) "
                f"-> {shown}")
     if cfg.kind == "execution":
         from cgda_jax.experiment.report import not_met_hint
 
         hint = not_met_hint(cfg, result)
         if hint:
-            say(args, f"[{cfg.name}] hint: {hint}")
+            say(session, f"[{cfg.name}] hint: {hint}")
     return pending
 
 
@@ -105,7 +107,7 @@ def _job_size(args) -> tuple[int, bool]:
     return 1, True
 
 
-def cmd_run(args) -> int:
+def cmd_run(args, session: Session) -> int:
     from cgda_jax.builtin import resolve_config
     from cgda_jax.results_folder.writing import check_free
     from cgda_jax.experiment import (
@@ -121,7 +123,7 @@ def cmd_run(args) -> int:
     extra = ["reality.enabled=true"] if getattr(args, "reality", False) else []
     cfg = load_config(resolve_config(args.config), [*args.overrides, *extra])
     if args.trials is not None:
-        from cgda_jax.experiment.trials import check_trials
+        from cgda_jax.experiment.success_rate import check_trials
 
         check_trials(cfg, args.trials)
     processes, local = _job_size(args)
@@ -139,13 +141,13 @@ def cmd_run(args) -> int:
         return EXIT_MET
     if args.trials is not None:
         return run_trials_command(
-            cfg, args, lambda: RunFolder(target, overwrite=args.overwrite, fresh=fresh),
-            lambda text: say(args, text), lambda rf: say_chosen(args, cfg.name, rf),
-            built)
+            cfg, args, session,
+            lambda: RunFolder(target, overwrite=args.overwrite, fresh=fresh),
+            lambda rf: say_chosen(session, cfg.name, rf), built)
     with RunFolder(target, overwrite=args.overwrite, fresh=fresh) as rf:
-        args.run_folder = rf
-        say_chosen(args, cfg.name, rf)
-        result = _run_one(cfg, rf.path, rf.work, args, built)
-    if not args.quiet:
+        session.run_folder = rf
+        say_chosen(session, cfg.name, rf)
+        result = _run_one(cfg, rf.path, rf.work, session, built)
+    if not session.quiet:
         print(rf.path / "report.md")
     return EXIT_MET if result.get("success") else EXIT_NOT_MET

@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import pathlib
 
-from cgda_jax.cli.output import EXIT_MET, say
+from cgda_jax.cli.output import EXIT_MET, Session, say
 
 SEGMENT_EXAMPLES = """\
 examples:
@@ -79,7 +79,7 @@ def _library(folder: pathlib.Path, interval_s: float):
     return ActionLibrary.from_demonstrations(demos, interval_s=interval_s)
 
 
-def cmd_segment(args) -> int:
+def cmd_segment(args, session: Session) -> int:
     from cgda_jax.data import load_csv
     from cgda_jax.plotting import plot_segmentation
     from cgda_jax.segmentation import segment
@@ -101,10 +101,10 @@ def cmd_segment(args) -> int:
             w.writerow([s.action, f"{s.start:.3f}", f"{s.end:.3f}", f"{s.cost:.6g}"])
     figure = out / "segments.png"
     plot_segmentation(recording, segments, path=figure)
-    if not args.quiet:
+    if not session.quiet:
         print(f"{'action':<12} {'start [s]':>9} {'end [s]':>9} {'cost':>10}")
         for s in segments:
             print(f"{s.action:<12} {s.start:9.2f} {s.end:9.2f} {s.cost:10.4g}")
-    say(args, f"[segment] {recording.name}: {len(segments)} actions -> {table}, "
+    say(session, f"[segment] {recording.name}: {len(segments)} actions -> {table}, "
         f"{figure}")
     return EXIT_MET

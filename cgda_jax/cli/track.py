@@ -10,7 +10,7 @@ import shutil
 import sys
 import tempfile
 
-from cgda_jax.cli.output import EXIT_FAILURE, EXIT_MET, say
+from cgda_jax.cli.output import EXIT_FAILURE, EXIT_MET, Session, say
 
 TRACK_EXAMPLES = """\
 examples:
@@ -103,7 +103,7 @@ def _jobs(args) -> list[dict]:
     return jobs
 
 
-def cmd_track(args) -> int:
+def cmd_track(args, session: Session) -> int:
     from cgda_jax.vision.cv import cv2
 
     try:
@@ -148,5 +148,5 @@ def cmd_track(args) -> int:
     finally:
         shutil.rmtree(work, ignore_errors=True)
     for line in lines:
-        say(args, line)
+        say(session, line)
     return EXIT_MET

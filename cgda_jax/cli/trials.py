@@ -1,7 +1,7 @@
 """``cgda run CONFIG --trials N [--processes P]``: the success rate of N seeds.
 
 The N seeds (``strategy.seed``, +1, ...) run in one batched call
-(`cgda_jax.experiment.trials`). With ``--processes P`` (P > 1) this process checks
+(`cgda_jax.experiment.success_rate`). With ``--processes P`` (P > 1) this process checks
 the config and takes the results folder (lock, temporary folder: a folder that is
 not empty, in use or not writable is refused before any worker starts), then starts
 P local copies of itself as one `jax.distributed` job (`cgda_jax.launch`); each
@@ -37,6 +37,7 @@ from cgda_jax.cli.output import (
     EXIT_USAGE,
     Interrupted,
     JobFailed,
+    Session,
     SignalWatcher,
     failure,
     launched_worker,
@@ -97,7 +98,7 @@ def job_member(args) -> bool:
         return False
 
 
-def join_job(args) -> bool:
+def join_job(args, session: Session) -> bool:
     """Joins the multi-process job the environment describes (before any JAX
     computation); False when there is none. A job's process ends at once on SIGINT
     or SIGTERM (`SignalWatcher`); workers other than 0 go quiet.
@@ -113,20 +114,20 @@ def join_job(args) -> bool:
     join_timeout()
     joined = distributed.initialize(
         waiting=None if launched_worker() else (
-            lambda text: say(args, f"[job] {text}")),
+            lambda text: say(session, f"[job] {text}")),
         on_timeout=lambda line: print(f"cgda: error: {line}", file=sys.stderr))
     if joined:
         # until the processes' last gather, one that fails alone leaves at once
         # (`leave_job`): JAX's exit would wait for the others, who wait for it
-        args.job_open = True
-        SignalWatcher(args, quiet=launched_worker()).start()
+        session.job_open = True
+        SignalWatcher(session, quiet=launched_worker()).start()
         if not distributed.is_writer():
-            args.quiet = True
+            session.quiet = True
     return joined
 
 
 class FolderElsewhere:
-    """``args.run_folder`` of a process whose job's results folder another process
+    """`Session.run_folder` of a process whose job's results folder another process
     holds (the launcher, or process 0): the run has started (a failure is no longer
     bad input, as in `~cgda_jax.cli.output.user_error`), nothing is committed here
     and there is nothing to abandon."""
@@ -149,46 +150,47 @@ def summary_line(cfg, s: dict, report: pathlib.Path) -> str:
             f"({s['total_time_s']:.1f} s) -> {report}")
 
 
-def run_trials_command(cfg, args, open_folder, say, chosen, built=None) -> int:
+def run_trials_command(cfg, args, session: Session, open_folder, chosen,
+                       built=None) -> int:
     """``--trials N`` after the config was checked: the folder is taken first (by
     the launching process, or process 0), so a taken folder fails before any work;
     every process runs its seeds, the records are gathered and process 0 writes
     them.
 
     Args:
+        session: this process's state (`Session`): its folder, job, quiet.
         open_folder: ``open_folder()`` gives the `RunFolder` context manager.
-        say: ``say(text)`` prints unless quiet.
         chosen: ``chosen(run_folder)`` says where the results go.
         built: what the checks built (`~cgda_jax.experiment.check_and_build`;
             None: each process builds its own).
     """
     from cgda_jax import distributed
-    from cgda_jax.experiment.trials import check_trials
+    from cgda_jax.experiment.success_rate import check_trials
 
     n = check_trials(cfg, args.trials)
     if _launching(args):
-        return _launch(cfg, args, open_folder, chosen)
+        return _launch(cfg, args, session, open_folder, chosen)
     given = os.environ.get(ENV_JOB_WORK) or None  # launched: the launcher's folder
     writer = distributed.is_writer()
     with contextlib.ExitStack() as stack:
         if given:
-            args.run_folder = FolderElsewhere(
+            session.run_folder = FolderElsewhere(
                 pathlib.Path(os.environ.get(ENV_JOB_FOLDER, given)), pathlib.Path(given))
-            work = args.run_folder.work
+            work = session.run_folder.work
         else:
-            work = _take_folder(stack, args, open_folder, chosen, writer)
+            work = _take_folder(stack, session, open_folder, chosen, writer)
         t0 = time.perf_counter()
-        records, procs = _run_share(cfg, args, n, say, built)
+        records, procs = _run_share(cfg, session, n, built)
         if not writer:
             return EXIT_MET
         s = write_trials_folder(cfg, records, work, t0, procs)
     if given is None:  # the folder is in place: say so (launched: the launcher does)
         # the summary line goes to stdout even with --quiet: it is the result
-        print(summary_line(cfg, s, args.run_folder.path / "report.md"))
+        print(summary_line(cfg, s, session.run_folder.path / "report.md"))
     return EXIT_MET
 
 
-def _take_folder(stack, args, open_folder, chosen, writer: bool):
+def _take_folder(stack, session: Session, open_folder, chosen, writer: bool):
     """Process 0 takes the results folder; in a job, every process learns at once
     whether it could (one small gather), so a refusal ends them all. Returns the
     folder to write into (None on the others)."""
@@ -200,26 +202,26 @@ def _take_folder(stack, args, open_folder, chosen, writer: bool):
     if writer:
         try:
             rf = stack.enter_context(open_folder())
-            args.run_folder = rf
+            session.run_folder = rf
             chosen(rf)
             work = rf.work
         except Exception as e:  # noqa: BLE001 - shared with the others, raised below
             err = e
     if jax.process_count() > 1:
-        payload = None if err is None else failure(args, err)[0]
+        payload = None if err is None else failure(session, err)[0]
         refused = [s for s in distributed.allgather_objects(payload) if s is not None]
         if refused:
-            args.job_open = False  # every process knows: all may end
+            session.job_open = False  # every process knows: all may end
         if refused and err is None:
             raise JobFailed(refused[0])  # process 0 says why
     if err is not None:
         raise err
     if not writer:
-        args.run_folder = FolderElsewhere()  # process 0 holds it
+        session.run_folder = FolderElsewhere()  # process 0 holds it
     return work
 
 
-def _run_share(cfg, args, n: int, say, built=None) -> tuple[list[dict], int]:
+def _run_share(cfg, session: Session, n: int, built=None) -> tuple[list[dict], int]:
     """This process's seeds in one batch, then every process's records. In a job a
     failure on any process is shared at the gather: it is raised where it happened
     and ends the others with its status (`JobFailed`), so no process waits for
@@ -227,16 +229,16 @@ def _run_share(cfg, args, n: int, say, built=None) -> tuple[list[dict], int]:
     import jax
 
     from cgda_jax import distributed
-    from cgda_jax.experiment.trials import trial_records
+    from cgda_jax.experiment.success_rate import trial_records
     from cgda_jax.progress import ProgressLine
 
     seeds = [cfg.strategy.seed + i for i in range(n)]
     procs = jax.process_count()
     mine = [seeds[i] for i in distributed.share(n)] if procs > 1 else seeds
     where = f" over {procs} processes ({len(mine)} here)" if procs > 1 else ""
-    say(f"[{cfg.name}] {cfg.strategy.name.upper()} execution, {n} seeds in one "
+    say(session, f"[{cfg.name}] {cfg.strategy.name.upper()} execution, {n} seeds in one "
         f"batch{where} ...")
-    bar = ProgressLine(cfg.name, quiet=args.quiet)
+    bar = ProgressLine(cfg.name, quiet=session.quiet)
     err = None
     try:
         records = trial_records(cfg, mine, bar, built) if mine else []
@@ -249,12 +251,12 @@ def _run_share(cfg, args, n: int, say, built=None) -> tuple[list[dict], int]:
     if procs == 1:
         return records, procs
     if err is not None:
-        status, line = failure(args, err)
+        status, line = failure(session, err)
         distributed.allgather_objects(("error", status))
-        args.job_open = False
+        session.job_open = False
         raise JobFailed(status, line)
     gathered = distributed.allgather_objects(("ok", records))
-    args.job_open = False  # the last step all processes take together
+    session.job_open = False  # the last step all processes take together
     for kind, value in gathered:
         if kind == "error":
             raise JobFailed(value)  # the failing process says why
@@ -262,7 +264,7 @@ def _run_share(cfg, args, n: int, say, built=None) -> tuple[list[dict], int]:
 
 
 def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
-    from cgda_jax.experiment.trials import write_trials
+    from cgda_jax.experiment.success_rate import write_trials
 
     return write_trials(cfg, records, folder,
                         {"total_time_s": time.perf_counter() - t0, "processes": procs})
@@ -273,7 +275,7 @@ def write_trials_folder(cfg, records, folder, t0: float, procs: int) -> dict:
 # ---------------------------------------------------------------------------
 
 
-def _launch(cfg, args, open_folder, chosen) -> int:
+def _launch(cfg, args, session: Session, open_folder, chosen) -> int:
     """Take the folder, start the P workers, move their folder into place once all
     ended well; a failure, a worker's death or an interrupt discards it."""
     from cgda_jax.results_folder.reading import read_json
@@ -281,10 +283,10 @@ def _launch(cfg, args, open_folder, chosen) -> int:
     from cgda_jax.launch import start_job, without_option
 
     p = args.processes
-    cmd = [sys.executable, "-m", "cgda_jax.cli", *without_option(args.argv,
+    cmd = [sys.executable, "-m", "cgda_jax.cli", *without_option(session.argv,
                                                                  "--processes")]
     with open_folder() as rf:
-        args.run_folder = rf
+        session.run_folder = rf
         chosen(rf)
         env = {ENV_JOB_WORK: str(rf.work), ENV_JOB_FOLDER: str(rf.path),
                "CGDA_LAUNCHED_PROCESSES": str(p)}

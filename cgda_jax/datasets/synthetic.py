@@ -30,6 +30,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cgda_jax.data import Demonstration
+from cgda_jax.numerics import min_jerk_np
 
 ACTIONS: tuple[str, ...] = ("MOVE", "ROTATE", "CLEAN", "PAINT")
 MARKER_FEATURES: tuple[str, ...] = (
@@ -75,11 +76,6 @@ class _Repetition:
     progress: np.ndarray
 
 
-def _min_jerk(s: np.ndarray) -> np.ndarray:
-    """Minimum-jerk progress profile 10 s^3 - 15 s^4 + 6 s^5 on [0, 1]."""
-    return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
-
-
 def repetition_progress(rng: np.random.Generator, n: int, rate_hz: float,
                         duration: float):
     """Progress p (T,) in [0, 1] of one repetition with pauses and a hesitation.
@@ -95,7 +91,7 @@ def repetition_progress(rng: np.random.Generator, n: int, rate_hz: float,
     warped_at_knots = knots + rng.uniform(-0.08, 0.08, size=2)
     warped_at_knots = np.clip(np.sort(warped_at_knots), 0.05, 0.95)
     s = np.interp(s, np.r_[0.0, knots, 1.0], np.r_[0.0, warped_at_knots, 1.0])
-    return _min_jerk(s), pre + duration + post
+    return min_jerk_np(s), pre + duration + post
 
 
 def _sample_count(rng: np.random.Generator, action: str, rate_hz: float):

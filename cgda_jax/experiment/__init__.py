@@ -22,7 +22,7 @@ another's ``_private`` name:
    ``[robot]``, ...), one typed dataclass each, with their defaults.
 2. :mod:`~cgda_jax.experiment.config`: the schema, TOML reading and writing,
    overrides (`merge_table`).
-3. :mod:`~cgda_jax.experiment.demo`: the experiments of ``cgda demo`` (configs).
+3. :mod:`~cgda_jax.experiment.demo_suite`: the experiments of ``cgda demo`` (configs).
 4. :mod:`~cgda_jax.experiment.locate`: the files and folders a config names (model,
    data folder, demonstration files, recordings per action).
 5. :mod:`~cgda_jax.experiment.rules`: checks of the config alone: choices, ranges,
@@ -36,13 +36,13 @@ another's ``_private`` name:
    execution run (and the replay on a finer simulator).
 9. :mod:`~cgda_jax.experiment.report`: JSON and ``report.md``.
 10. :mod:`~cgda_jax.experiment.load`: a results folder back in Python (`load_run`).
-11. :mod:`~cgda_jax.experiment.export`: a run as a controller's trajectory file
+11. :mod:`~cgda_jax.experiment.trajectory_file`: a run as a controller's trajectory file
     (`export_trajectory`, `check_exported`; ``cgda export``).
 12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
 13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
     `run_experiment`): computes, then draws and writes its outputs.
-14. :mod:`~cgda_jax.experiment.trials`: many seeds of one experiment (``cgda
+14. :mod:`~cgda_jax.experiment.success_rate`: many seeds of one experiment (``cgda
     trials``).
 
 The results folder itself (its rules, writing it aside, reading its files back) is
@@ -79,11 +79,11 @@ from cgda_jax.experiment.config import (
     load_config as load_config,
     merge_table as merge_table,
 )
-from cgda_jax.experiment.demo import (
+from cgda_jax.experiment.demo_suite import (
     DEMO_EXPERIMENTS as DEMO_EXPERIMENTS,
     demo_configs as demo_configs,
 )
-from cgda_jax.experiment.export import (
+from cgda_jax.experiment.trajectory_file import (
     check_exported as check_exported,
     export_trajectory as export_trajectory,
 )

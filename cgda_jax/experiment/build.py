@@ -438,7 +438,7 @@ class BuiltExecution:
     """An execution run's objects, built once: by its checks
     (`cgda_jax.experiment.validate.check_and_build`), then used by the run
     (`cgda_jax.experiment.compute.compute_execution`,
-    `cgda_jax.experiment.trials.trial_records`).
+    `cgda_jax.experiment.success_rate.trial_records`).
 
     Attributes:
         goal: (N, F) the goal; demos: its demonstrations ([] without);
@@ -525,8 +525,8 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
             self_collision=f.self_collision, exclude=list(f.exclude),
             samples=f.samples, margin=f.margin, certify=f.certify,
             physics_contacts=cfg.robot.mode == "dynamic",
-            max_step=math.radians(f.max_step_deg), tracking_deg=f.tracking_deg,
-            saturation=f.saturation)
+            max_step=math.radians(f.max_step_deg), geometry=f.geometry,
+            tracking_deg=f.tracking_deg, saturation=f.saturation)
     except KeyError as e:
         raise ConfigError(f"key 'feasibility.exclude': {e.args[0]}") from None
     except ValueError as e:

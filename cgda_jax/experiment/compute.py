@@ -158,13 +158,13 @@ def point_errors(strategy: str, features: np.ndarray, goal: np.ndarray,
 def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4,
                  profile: str = "min_jerk") -> dict:
     """The reported joints exported as a controller's trajectory
-    (`cgda_jax.reality.export.trajectory_of`, ``rate`` Hz), written as its JSON file
-    and read back (`cgda_jax.reality.files`), then replayed on MuJoCo C
+    (`cgda_jax.reality.control_trajectory.trajectory_of`, ``rate`` Hz), written as
+    its JSON file and read back (`cgda_jax.reality.files`), then replayed on MuJoCo C
     (`cgda_jax.reality.replay.replay_trajectory`, ``factor`` x finer): its features
     against the goal and the run's features, and its samples against the limits.
     ``profile``: each move's (`cgda_jax.reality.profiles.PROFILES`).  A result
     without postures to export (NaN joints) says why instead."""
-    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.control_trajectory import trajectory_of
     from cgda_jax.reality.files import from_json_dict, to_json_dict
     from cgda_jax.reality.replay import replay_trajectory
 
@@ -200,7 +200,7 @@ def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
     (`cgda_jax.reality.mismatch.MismatchedWorld` with the ``[reality]`` values
     ``table``): the exported trajectory sent as it is, the world's features
     measured at each waypoint and judged against the goal per point."""
-    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.control_trajectory import trajectory_of
     from cgda_jax.reality.mismatch import Mismatch, MismatchedWorld
     from cgda_jax.reality.protocol import measure
 

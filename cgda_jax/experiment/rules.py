@@ -141,6 +141,11 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
     if not (math.isfinite(f.saturation) and 0 <= f.saturation <= 1):
         raise ConfigError(f"key 'feasibility.saturation' must be in [0, 1], got "
                           f"{f.saturation}")
+    from cgda_jax.sim.feasibility import GEOMETRIES
+
+    if f.geometry not in GEOMETRIES:
+        raise ConfigError(f"key 'feasibility.geometry' must be one of "
+                          f"{list(GEOMETRIES)}, got {f.geometry!r}")
     if not (math.isfinite(f.margin) and 0 <= f.margin < f.penetration):
         raise ConfigError(f"key 'feasibility.margin' must be >= 0 and below "
                           f"'feasibility.penetration' ({f.penetration:g} m), got "

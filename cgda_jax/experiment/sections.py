@@ -280,7 +280,9 @@ class FeasibilityConfig:
     what passes between samples; ``certify``: bound the distance between samples
     instead (a guarantee, far stricter on long moves near obstacles);
     ``max_step_deg``: the largest change of a joint between two waypoints (a larger
-    one is flailing; the approach from the start posture excepted).
+    one is flailing; the approach from the start posture excepted); ``geometry``:
+    "round" (the robot's moving geoms as capsules that hold them: closed-form
+    pairs, never more lenient) or "exact" (the geoms themselves).
     Dynamic mode, what the physics executed (`Feasibility.executed`):
     ``tracking_deg`` [deg; a slide: mm]: the largest error of an evolved joint
     from its commanded posture at any physics step; ``saturation``: the largest
@@ -298,6 +300,7 @@ class FeasibilityConfig:
     max_step_deg: float = 90.0
     tracking_deg: float = 30.0
     saturation: float = 0.75
+    geometry: str = "round"
 
 
 @dataclasses.dataclass

@@ -47,6 +47,7 @@ from cgda_jax.sizes import (
     check_recognition,
     check_samples,
     samples_estimate,
+    sim_estimate,
 )
 
 #: Seeds are 32-bit unsigned integers (JAX keys, NumPy generators).
@@ -280,22 +281,13 @@ def _check_algorithm(cfg: ExperimentConfig, n_genes: int) -> None:
 
 
 def _sampled_postures(cfg: ExperimentConfig, sim) -> tuple[int, str]:
-    """Postures the strategy samples once per trial and the option that sets them
-    (the plans' own rule: `cgda_jax.strategies.runner.plan_estimate`)."""
-    from cgda_jax.strategies.base import points_independent
+    """Postures the strategy samples once per trial and the option that sets them:
+    the plan's own rule (`cgda_jax.strategies.base.PlanBase.sampled_postures`)."""
     from cgda_jax.strategies import STRATEGIES
 
-    s = cfg.strategy
-    opts = {**STRATEGIES[s.name].settings.defaults(), **s.options}
-    if s.name == "fte":
-        init = opts["init"]
-        if init == "auto":
-            init = "reach" if points_independent(sim) else "sampled"
-        return (int(opts["init_samples"]) if init in ("sampled", "reach") else 0,
-                "init_samples")
-    if s.name in ("ie", "iet") and points_independent(sim) and int(opts["restarts"]):
-        return int(opts["restart_samples"]), "restart_samples"
-    return 0, ""
+    entry = STRATEGIES[cfg.strategy.name]
+    return entry.plan.sampled_postures(entry.settings.of(None, **cfg.strategy.options),
+                                       sim)
 
 
 def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
@@ -318,10 +310,9 @@ def _check_option_combinations(cfg: ExperimentConfig, sim) -> None:
 
 def _check_run_size(cfg: ExperimentConfig, sim, n_points: int, trials: int | None,
                     processes: int, local: bool) -> None:
-    """What the run will hold at once (`cgda_jax.strategies.runner.sim_estimate`)
+    """What the run will hold at once (`cgda_jax.sizes.sim_estimate`)
     within XLA's 32-bit sizes and the memory of each process; `processes` against
     the cores."""
-    from cgda_jax.strategies.runner import sim_estimate
 
     s = cfg.strategy
     samples, option = _sampled_postures(cfg, sim)

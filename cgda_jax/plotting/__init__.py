@@ -22,9 +22,9 @@ Fig. 8, 11                        :func:`plot_frames`
 (a segmented recording)           :func:`plot_segmentation`
 ================================  ===========================================
 
-Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.evolution`,
+Modules: `~cgda_jax.plotting.trajectories`, `~cgda_jax.plotting.convergence`,
 `~cgda_jax.plotting.tables`, `~cgda_jax.plotting.selection`,
-`~cgda_jax.plotting.segments`, `~cgda_jax.plotting.frames`,
+`~cgda_jax.plotting.segments`, `~cgda_jax.plotting.filmstrip`,
 `~cgda_jax.plotting.units`.
 """
 
@@ -34,12 +34,12 @@ from cgda_jax.plotting._base import (
     POINT_AXIS as POINT_AXIS,
     knot_curve as knot_curve,
 )
-from cgda_jax.plotting.evolution import (
+from cgda_jax.plotting.convergence import (
     plot_fitness as plot_fitness,
     plot_point_errors as plot_point_errors,
     plot_time_per_point as plot_time_per_point,
 )
-from cgda_jax.plotting.frames import plot_frames as plot_frames
+from cgda_jax.plotting.filmstrip import plot_frames as plot_frames
 from cgda_jax.plotting.motion import plot_motion as plot_motion
 from cgda_jax.plotting.segments import plot_segmentation as plot_segmentation
 from cgda_jax.plotting.selection import plot_zscores as plot_zscores

@@ -1,6 +1,6 @@
 """From simulation to a robot: a result as a trajectory a controller can take
-(`cgda_jax.reality.export`, its files `cgda_jax.reality.files`), the replay of
-that trajectory on MuJoCo C that checks it (`cgda_jax.reality.replay`), and the
+(`cgda_jax.reality.control_trajectory`, its files `cgda_jax.reality.files`), the
+replay of that trajectory on MuJoCo C that checks it (`cgda_jax.reality.replay`), and the
 robot interface a result can be executed on (`cgda_jax.reality.protocol`, with a
 mismatched MuJoCo world as the shipped implementation).
 
@@ -8,7 +8,7 @@ Modules, in their import order:
 
 1. :mod:`~cgda_jax.reality.profiles`: one move's profile (the run's minimum-jerk
    ramp, or ruckig's jerk-limited one).
-2. :mod:`~cgda_jax.reality.export`: time parameterization along the run's
+2. :mod:`~cgda_jax.reality.control_trajectory`: time parameterization along the run's
    straight moves (`time_parameterize`, `trajectory_of`, `ExportedTrajectory`).
 3. :mod:`~cgda_jax.reality.files`: CSV, JSON (a ROS ``JointTrajectory``) and NPZ.
 4. :mod:`~cgda_jax.reality.replay`: the exported samples on MuJoCo C -> features.

@@ -40,7 +40,7 @@ import pathlib
 import numpy as np
 
 from cgda_jax.results_folder.reading import write_aside
-from cgda_jax.reality.export import ExportedTrajectory
+from cgda_jax.reality.control_trajectory import ExportedTrajectory
 
 __all__ = ["FORMAT", "FORMATS", "from_json_dict", "load_trajectory", "save_trajectory",
            "to_json_dict"]

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from cgda_jax.reality.export import ExportedTrajectory
+from cgda_jax.reality.control_trajectory import ExportedTrajectory
 from cgda_jax.reality.protocol import Measurement
 from cgda_jax.reality.replay import SceneTracker
 

@@ -1,7 +1,7 @@
 """One move of an exported trajectory: the path parameter ``s`` from 0 to 1 (rest to
 rest) sampled at the control rate, on the simulator's own minimum-jerk ramp or on
-ruckig's jerk-limited profile (`cgda_jax.reality.export` says which to take and
-why).  Each mover returns (control periods, (periods, 3) of s, s', s'' at the
+ruckig's jerk-limited profile (`cgda_jax.reality.control_trajectory` says which to
+take and why).  Each mover returns (control periods, (periods, 3) of s, s', s'' at the
 samples, whether the limits made the move longer than the run's)."""
 
 from __future__ import annotations

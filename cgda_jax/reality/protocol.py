@@ -3,8 +3,8 @@ against instead of the internal simulator.
 
 A user implements it for their robot driver: ``reset()`` brings the robot to its
 start posture and measures the features there; ``execute(trajectory)`` sends an
-`cgda_jax.reality.export.ExportedTrajectory` (position targets at its control rate,
-from the robot's current posture) and measures, at each waypoint's feature time
+`cgda_jax.reality.control_trajectory.ExportedTrajectory` (position targets at its
+control rate, from the robot's current posture) and measures, at each waypoint's feature time
 (``trajectory.feature_t``), the features and the joints.  The library ships one
 implementation, `cgda_jax.reality.mismatch.MismatchedWorld` (the same scene in
 MuJoCo C with perturbed parameters).
@@ -20,7 +20,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-from cgda_jax.reality.export import ExportedTrajectory
+from cgda_jax.reality.control_trajectory import ExportedTrajectory
 
 __all__ = ["Measurement", "Reality", "RealityError", "measure"]
 

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from cgda_jax.reality.export import ExportedTrajectory
+from cgda_jax.reality.control_trajectory import ExportedTrajectory
 
 __all__ = ["SceneTracker", "replay_trajectory", "scene_features"]
 

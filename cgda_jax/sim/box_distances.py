@@ -23,8 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax import Array
 
-__all__ = ["SAT_PARALLEL", "box_box_sat", "box_cylinder_sat", "box_sdf",
-           "segment_box_min"]
+__all__ = ["SAT_PARALLEL", "box_box_sat", "box_cylinder_sat", "box_sdf", "dot3",
+           "mat_mul3", "mat_vec3", "norm3", "segment_box_min", "to_local"]
 
 #: `box_box_sat` skips an edge-edge axis whose edges are this close to parallel
 #: (the sine of their angle): its direction is noise in float32, and the face
@@ -54,34 +54,56 @@ def _box_corners():
 _BOX_SIGNS, _EDGE_START, _EDGE_DIR = _box_corners()
 
 
-def _segment_box_tables():
-    """Constant tables of `segment_box_min`'s candidate parameters: per edge of
-    the 12 (along axis k at signs s1, s2 in the other two axes) its selection
-    (2, 3) and signs (2,); per kink of the 15 ``t = -(u.h + w.a) / (w.d)`` its
-    rows ``u``, ``w`` (3,)."""
-    sel, sgn = [], []
-    for k in range(3):
-        o = [i for i in range(3) if i != k]
-        for s1 in (-1, 1):
-            for s2 in (-1, 1):
-                sel.append(np.eye(3, dtype=np.float32)[o])
-                sgn.append([s1, s2])
-    u, w = [], []
-    for i in range(3):  # a coordinate crosses 0
-        u.append(np.zeros(3))
-        w.append(np.eye(3)[i])
-    for i, j in ((0, 1), (0, 2), (1, 2)):  # s_i x_i - h_i = s_j x_j - h_j
-        for si in (-1.0, 1.0):
-            for sj in (-1.0, 1.0):
-                uk, wk = np.zeros(3), np.zeros(3)
-                uk[i], uk[j], wk[i], wk[j] = 1.0, -1.0, -si, sj
-                u.append(uk)
-                w.append(wk)
-    return (np.asarray(sel, np.float32), np.asarray(sgn, np.float32),
-            np.asarray(u, np.float32), np.asarray(w, np.float32))
+def dot3(u, v) -> Array:
+    """``u . v`` of two 3-vectors, written out by component.
+
+    The pair kernels here are written out by component (``x[0]``, ``x[1]``,
+    ``x[2]``) rather than with ``@``, ``jnp.dot`` or ``jnp.linalg.norm`` on (3,)
+    vectors: vmapped over postures and pairs, XLA on CPU fuses the scalar form into
+    one vectorized loop, while a batch of (3,)-sized dot products runs as many tiny
+    ones (measured 50x slower for a segment-box distance,
+    ``benchmarks/bench_check_budget.py``)."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
-_SEGMENT_BOX = _segment_box_tables()
+def norm3(u) -> Array:
+    """``|u|`` of a 3-vector, by component (`dot3`)."""
+    return jnp.sqrt(dot3(u, u))
+
+
+def to_local(R, p, x) -> Array:
+    """``R.T @ (x - p)`` by component (`dot3`): a world point (3,) in the frame of
+    rotation ``R`` (3, 3; columns the frame's axes) and origin ``p`` (3,)."""
+    y = [x[k] - p[k] for k in range(3)]
+    return jnp.stack([R[0, i] * y[0] + R[1, i] * y[1] + R[2, i] * y[2]
+                      for i in range(3)])
+
+
+def mat_mul3(A, B) -> Array:
+    """``A @ B`` of (..., 3, 3) matrices by component (`dot3`; numpy constants
+    broadcast, and their zero entries cost nothing)."""
+    def entry(i, j):
+        terms = []
+        for k in range(3):
+            b = B[..., k, j]
+            if isinstance(b, np.ndarray | np.floating | float) and np.all(b == 0):
+                continue
+            terms.append(A[..., i, k] * b)
+        return sum(terms) if terms else jnp.zeros_like(A[..., i, 0])
+
+    return jnp.stack([jnp.stack([entry(i, j) for j in range(3)], -1)
+                      for i in range(3)], -2)
+
+
+def mat_vec3(A, v) -> Array:
+    """``A @ v`` of (..., 3, 3) matrices and (..., 3) vectors by component."""
+    return jnp.stack([A[..., i, 0] * v[..., 0] + A[..., i, 1] * v[..., 1]
+                      + A[..., i, 2] * v[..., 2] for i in range(3)], -1)
+
+
+def _ratio(num, den):
+    ok = jnp.abs(den) > 1e-12
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
 
 
 def segment_box_min(size: Array, a: Array, b: Array) -> Array:
@@ -94,23 +116,38 @@ def segment_box_min(size: Array, a: Array, b: Array) -> Array:
     is a vertex, an edge or a face, and a face's distance is linear along the
     segment); and the kinks of ``max_i(|x_i| - h_i)``, the sdf inside the box (a
     coordinate crossing 0, two coordinates' terms equal).  Exact up to float32
-    round-off, with no iterations.
+    round-off, with no iterations; written out by component (`dot3`).
     """
-    sel, sgn, u, w = _SEGMENT_BOX
-    d = b - a
-
-    def ratio(num, den):
-        ok = jnp.abs(den) > 1e-12
-        return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
-
-    t_vert = ratio((_BOX_SIGNS * size - a) @ d, jnp.dot(d, d))  # (8,)
-    do = sel @ d  # (12, 2): the segment's direction across each edge
-    t_edge = ratio(jnp.sum((sgn * (sel @ size) - sel @ a) * do, -1),
-                   jnp.sum(do * do, -1))  # (12,)
-    t_kink = ratio(-(u @ size + w @ a), w @ d)  # (15,)
-    t = jnp.clip(jnp.concatenate([jnp.array([0.0, 1.0], jnp.float32), t_vert,
-                                  t_edge, t_kink]), 0.0, 1.0)
-    return jnp.min(box_sdf(size, a + t[:, None] * d))
+    h = [size[k] for k in range(3)]
+    a = [a[k] for k in range(3)]
+    d = [b[k] - a[k] for k in range(3)]
+    ts = [0.0, 1.0]
+    dd = dot3(d, d)
+    for sg in _BOX_SIGNS:  # nearest each vertex
+        ts.append(_ratio(sum((float(sg[k]) * h[k] - a[k]) * d[k] for k in range(3)),
+                         dd))
+    for k in range(3):  # nearest each edge's line (along axis k)
+        o1, o2 = [i for i in range(3) if i != k]
+        den = d[o1] * d[o1] + d[o2] * d[o2]
+        for s1 in (-1.0, 1.0):
+            for s2 in (-1.0, 1.0):
+                ts.append(_ratio((s1 * h[o1] - a[o1]) * d[o1]
+                                 + (s2 * h[o2] - a[o2]) * d[o2], den))
+    for i in range(3):  # a coordinate crosses 0
+        ts.append(_ratio(-a[i], d[i]))
+    for i, j in ((0, 1), (0, 2), (1, 2)):  # s_i x_i - h_i = s_j x_j - h_j
+        for si in (-1.0, 1.0):
+            for sj in (-1.0, 1.0):
+                ts.append(_ratio(h[j] - h[i] + si * a[i] - sj * a[j],
+                                 sj * d[j] - si * d[i]))
+    best = None
+    for t in ts:
+        t = jnp.clip(t, 0.0, 1.0)
+        q = [jnp.abs(a[k] + t * d[k]) - h[k] for k in range(3)]
+        out = (norm3([jnp.maximum(x, 0.0) for x in q])
+               + jnp.minimum(jnp.maximum(jnp.maximum(q[0], q[1]), q[2]), 0.0))
+        best = out if best is None else jnp.minimum(best, out)
+    return best
 
 
 def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:

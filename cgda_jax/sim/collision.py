@@ -38,6 +38,22 @@ their own way: signs agree in the tests, magnitudes may differ by centimetres fo
 overlaps; MuJoCo's capsule-box even reports a separation for a thin capsule that
 pierces right through a box, where this module is negative).
 
+Round geometry (``rounded=True``, the feasibility check's, `cgda_jax.sim.feasibility`):
+every moving geom that is not a sphere or capsule is checked as capsules whose union
+holds it (`cgda_jax.sim.geoms.round_cover`: a box, a mesh's or ellipsoid's box, as 1-4
+capsules along its longest axis, side by side across its middle one; a cylinder as
+its own capsule or its box's), every still geom as shapes that each hold it
+(`geoms.closed_form_bounds`: a cylinder as its bounding box and that box turned 45
+degrees, the larger distance counting).  So every pair is a capsule against a
+capsule, a box or a plane, all closed form (no golden-section search, no separating
+axes), and a distance is never larger than the geoms' own and at most
+`Collider.excess` smaller (TEO's hand box: 2 capsules of radius 37.5 mm, at most
+37.5 mm stricter; `tests/test_round_collision.py` checks both against MuJoCo C).
+Its pairs are computed by component (`cgda_jax.sim.box_distances.dot3`): the moving
+pieces' core ends from their bodies' frames, then every row of a kind at once, a
+few tens of nanoseconds a pair on one CPU core
+(``benchmarks/bench_check_budget.py``).
+
 Example:
     >>> import jax.numpy as jnp
     >>> from cgda_jax import Robot, model_path
@@ -62,36 +78,66 @@ import mujoco
 import numpy as np
 from jax import Array
 
+from cgda_jax.sim.box_distances import (
+    dot3,
+    mat_mul3,
+    mat_vec3,
+    segment_box_min,
+    to_local,
+)
 from cgda_jax.sim.chain import body_chain_ops
-from cgda_jax.sim.primitive_distances import KINDS, error_bound, pair_distance, swap_needed
 from cgda_jax.sim.geoms import (
     GEOM_KINDS,
     Obstacle,
+    closed_form_bounds,
+    cover_excess,
     geom_name,
     geom_radius,
     geom_reach,
     geom_shape,
     quat_mat,
+    round_cover,
+)
+from cgda_jax.sim.primitive_distances import (
+    BASE_ERROR,
+    KINDS,
+    error_bound,
+    pair_distance,
+    segment_segment,
+    swap_needed,
 )
 
 __all__ = ["GEOM_KINDS", "Collider", "Obstacle", "geom_radius", "geom_reach"]
 
 _FREE = int(mujoco.mjtJoint.mjJNT_FREE)
+
+
+def _pieces(kind: str, size, moving: bool, rounded: bool) -> list:
+    """The shapes a table entry is checked as (`geoms.Piece`s, in its frame):
+    itself; with ``rounded`` a moving geom's `round_cover` (a plane stays one)
+    and a still geom's `closed_form_bounds`."""
+    if rounded and moving and kind != "plane":
+        return round_cover(kind, size)
+    if rounded and not moving:
+        return closed_form_bounds(kind, size)
+    return [(kind, size, np.eye(3), np.zeros(3))]
+
+
 def _frame_apply(ops, genes: Array, R: Array, p: Array) -> tuple[Array, Array]:
     """Compose folded chain ops (`cgda_jax.sim.chain.ChainOp`) onto a frame."""
-    for op in ops:
+    for op in ops:  # by component (box_distances.mat_mul3: fused, vectorized)
         if op.kind == "const":
-            p = p + R @ op.vec
-            R = R @ op.rot
+            p = p + mat_vec3(R, op.vec)
+            R = mat_mul3(R, op.rot)
         elif op.kind == "slide":
-            p = p + R @ (op.vec * (genes[op.gene] - op.offset))
+            p = p + mat_vec3(R, op.vec * (genes[op.gene] - op.offset))
         else:  # hinge: Rodrigues rotation about the unit axis through the origin
             angle = genes[op.gene] - op.offset
             k = op.vec
             K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]],
                          np.float32)
-            R = R @ (np.eye(3, dtype=np.float32) + jnp.sin(angle) * K
-                     + (1 - jnp.cos(angle)) * (K @ K))
+            R = mat_mul3(R, np.eye(3, dtype=np.float32) + jnp.sin(angle) * K
+                         + (1 - jnp.cos(angle)) * (K @ K))
     return R, p
 
 
@@ -106,15 +152,25 @@ class Collider:
         exclude: geom or obstacle names left out of every pair (e.g. a pushed box).
         only: keep just these ``(robot geom, other)`` pairs (names as in
             `pair_names`; None: every pair).
+        rounded: check the round geometry (module doc): the moving geoms as
+            capsules that hold them, the still ones as closed-form shapes that
+            hold them; never more lenient, at most `excess` stricter.
 
     Attributes:
         pairs: (n_pairs, 2) geom-table indices (internal; see `pair_names`).
         pair_names: (n_pairs,) ``(robot geom, other geom or obstacle)`` names.
         pair_types: (n_pairs,) their geom types.
-        error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms.
+        error_bounds: (n_pairs,) numpy worst-case error (m) on separated geoms
+            (of the shapes checked: with ``rounded`` float32 round-off).
+        excess: (n_pairs,) numpy: how much smaller (m) a pair's distance may be
+            than its geoms' (``rounded``; 0 otherwise): their shapes' reach
+            beyond them (`cgda_jax.sim.geoms.cover_excess`; meshes beyond their
+            bounding boxes not counted).
+        rounded: whether the round geometry is checked.
         n_pairs: number of pairs.
         skipped: names of geoms left out for an unsupported type.
-        geom_names: (G,) names of the rows of `geom_frames`.
+        geom_names: (G,) names of the rows of `geom_frames` (with ``rounded``
+            its pieces: ``"r_hand[0]"``, ...).
         pair_reach: (n_pairs, DoF) numpy: how far (m) any point of either geom of
             a pair can move per unit change of each gene (radian / metre), an upper
             bound over every posture (the chain's lengths from the joint to the
@@ -129,7 +185,8 @@ class Collider:
 
     def __init__(self, robot, obstacles: Sequence[Obstacle] = (), *,
                  self_collision: bool = True, exclude: Sequence[str] = (),
-                 only: Sequence[tuple[str, str]] | None = None):
+                 only: Sequence[tuple[str, str]] | None = None,
+                 rounded: bool = False):
         m = robot.mj_model
         self.n_dof = int(robot.n_dof)
         joint_ids = [int(j) for j in robot.joint_ids]
@@ -232,7 +289,8 @@ class Collider:
         self.pair_names = tuple((table_names[a], table_names[b]) for a, b in pairs)
         self.pair_types = tuple((table_types[a], table_types[b]) for a, b in pairs)
         self.error_bounds = np.array(
-            [error_bound(table_types[a], sizes[a], table_types[b], sizes[b])
+            [BASE_ERROR if rounded else
+             error_bound(table_types[a], sizes[a], table_types[b], sizes[b])
              for a, b in pairs])
 
         # body frames: each needed body from its nearest moving ancestor
@@ -265,29 +323,68 @@ class Collider:
             self._body_plan.append((b, r, ops))
         slot = {b: k for k, b in enumerate(self._bodies)}
         used = sorted({a for a, _ in pairs} | {b for _, b in pairs if b < n_mov})
-        self.geom_names = (tuple(table_names[a] for a in used)
-                           + tuple(table_names[n_mov:]))
-        self._mov_body = np.asarray([slot[int(m.geom_bodyid[mov[a]])] for a in used],
-                                    np.int32)
-        self._mov_pos = np.asarray(
-            [m.geom_pos[mov[a]] + quat_mat(m.geom_quat[mov[a]]) @ shape[mov[a]][2]
-             for a in used], np.float32).reshape(-1, 3)
-        self._mov_rot = np.asarray(
-            [quat_mat(m.geom_quat[mov[a]]) for a in used], np.float32)
-        self._const_R = np.asarray(c_R, np.float32).reshape(-1, 3, 3)
-        self._const_p = np.asarray(c_p, np.float32).reshape(-1, 3)
+        # the table: used moving geoms, then the constants (and obstacles); each
+        # entry checked as one or more pieces (`_pieces`)
+        tab = [(table_types[a], sizes[a]) for a in used] + [
+            (table_types[n_mov + c], sizes[n_mov + c]) for c in range(len(c_R))]
+        pieces = [_pieces(k, sz, t < len(used), rounded) for t, (k, sz) in enumerate(tab)]
+        self.rounded = bool(rounded)
+        excess = np.asarray([
+            cover_excess(k, sz, t < len(used)) if rounded else 0.0
+            for t, (k, sz) in enumerate(tab)])
+        piece_names = [
+            [table_names[n] if len(ps) == 1 else f"{table_names[n]}[{i}]"
+             for i in range(len(ps))]
+            for n, ps in zip(used + list(range(n_mov, len(table_names))), pieces,
+                             strict=True)]
+        self.geom_names = tuple(x for names_t in piece_names for x in names_t)
+        mov_body, mov_pos, mov_rot, p_R, p_p, kinds, psize = [], [], [], [], [], [], []
+        for t, ps in enumerate(pieces):
+            if t < len(used):
+                g = mov[used[t]]
+                gR = quat_mat(m.geom_quat[g])
+                gp = m.geom_pos[g] + gR @ shape[g][2]
+            else:
+                gR, gp = c_R[t - len(used)], c_p[t - len(used)]
+            for kind, size, R, pos in ps:
+                kinds.append(kind)
+                psize.append(size)
+                if t < len(used):
+                    mov_body.append(slot[int(m.geom_bodyid[mov[used[t]]])])
+                    mov_rot.append(gR @ R)
+                    mov_pos.append(gp + gR @ pos)
+                else:
+                    p_R.append(gR @ R)
+                    p_p.append(gp + gR @ pos)
+        self._mov_body = np.asarray(mov_body, np.int32)
+        self._mov_pos = np.asarray(mov_pos, np.float32).reshape(-1, 3)
+        self._mov_rot = np.asarray(mov_rot, np.float32).reshape(-1, 3, 3)
+        self._const_R = np.asarray(p_R, np.float32).reshape(-1, 3, 3)
+        self._const_p = np.asarray(p_p, np.float32).reshape(-1, 3)
+        first = np.cumsum([0] + [len(ps) for ps in pieces])
 
-        # pairs grouped by (type a, type b) in pair_distance's order, table indices
-        # remapped: used moving geoms first, then the constants
+        # rows: every piece of a pair's first entry against every piece of its
+        # second, grouped by (kind a, kind b) in pair_distance's order
         remap = {a: k for k, a in enumerate(used)}
         remap.update({n_mov + c: len(used) + c for c in range(len(c_R))})
         groups: dict[tuple[str, str], list] = {}
+        grid = []  # per pair: (its rows' numbers (pieces a, pieces b), join by max)
+        n_rows = 0
         for n, (a, b) in enumerate(pairs):
-            ta, tb = table_types[a], table_types[b]
-            if swap_needed(ta, tb):
-                a, b, ta, tb = b, a, tb, ta
-            groups.setdefault((ta, tb), []).append((n, remap[a], remap[b],
-                                                    sizes[a], sizes[b]))
+            ta, tb = remap[a], remap[b]
+            cells = np.empty((first[ta + 1] - first[ta], first[tb + 1] - first[tb]),
+                             np.int64)
+            for i, ia in enumerate(range(first[ta], first[ta + 1])):
+                for j, ib in enumerate(range(first[tb], first[tb + 1])):
+                    ka, kb, x, y = kinds[ia], kinds[ib], ia, ib
+                    if swap_needed(ka, kb):
+                        x, y, ka, kb = y, x, kb, ka
+                    groups.setdefault((ka, kb), []).append((n_rows, x, y, psize[x],
+                                                            psize[y]))
+                    cells[i, j] = n_rows
+                    n_rows += 1
+            # a still geom's bounds hold it together: the largest distance counts
+            grid.append((cells, rounded and tb >= len(used) and cells.shape[1] > 1))
         self._groups = [
             (ta, tb, np.asarray([e[1] for e in g], np.int32),
              np.asarray([e[2] for e in g], np.int32),
@@ -295,10 +392,104 @@ class Collider:
              np.asarray([e[4] for e in g], np.float32))
             for (ta, tb), g in groups.items()]
         order = np.concatenate([[e[0] for e in g] for g in groups.values()] or [[]])
-        self._inverse = np.argsort(order).astype(np.int32)
+        self._inverse = np.argsort(order).astype(np.int32)  # rows, in row order
+        self._reduce = None
+        if n_rows > len(pairs):  # some pair has several rows: (pairs, Pa, Pb)
+            pa = max(c.shape[0] for c, _ in grid)
+            pb = max(c.shape[1] for c, _ in grid)
+            idx = np.zeros((len(pairs), pa, pb), np.int32)
+            valid = np.zeros((len(pairs), pa, pb), bool)
+            for n, (cells, _) in enumerate(grid):
+                idx[n, :cells.shape[0], :cells.shape[1]] = self._inverse[cells]
+                valid[n, :cells.shape[0], :cells.shape[1]] = True
+            self._reduce = (idx, valid, np.asarray([j for _, j in grid], bool))
+        self._round = self._round_plan(groups, grid, kinds, psize, mov_body,
+                                       mov_pos, mov_rot, p_R, p_p) if rounded else None
+        self.excess = np.asarray([excess[remap[a]] + excess[remap[b]]
+                                  for a, b in pairs], np.float64)
+        self.pair_reach = self.pair_reach + np.asarray(
+            [excess[remap[a]] * (reach[a] > 0) + excess[remap[b]] * (reach[b] > 0)
+             for a, b in pairs], np.float64).reshape(-1, self.n_dof)
 
     def __repr__(self) -> str:
         return f"Collider(n_pairs={self.n_pairs}, bodies={len(self._bodies)})"
+
+    def _round_plan(self, groups, grid, kinds, psize, mov_body, mov_pos, mov_rot,
+                    p_R, p_p) -> dict:
+        """Constants of the rounded check (`_round_distances`): each round
+        piece's core ends (a moving one's in its body's frame, a still one's in
+        the world's), each row's pieces, the still boxes' and planes' world
+        frames, and which rows each pair reduces."""
+        n_mov = len(mov_body)
+        ends = []
+        for i, (kind, size) in enumerate(zip(kinds, psize, strict=True)):
+            if kind != "capsule":
+                ends.append(None)
+                continue
+            R, p = (mov_rot[i], mov_pos[i]) if i < n_mov else (p_R[i - n_mov],
+                                                               p_p[i - n_mov])
+            ends.append((p - R[:, 2] * size[1], p + R[:, 2] * size[1], size[0]))
+        plan = {"rows": [], "n_mov": n_mov,
+                "bodies": np.asarray(mov_body, np.int32),
+                "c0": np.asarray([e[0] if e else np.zeros(3) for e in ends[:n_mov]],
+                                 np.float32).reshape(-1, 3),
+                "c1": np.asarray([e[1] if e else np.zeros(3) for e in ends[:n_mov]],
+                                 np.float32).reshape(-1, 3)}
+        for (ka, kb), rows in groups.items():
+            if ka != "capsule" or kb not in ("capsule", "box", "plane"):
+                raise ValueError(
+                    f"the round check has no closed form for a {ka} against a {kb} "
+                    f"(a plane on a moving body?): use the exact geometry "
+                    f"(feasibility.geometry = \"exact\")")
+            xs = np.asarray([e[1] for e in rows], np.int32)
+            ys = np.asarray([e[2] for e in rows], np.int32)
+            row = {"kind": kb, "a": xs, "ra": np.asarray([ends[x][2] for x in xs],
+                                                          np.float32)}
+            if kb == "capsule":
+                row["b"] = ys
+                row["rb"] = np.asarray([ends[y][2] for y in ys], np.float32)
+            else:  # a still box or plane: its world frame, constant
+                row["R"] = np.asarray([p_R[y - n_mov] for y in ys], np.float32)
+                row["p"] = np.asarray([p_p[y - n_mov] for y in ys], np.float32)
+                row["size"] = np.asarray([psize[y] for y in ys], np.float32)
+            plan["rows"].append(row)
+        # the still round pieces' ends, after the moving ones'
+        plan["s0"] = np.asarray([e[0] if e else np.zeros(3) for e in ends[n_mov:]],
+                                np.float32).reshape(-1, 3)
+        plan["s1"] = np.asarray([e[1] if e else np.zeros(3) for e in ends[n_mov:]],
+                                np.float32).reshape(-1, 3)
+        return plan
+
+    def _round_distances(self, genes: Array) -> Array:
+        """The rounded check's distances (module doc), by component: the moving
+        pieces' core ends from their bodies' frames, then each row's closed-form
+        distance vectorized over the rows, then each pair's reduction."""
+        plan = self._round
+        genes = jnp.asarray(genes, jnp.float32)
+        frames = {0: (jnp.eye(3, dtype=jnp.float32), jnp.zeros(3, jnp.float32))}
+        for b, r, ops in self._body_plan:
+            frames[b] = _frame_apply(ops, genes, *frames[r])
+        if plan["n_mov"]:
+            bR = jnp.stack([frames[b][0] for b in self._bodies])[plan["bodies"]]
+            bp = jnp.stack([frames[b][1] for b in self._bodies])[plan["bodies"]]
+            e0 = jnp.concatenate([bp + mat_vec3(bR, plan["c0"]), plan["s0"]])
+            e1 = jnp.concatenate([bp + mat_vec3(bR, plan["c1"]), plan["s1"]])
+        else:
+            e0, e1 = jnp.asarray(plan["s0"]), jnp.asarray(plan["s1"])
+        out = []
+        for row in plan["rows"]:
+            a0, a1 = e0[row["a"]].T, e1[row["a"]].T  # (3, rows)
+            if row["kind"] == "capsule":
+                d = segment_segment(a0, a1, e0[row["b"]].T, e1[row["b"]].T) - row["rb"]
+            elif row["kind"] == "box":
+                R, p = row["R"], row["p"]
+                d = segment_box_min(row["size"].T, to_local(R.transpose(1, 2, 0), p.T, a0),
+                                    to_local(R.transpose(1, 2, 0), p.T, a1))
+            else:  # plane: the lower end along its normal
+                n, pp = row["R"][:, :, 2].T, row["p"].T
+                d = jnp.minimum(dot3(n, a0 - pp), dot3(n, a1 - pp))
+            out.append(d - row["ra"])
+        return self._pairs_of(jnp.concatenate(out))
 
     def geom_frames(self, genes: Array) -> tuple[Array, Array]:
         """World frames of the geom table (used moving geoms, then constants).
@@ -319,8 +510,8 @@ class Collider:
             return jnp.asarray(self._const_R), jnp.asarray(self._const_p)
         bR = jnp.stack([frames[b][0] for b in self._bodies])[self._mov_body]
         bp = jnp.stack([frames[b][1] for b in self._bodies])[self._mov_body]
-        R = jnp.einsum("gij,gjk->gik", bR, self._mov_rot)
-        p = bp + jnp.einsum("gij,gj->gi", bR, self._mov_pos)
+        R = mat_mul3(bR, self._mov_rot)
+        p = bp + mat_vec3(bR, self._mov_pos)
         return (jnp.concatenate([R, self._const_R]),
                 jnp.concatenate([p, self._const_p]))
 
@@ -340,6 +531,9 @@ class Collider:
         Returns:
             (n_pairs,) float32, in `pair_names` order.
         """
+        if self._round is not None:
+            return self._round_distances(genes) if self.n_pairs else jnp.zeros(
+                (0,), jnp.float32)
         R, p = self.geom_frames(genes)
         out = []
         for ta, tb, ia, ib, sa, sb in self._groups:
@@ -350,7 +544,19 @@ class Collider:
             out.append(jax.vmap(one)(ia, ib, sa, sb))
         if not out:
             return jnp.zeros((0,), jnp.float32)
-        return jnp.concatenate(out)[self._inverse]
+        return self._pairs_of(jnp.concatenate(out))
+
+    def _pairs_of(self, rows: Array) -> Array:
+        """Each pair's distance from its rows' (in group order): a union of pieces
+        the nearest, a still geom's bounds the farthest."""
+        if self._reduce is None:
+            return rows[self._inverse]
+        idx, valid, join_max = self._reduce
+        d = rows[idx]  # (pairs, pieces a, pieces b)
+        inner = jnp.where(join_max[:, None],
+                          jnp.max(jnp.where(valid, d, -jnp.inf), axis=-1),
+                          jnp.min(jnp.where(valid, d, jnp.inf), axis=-1))
+        return jnp.min(jnp.where(valid.any(-1), inner, jnp.inf), axis=-1)
 
     def min_distance(self, genes: Array) -> tuple[Array, Array]:
         """The worst (smallest) signed distance and its pair's index.

@@ -8,6 +8,13 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
 - **penetration**: the worst signed distance between the robot's collision geoms
   and themselves / the world / the scene's obstacles (the paint board) along the
   move (`cgda_jax.sim.collision.Collider`), against ``penetration`` (default 5 mm).
+  By default (``geometry="round"``) the moves are judged on the round geometry
+  (`Collider` with ``rounded``): the moving geoms as capsules that hold them (TEO's
+  hand box: two capsules), the still ones as closed-form shapes that hold them, so
+  every pair is closed form and costs a few tens of nanoseconds; never more
+  lenient than the geoms, at most `Collider.excess` stricter (37.5 mm for the
+  hand, 0 for capsule pairs).  ``collider`` stays the exact one: the
+  independent check of a result (`cgda_jax.sim.motion_check`) judges the geoms.
   The distances are taken at ``samples + 1`` postures equally spaced along the
   move (both ends included), and must stay ``margin`` (default 2 mm) above the
   limit, for what may pass between two samples: a move is infeasible when its
@@ -69,9 +76,10 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION", "EXECUTED_MARGIN",
-           "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "Feasibility",
-           "penalized", "relevant_pairs", "scene_obstacles"]
+__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
+           "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "EXECUTED_MARGIN",
+           "GEOMETRIES", "Feasibility", "penalized", "relevant_pairs",
+           "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -93,6 +101,8 @@ DEFAULT_SATURATION = 0.75
 #: Dynamic mode: the share of the tracking and saturation limits the search keeps
 #: in hand (`Feasibility.executed`; the independent replay checks the full limits).
 EXECUTED_MARGIN = 0.05
+#: What the check's distances measure (`Feasibility`'s ``geometry``).
+GEOMETRIES = ("round", "exact")
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -142,11 +152,19 @@ class Feasibility:
             joint [deg; a slide: mm] (`executed`).
         saturation: dynamic mode: the largest share of a move's physics steps
             with an evolved joint's force at its limit, in [0, 1] (`executed`).
+        geometry: what the check measures: "round" (default) the robot's moving
+            geoms as capsules that hold them and the still ones as closed-form
+            shapes that hold them (`Collider` with ``rounded``; never more
+            lenient, at most `Collider.excess` stricter), or "exact" the geoms
+            themselves.
 
     Attributes:
         limits: the `cgda_jax.sim.limits.JointLimits` judged against.
-        collider: the `cgda_jax.sim.collision.Collider` of the kept pairs (None
-            without collisions or pairs).
+        collider: the exact `cgda_jax.sim.collision.Collider` of the kept pairs
+            (None without collisions or pairs): the independent motion check's.
+        check: the `cgda_jax.sim.collision.Collider` the moves are judged with:
+            ``collider`` itself, or its rounded twin (``geometry="round"``).
+        geometry: "round" or "exact".
         penetration: metres of penetration tolerated.
         penalty: fitness added to an infeasible candidate, times (1 + violation).
         overlapping: pairs left out because they overlap in the start posture.
@@ -172,6 +190,7 @@ class Feasibility:
         certify: bool = False,
         tracking_deg: float = DEFAULT_TRACKING_DEG,
         saturation: float = DEFAULT_SATURATION,
+        geometry: str = "round",
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
 
@@ -200,12 +219,16 @@ class Feasibility:
         self.margin = float(margin)
         self.certify = bool(certify)
         self._executed_limits(robot, tracking_deg, saturation)
+        if geometry not in GEOMETRIES:
+            raise ValueError(f"feasibility geometry must be one of {GEOMETRIES}, got "
+                             f"{geometry!r}")
+        self.geometry = geometry
         # as given (`cgda_jax.sim.description` writes them into a config)
         self.obstacles = list(obstacles)
         self.collisions, self.self_collision = bool(collisions), bool(self_collision)
         self.exclude = tuple(exclude)
         self.physics_contacts = bool(physics_contacts)
-        self.collider = None
+        self.collider = self.check = None
         self.overlapping: list[tuple[str, str]] = []
         self.physical: list[tuple[str, str]] = []
         if collisions:
@@ -220,8 +243,10 @@ class Feasibility:
                 self.physical = [p for p in keep if _collides(robot.mj_model, *p)]
                 keep = [p for p in keep if p not in self.physical]
             if keep:
-                self.collider = Collider(robot, obs, only=keep, **args)
-                self._reach = np.asarray(self.collider.pair_reach, np.float32)
+                self.collider = self.check = Collider(robot, obs, only=keep, **args)
+                if geometry == "round":
+                    self.check = Collider(robot, obs, only=keep, rounded=True, **args)
+                self._reach = np.asarray(self.check.pair_reach, np.float32)
         self._velocity = np.asarray(limits.velocity, np.float32)
         self._acceleration = np.asarray(limits.acceleration, np.float32)
 
@@ -229,7 +254,8 @@ class Feasibility:
         pairs = 0 if self.collider is None else self.collider.n_pairs
         check = "certify" if self.certify else f"margin={self.margin:g}"
         return (f"Feasibility(pairs={pairs}, penetration={self.penetration:g}, "
-                f"samples={self.samples}, {check}, limits={self.limits!r})")
+                f"samples={self.samples}, {check}, geometry={self.geometry}, "
+                f"limits={self.limits!r})")
 
     def approach_s(self, robot, floor: float) -> float:
         """Duration (s) of the approach from the robot's start posture: a min-jerk
@@ -258,13 +284,14 @@ class Feasibility:
         """Minus the smallest signed distance (m) of the move's pairs at its
         ``samples + 1`` postures, or with ``certify`` minus its lower bound on the
         whole move: > 0 penetrates, < 0 is the clearance."""
-        if self.collider is None:
+        if self.check is None:
             return jnp.float32(-jnp.inf)
         alphas = jnp.arange(self.samples + 1, dtype=jnp.float32) / self.samples
         path = q0 + alphas[:, None] * dq  # (S + 1, DoF)
-        # the depth is what counts: separated box-box and box-cylinder pairs
-        # get a lower bound of their distance (Collider.distances)
-        d = jax.vmap(lambda q: self.collider.distances(q, exact=False))(path)
+        # the depth is what counts: with the exact geometry, separated box-box
+        # and box-cylinder pairs get a lower bound of their distance
+        # (Collider.distances); the round one is closed form throughout
+        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
         if not self.certify:
             return -jnp.min(d)
         # between two samples h = 1/S apart the distance changes at most at the
@@ -307,9 +334,9 @@ class Feasibility:
     def postures(self, path: Array) -> Array:
         """Minus the smallest signed distance (m) of the pairs at the postures
         ``path`` (K, DoF) (-inf without pairs): > 0 penetrates."""
-        if self.collider is None:
+        if self.check is None:  # the geometry the moves are judged with (`worst`)
             return jnp.float32(-jnp.inf)
-        d = jax.vmap(lambda q: self.collider.distances(q, exact=False))(path)
+        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
         return -jnp.min(d)
 
     def executed(self, path: Array, tracking: Array, saturation: Array) -> Array:

@@ -60,7 +60,10 @@ from cgda_jax.sim.box_distances import (
     box_box_sat,
     box_cylinder_sat,
     box_sdf,
+    dot3,
+    norm3,
     segment_box_min,
+    to_local,
 )
 
 __all__ = [
@@ -142,11 +145,14 @@ def segment_min(f, a: Array, b: Array, iters: int = GOLDEN_ITERS) -> Array:
 def segment_segment(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
     """Distance between the segments ``p1``-``q1`` and ``p2``-``q2`` (each (3,)),
     closed form (Ericson, Real-Time Collision Detection 5.1.9); degenerate
-    (zero-length) segments are points."""
+    (zero-length) segments are points.  Written out by component
+    (`cgda_jax.sim.box_distances.dot3`)."""
     eps = 1e-12
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a, e, f = jnp.dot(d1, d1), jnp.dot(d2, d2), jnp.dot(d2, r)
-    c, b = jnp.dot(d1, r), jnp.dot(d1, d2)
+    d1 = [q1[k] - p1[k] for k in range(3)]
+    d2 = [q2[k] - p2[k] for k in range(3)]
+    r = [p1[k] - p2[k] for k in range(3)]
+    a, e, f = dot3(d1, d1), dot3(d2, d2), dot3(d2, r)
+    c, b = dot3(d1, r), dot3(d1, d2)
     denom = a * e - b * b
     safe_a, safe_e = jnp.maximum(a, eps), jnp.maximum(e, eps)
     s = jnp.where(denom > eps * jnp.maximum(a * e, eps),
@@ -158,7 +164,7 @@ def segment_segment(p1: Array, q1: Array, p2: Array, q2: Array) -> Array:
     s = jnp.where(e > eps, s, jnp.clip(-c / safe_a, 0.0, 1.0))  # b is a point
     s = jnp.where(a > eps, s, 0.0)
     t = jnp.clip(t, 0.0, 1.0)
-    return jnp.linalg.norm((p1 + s * d1) - (p2 + t * d2))
+    return norm3([p1[k] + s * d1[k] - p2[k] - t * d2[k] for k in range(3)])
 
 
 def _core(kind: str, size: Array, R: Array, p: Array) -> tuple[Array, Array, Array]:
@@ -202,12 +208,12 @@ def plane_distance(kind: str, size: Array, R: Array, p: Array, Rp: Array, pp: Ar
     """Signed distance from a geom (frame ``R``, ``p``) to the plane (``Rp``, ``pp``):
     its lowest point along the plane's normal, closed form."""
     n = Rp[:, 2]
-    h = jnp.dot(n, p - pp)
+    h = dot3(n, p - pp)
     if kind in ROUND:
         a, b, r = _core(kind, size, R, p)
-        return jnp.minimum(jnp.dot(n, a - pp), jnp.dot(n, b - pp)) - r
+        return jnp.minimum(dot3(n, a - pp), dot3(n, b - pp)) - r
     if kind == "box":
-        return h - jnp.sum(size * jnp.abs(n @ R))
+        return h - sum(size[i] * jnp.abs(dot3(n, R[:, i])) for i in range(3))
     if kind == "cylinder":
         c = jnp.dot(n, R[:, 2])
         return h - size[1] * jnp.abs(c) - size[0] * jnp.sqrt(jnp.maximum(1 - c * c, 0))
@@ -265,7 +271,8 @@ def pair_distance(kind_a: str, kind_b: str, size_a, Ra, pa, size_b, Rb, pb, *,
         if kind_a == "sphere":
             return sdf_b(pa) - ra
         if kind_b == "box":
-            return segment_box_min(size_b, Rb.T @ (a0 - pb), Rb.T @ (a1 - pb)) - ra
+            return (segment_box_min(size_b, to_local(Rb, pb, a0), to_local(Rb, pb, a1))
+                    - ra)
         return segment_min(sdf_b, a0, a1) - ra
     sat = None
     if kind_a == kind_b == "box":

@@ -3,23 +3,58 @@
 
 from __future__ import annotations
 
+import abc
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
 from jax import Array
 
 from cgda_jax.sim.sim_state import SimState, check_waypoints
 
+if TYPE_CHECKING:
+    from cgda_jax.sim.robot import Robot
+
 __all__ = ["Executions"]
 
 
-class Executions:
+class Executions(abc.ABC):
     """Rollouts and batched executions built on a simulator's one-move `step`.
 
-    The simulator (`cgda_jax.sim.simulator.Simulator`) provides ``robot``, ``mode``,
-    ``batch_size``, ``step``, its start state ``_start`` and the jitted
-    ``_rollout`` / ``_execute_population`` of the methods here, and counts
-    ``n_traces``.
+    The contract with a subclass (`cgda_jax.sim.simulator.Simulator`):
+
+    - it sets the attributes declared here, `robot`, `mode` and `batch_size`;
+    - it defines the abstract `step` (one move) and `_start` (the start state
+      of checked genes);
+    - its ``__init__`` calls ``Executions.__init__`` once those are set, which
+      jits `rollout`'s and `execute_population`'s programs (per simulator) and
+      starts `n_traces`.
+
+    Attributes:
+        n_traces: how often `execute_population`'s program was traced (tests
+            read it: one trace per population shape).
     """
+
+    #: the robot (its evolved joints check the waypoints).
+    robot: Robot
+    #: "kinematic" or "dynamic" (`map_population` slices only dynamic MJX).
+    mode: str
+    #: dynamic mode: candidates per slice of `map_population` (None: one batch).
+    batch_size: int | None
+
+    def __init__(self) -> None:
+        self.n_traces = 0
+        self._execute_population = jax.jit(self._execute_batched)
+        self._rollout = jax.jit(self._rollout_checked)
+
+    @abc.abstractmethod
+    def step(self, state: SimState, waypoint: Array, *,
+             judge: bool = True) -> tuple[SimState, Array]:
+        """Move to one waypoint: (new state, features (F,) there)."""
+
+    @abc.abstractmethod
+    def _start(self, genes0: Array) -> SimState:
+        """The start state at checked genes ``genes0`` (DoF,)."""
 
     def rollout(
         self, waypoints: Array, state: SimState | None = None
@@ -39,7 +74,7 @@ class Executions:
     def _rollout_checked(
         self, waypoints: Array, state: SimState | None
     ) -> tuple[Array, SimState]:
-        """`rollout` of checked waypoints (jitted per simulator in ``__init__``)."""
+        """`rollout` of checked waypoints (jitted per simulator in `__init__`)."""
         if state is None:
             state = self._start(self.robot.start_genes)
         state, features = jax.lax.scan(
@@ -64,8 +99,8 @@ class Executions:
 
     def map_population(self, fn, xs):
         """``vmap(fn)(xs)``, in dynamic MJX mode as ``lax.map`` over slices of at
-        most ``batch_size`` candidates (see the class doc: large LAPACK batches
-        deadlock XLA's CPU thread pool).  Otherwise a plain ``vmap`` (the MuJoCo C
+        most ``batch_size`` candidates (see `cgda_jax.sim.simulator.Simulator`:
+        large LAPACK batches deadlock XLA's CPU thread pool).  Otherwise a plain ``vmap`` (the MuJoCo C
         backend gets the whole batch in one call).
 
         Args:

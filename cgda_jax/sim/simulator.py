@@ -216,11 +216,9 @@ class Simulator(Executions):
                 self.approach_s, self.physics.timestep, self.physics_steps,
                 self._move_steps)
             self.approach_steps = len(self._approach_profile)
-        self.n_traces = 0  # how often execute_population was traced (tests read it)
-        self._execute_population = jax.jit(self._execute_batched)
         # eager set-up and replays: one program each, not one per operation
         self._init_state = jax.jit(self._start)
-        self._rollout = jax.jit(self._rollout_checked)
+        super().__init__()  # the rollout and population programs (`Executions`)
 
     def finer(self, factor: int = 4, physics: str = "mujoco") -> Simulator:
         """The same simulator with ``factor`` times finer steps: kinematic mode

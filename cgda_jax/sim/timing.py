@@ -85,7 +85,8 @@ def approach_profile(approach_s: float, dt: float, steps: int, move_steps: int
 
 
 def min_jerk(tau: Array) -> Array:
-    """Minimum-jerk profile ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``, 0 -> 1.
+    """Minimum-jerk profile ``s = 10 tau^3 - 15 tau^4 + 6 tau^5``, 0 -> 1 (JAX,
+    float32; host code without JAX: `cgda_jax.numerics.min_jerk_np`).
 
     Args:
         tau: (...) normalized time ``t / T``; clipped into [0, 1] (0 before the move,

@@ -16,6 +16,7 @@ References:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -27,6 +28,7 @@ from jax.sharding import NamedSharding, PartitionSpec
 from cgda_jax.numerics import exact_matmuls
 from cgda_jax.sharding import shard_population
 from cgda_jax.sim.description import setup_of
+from cgda_jax.sizes import Estimate, sim_estimate
 from cgda_jax.strategies.evolution import (
     ALGORITHMS as ALGORITHMS,
     INVALID_PENALTY as INVALID_PENALTY,
@@ -269,6 +271,50 @@ class PlanBase:
         if self.stagnation is None:
             return jnp.zeros(jnp.shape(evo.stall), bool)
         return evo.stall >= self.stagnation
+
+    # ---- what the drivers of `cgda_jax.strategies.runner` ask of a plan
+    @classmethod
+    def sampled_postures(cls, settings: Settings, sim: Any) -> tuple[int, str]:
+        """Postures a trial of this plan samples once (restart or start means) with
+        `settings` on `sim`, and the option that sets them; ``(0, "")``: none.
+        The one rule of the plan, of its size (`estimate`) and of a config's checks
+        (`cgda_jax.experiment.validate`)."""
+        return 0, ""
+
+    def estimate(self, n_trials: int) -> Estimate:
+        """What `n_trials` trials of this plan in one batch hold at once
+        (`cgda_jax.sizes.sim_estimate`)."""
+        return sim_estimate(self.sim, trials=n_trials,
+                            population=int(self.info["population_size"]),
+                            points=self.n_points, strategy=self.name,
+                            samples=self.sampled_postures(self.settings, self.sim)[0])
+
+    def report_progress(self, progress_fn: Callable[[dict[str, Any]], None] | None,
+                        generations: int, finished: bool, t1: float,
+                        carry: Any) -> None:
+        """``progress_fn`` of every driver after a chunk: the strategy, its points,
+        the generations run, whether it finished, the seconds since ``t1`` and the
+        plan's own figures of ``carry`` (``progress``)."""
+        if progress_fn is not None:
+            progress_fn({
+                "strategy": self.name, "points": self.n_points,
+                "generations": generations, "done": finished,
+                "elapsed_s": time.perf_counter() - t1, **self.progress(carry),
+            })
+
+    def split_results(self, final: Any, histories: list[Any], timing: dict[str, Any],
+                      info: dict[str, Any] | None = None) -> list[ExecutionResult]:
+        """Every driver's results: trial r's ``to_result`` of its final arrays
+        (leaves (R, ...) of ``final``) and history ``histories[r]``, with the
+        batch's ``timing`` (wall and compile time of the whole batch,
+        ``trials_in_batch``) and ``info`` added to its ``info``."""
+        results = []
+        for r, history in enumerate(histories):
+            f = jax.tree.map(lambda x, r=r: x[r], final)
+            res = self.to_result(f, history, timing)
+            res.info.update(info or {})
+            results.append(res)
+        return results
 
     # ---- plan functions shared by several strategies
     def done(self, carry: Any) -> jax.Array:

@@ -7,8 +7,8 @@ One step:
    executed in the model; its restarts and stagnation as OET's) from the current
    internal state;
 2. execute: that posture as a short exported trajectory segment
-   (`cgda_jax.reality.export.trajectory_of` from where the robot was last sent,
-   the run's move and hold times; the first segment is the approach from the start
+   (`cgda_jax.reality.control_trajectory.trajectory_of` from where the robot was
+   last sent, the run's move and hold times; the first segment is the approach from the start
    posture) sent through `cgda_jax.reality.protocol.measure` (a reality that raises
    or measures NaN stops the run with `RealityError`);
 3. re-localize (`OETPlan.relocalize`): the goal step nearest the MEASURED features
@@ -43,7 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from cgda_jax.reality.calibrate import OffsetEstimate
-from cgda_jax.reality.export import trajectory_of
+from cgda_jax.reality.control_trajectory import trajectory_of
 from cgda_jax.reality.protocol import Reality, RealityError, measure
 from cgda_jax.sim.relocate import ObjectLocator
 from cgda_jax.strategies.base import check_config

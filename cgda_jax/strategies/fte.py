@@ -227,9 +227,8 @@ class FTEPlan(PlanBase):
     def __init__(self, sim, goal, settings: FTESettings | None = None, *,
                  info=None, sharding=None, **changes):
         st = FTESettings.of(settings, **changes)
-        init, refine, distance = st.init, st.refine, st.distance
-        if init == "auto":
-            init = "reach" if points_independent(sim) else "sampled"
+        refine, distance = st.refine, st.distance
+        init = self.start_mode(st.init, sim)
         if init == "reach" and not points_independent(sim):
             raise ValueError(
                 "init='reach' needs a differentiable execution: kinematic mode and a "
@@ -261,6 +260,21 @@ class FTEPlan(PlanBase):
         std = MODE_STD.get(init, 0.08) if init_std is None else float(init_std)
         if "std_init" in fields and "std_init" not in user_params:
             self.try_params = self.params.replace(std_init=jnp.asarray(std))
+
+    @staticmethod
+    def start_mode(init: str, sim) -> str:
+        """``init`` with "auto" resolved: "reach" with independent points, else
+        "sampled"."""
+        if init == "auto":
+            return "reach" if points_independent(sim) else "sampled"
+        return init
+
+    @classmethod
+    def sampled_postures(cls, settings: FTESettings, sim) -> tuple[int, str]:
+        """``init_samples`` when the start samples postures ("sampled", "reach"),
+        else none (see `PlanBase.sampled_postures`)."""
+        sampled = cls.start_mode(settings.init, sim) in ("sampled", "reach")
+        return int(settings.init_samples) if sampled else 0, "init_samples"
 
     # ---- fitness and execution
     def _trajectory(self, u_flat):

@@ -225,7 +225,7 @@ class IEPlan(PlanBase):
                 "refine": refine}
         super().__init__(sim, goal, int(sim.n_dof), st, info=info, sharding=sharding)
         warm_start, restarts = st.warm_start, st.restarts
-        refine_steps, restart_samples = st.refine_steps, st.restart_samples
+        refine_steps = st.refine_steps
         self.keys = keys
         self.warm_start = bool(warm_start)
         self.info["warm_start"] = self.warm_start
@@ -234,8 +234,7 @@ class IEPlan(PlanBase):
         # sampled restart means need postures whose features do not depend on the
         # context (independent features; with feasibility the move to them is still
         # judged in context) and at least one restart to use them
-        self.restart_samples = (0 if not points_independent(sim) or self.restarts == 0
-                                else int(restart_samples))
+        self.restart_samples = self.sampled_postures(st, sim)[0]
         self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
         self.max_generations_total = self.max_generations * (1 + self.restarts)
         self.unreachable = np.zeros(self.n_points, bool)
@@ -250,6 +249,13 @@ class IEPlan(PlanBase):
             self.info["unreachable_points"] = [
                 {"index": i, "nearest_approach": float(reach["nearest"][i])}
                 for i in reach["unreachable"]]
+
+    @classmethod
+    def sampled_postures(cls, settings: IESettings, sim) -> tuple[int, str]:
+        """``restart_samples`` with independent points and a restart to use them,
+        else none (see `PlanBase.sampled_postures`)."""
+        use = points_independent(sim) and int(settings.restarts) > 0
+        return int(settings.restart_samples) if use else 0, "restart_samples"
 
     def point_stop(self, evo: Evolution) -> jax.Array:
         """One try of a point stops: tolerance met, its budget spent, or stalled."""

@@ -33,7 +33,7 @@ from cgda_jax.strategies.base import (
     ragged_rows,
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
-from cgda_jax.strategies.ie import LOCAL_STD, RESTART_SAMPLES, STAGNATION
+from cgda_jax.strategies.ie import LOCAL_STD, RESTART_SAMPLES, STAGNATION, IEPlan
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.settings import Settings, option
 
@@ -177,15 +177,19 @@ class IETPlan(PlanBase):
                  info=None, sharding=None, **changes):
         st = IETSettings.of(settings, **changes)
         super().__init__(sim, goal, int(sim.n_dof), st, info=info, sharding=sharding)
-        restarts, restart_samples = st.restarts, st.restart_samples
-        self.restart_samples = (int(restart_samples) if points_independent(sim)
-                                and int(restarts) > 0 else 0)
+        restarts = st.restarts
+        self.restart_samples = self.sampled_postures(st, sim)[0]
         self.n_nearest = min(self.restart_samples, int(restarts))
         self.restarts = int(restarts)
         self.backtracks = int(st.backtracks)
         self.warm_start = bool(st.warm_start)
         evolutions = self.n_points * (1 + self.restarts) * (1 + self.backtracks)
         self.max_generations_total = evolutions * self.max_generations
+
+    @classmethod
+    def sampled_postures(cls, settings: IETSettings, sim) -> tuple[int, str]:
+        """IE's rule (`IEPlan.sampled_postures`)."""
+        return IEPlan.sampled_postures(settings, sim)
 
     def _goal(self, point):
         return self.goal[jnp.clip(point, 0, self.n_points - 1)]

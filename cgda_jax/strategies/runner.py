@@ -13,6 +13,10 @@ A *plan* (see fte.py, ie.py, iet.py, oet.py) is a small object with pure functio
 - ``max_generations_total``: an upper bound on generations (loop guard).
 - ``n_points``: goal points (reported to ``progress_fn`` as ``points``).
 
+and, from `cgda_jax.strategies.base.PlanBase`, what every driver asks of it:
+``report_progress`` (``progress_fn`` after a chunk), ``split_results`` (a batch's
+results per trial) and ``estimate`` (what a batch holds, checked before compiling).
+
 `run_plan` is the entry every run shares (`cgda_jax.strategies.run`): it checks the goal,
 builds the plan from its settings and drives it for a list of seeds.
 
@@ -81,13 +85,7 @@ import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
-from cgda_jax.sizes import (
-    Estimate,
-    check_estimate,
-    dynamic_width,
-    motion_width,
-    run_estimate,
-)
+from cgda_jax.sizes import check_estimate
 from cgda_jax.strategies.base import check_config
 from cgda_jax.strategies.result import ExecutionResult, SimulationDiverged
 
@@ -171,34 +169,6 @@ def compile_plan(
     )
 
 
-def report_progress(progress_fn: Callable[[dict[str, Any]], None] | None, plan: Any,
-                    generations: int, finished: bool, t1: float, carry: Any) -> None:
-    """``progress_fn`` of every driver after a chunk: the strategy, its points, the
-    generations run, whether it finished, the seconds since ``t1`` and the plan's
-    own figures of ``carry`` (`plan.progress`)."""
-    if progress_fn is not None:
-        progress_fn({
-            "strategy": plan.name, "points": plan.n_points, "generations": generations,
-            "done": finished, "elapsed_s": time.perf_counter() - t1,
-            **plan.progress(carry),
-        })
-
-
-def split_results(plan: Any, final: Any, histories: list[Any], timing: dict[str, Any],
-                  info: dict[str, Any] | None = None) -> list[ExecutionResult]:
-    """Every driver's results: trial r's `plan.to_result` of its final arrays (leaves
-    (R, ...) of ``final``) and history ``histories[r]``, with the batch's
-    ``timing`` (wall and compile time of the whole batch, ``trials_in_batch``) and
-    ``info`` added to its ``info``."""
-    results = []
-    for r, history in enumerate(histories):
-        f = jax.tree.map(lambda x, r=r: x[r], final)
-        res = plan.to_result(f, history, timing)
-        res.info.update(info or {})
-        results.append(res)
-    return results
-
-
 def drive(
     plan: Any,
     keys: jax.Array,
@@ -244,7 +214,7 @@ def drive(
         histories.append(metrics)
         generations += chunk_size
         finished = bool(done_c(carry))
-        report_progress(progress_fn, plan, generations, finished, t1, carry)
+        plan.report_progress(progress_fn, generations, finished, t1, carry)
         if finished or generations >= plan.max_generations_total:
             break
     final = jax.block_until_ready(finish_c(carry))
@@ -258,7 +228,7 @@ def drive(
         "trials_in_batch": int(n_trials),
     }
     # history leaves are (G, R, ...), final leaves (R, ...)
-    return split_results(plan, final, [jax.tree.map(lambda x, r=r: x[:, r], history)
+    return plan.split_results(final, [jax.tree.map(lambda x, r=r: x[:, r], history)
                                        for r in range(n_trials)], timing)
 
 
@@ -302,40 +272,6 @@ def check_divergence(results: list[ExecutionResult]) -> None:
         "them last and never reported one as the best%s. If many diverge, check the "
         "simulation (actuator gains, timestep)", invalid, total, run, detail,
     )
-
-
-def sim_estimate(sim: Any, *, trials: int, population: int, points: int,
-                 strategy: str, samples: int = 0) -> Estimate:
-    """What `trials` trials on `sim` in one batch hold at once
-    (`cgda_jax.sizes.run_estimate`): the widths read from the simulator (its
-    bodies, physics state and motion check). The one rule for a plan
-    (`plan_estimate`) and for a config's checks (``cgda run --dry-run``)."""
-    robot = getattr(sim, "robot", None)
-    model = getattr(robot, "mj_model", None)
-    backend = getattr(getattr(sim, "backend", None), "name", None)
-    feas = getattr(sim, "feasibility", None)
-    collider = getattr(feas, "collider", None)
-    return run_estimate(
-        trials=trials, population=population, points=points,
-        features=int(sim.n_features), dof=int(sim.n_dof),
-        bodies=int(model.nbody) if model is not None else 1, strategy=strategy,
-        samples=samples,
-        dynamic_width=(dynamic_width(model) if backend == "mjx" and model is not None
-                       else 0),
-        motion_width=0 if feas is None else motion_width(
-            feas.samples, 0 if collider is None else collider.n_pairs,
-            0 if collider is None or model is None else model.ngeom,
-            int(sim.n_dof)))
-
-
-def plan_estimate(plan: Any, n_trials: int) -> Estimate:
-    """What `n_trials` trials of `plan` in one batch hold at once (`sim_estimate`)."""
-    samples = int(getattr(plan, "restart_samples", 0) or 0)
-    if getattr(plan, "init_mode", None) in ("sampled", "reach"):
-        samples = max(samples, int(plan.init_samples))
-    return sim_estimate(plan.sim, trials=n_trials,
-                        population=int(plan.info["population_size"]),
-                        points=plan.n_points, strategy=plan.name, samples=samples)
 
 
 def check_seeds(seeds: Any) -> list[int]:
@@ -396,7 +332,7 @@ def run_plan(
     Raises:
         SimulationDiverged: every candidate evaluation of the run diverged.
         cgda_jax.sizes.SizeError: the run would not fit (XLA's 32-bit sizes or the
-            memory; see `plan_estimate`), before anything is compiled.
+            memory; see `PlanBase.estimate`), before anything is compiled.
         ValueError: a seed outside 0 .. 2**32 - 1.
     """
     chunk_size, devices = settings.chunk_size, settings.devices
@@ -408,8 +344,8 @@ def run_plan(
     plan = plan_cls(sim, goal, settings,
                     sharding=sharding if shard == "population" else None)
     # before any program is compiled: XLA aborts on 32-bit overflows
-    est = plan_estimate(plan, len(seeds))
-    sampled = "init_samples" if plan.name == "fte" else "restart_samples"
+    est = plan.estimate(len(seeds))
+    sampled = plan.sampled_postures(settings, sim)[1] or "population_size"
     check_estimate(est, sampled if est.part != "generation" and len(seeds) == 1
                    else "n_trials" if len(seeds) > 1 else "population_size")
     if driver is not None and sharding is None:
@@ -534,14 +470,14 @@ def drive_repacked(
         active = active[~np.asarray(done[: active.size], bool)]
         if generations >= plan.max_generations_total:
             active = active[:0]
-        report_progress(progress_fn, plan, generations, not active.size, t1, carry)
+        plan.report_progress(progress_fn, generations, not active.size, t1, carry)
     final = jax.device_get(jax.block_until_ready(finish_c(carry)))
     wall = time.perf_counter() - t1 - (progs.compile_s - compiled_before)
     histories = [jax.tree.map(lambda *xs: np.concatenate(xs, axis=0), *h)
                  for h in per_trial]
     timing = {"wall_time_s": wall, "compile_time_s": progs.compile_s,
               "trials_in_batch": n}
-    return split_results(plan, final, histories, timing,
+    return plan.split_results(final, histories, timing,
                          {"batching": "trials", "batch_sizes": batch_sizes})
 
 
@@ -646,7 +582,7 @@ def drive_ie_points(
         active = np.flatnonzero(~done)
         if generations >= plan.max_generations_total:
             active = active[:0]
-        report_progress(progress_fn, plan, generations, not active.size, t1,
+        plan.report_progress(progress_fn, generations, not active.size, t1,
                   SimpleNamespace(  # the fields IEPlan.progress reads, per trial
                       done=done.reshape((n, n_pts)),
                       best_fitness=best_f.reshape((n, n_pts)),
@@ -660,7 +596,7 @@ def drive_ie_points(
     histories = [{k: v[:, r] for k, v in history.items()} for r in range(n)]
     timing = {"wall_time_s": wall, "compile_time_s": progs.compile_s,
               "trials_in_batch": n}
-    return split_results(plan, final, histories, timing,
+    return plan.split_results(final, histories, timing,
                          {"batching": "points", "batch_sizes": batch_sizes})
 
 

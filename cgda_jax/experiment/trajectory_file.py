@@ -4,9 +4,9 @@
     >>> cgda_jax.save_trajectory(traj, "paint.json")   # a ROS JointTrajectory inside
     >>> check_exported(run, traj)["success"]           # its replay on MuJoCo C
 
-The trajectory itself is `cgda_jax.reality.export`'s (straight joint-space moves
-with the run's timing, on its minimum-jerk ramp or ruckig's profile); its files are
-`cgda_jax.reality.files`'.
+The trajectory itself is `cgda_jax.reality.control_trajectory`'s (straight
+joint-space moves with the run's timing, on its minimum-jerk ramp or ruckig's
+profile); its files are `cgda_jax.reality.files`'.
 """
 
 from __future__ import annotations
@@ -59,16 +59,16 @@ def export_trajectory(run: Run | str | os.PathLike, rate: float = EXPORT_RATE, *
             ``"ruckig"`` (`cgda_jax.reality.profiles.PROFILES`).
 
     Returns:
-        `cgda_jax.reality.export.ExportedTrajectory` (positions, velocities and
-        accelerations of the evolved joints, from the start posture through every
-        waypoint, each held as long as the run held it).
+        `cgda_jax.reality.control_trajectory.ExportedTrajectory` (positions,
+        velocities and accelerations of the evolved joints, from the start posture
+        through every waypoint, each held as long as the run held it).
 
     Raises:
         FolderError: not a results folder; ValueError: a recognition run, or joints
             that are NaN (a point without a posture: named) or outside their
             ranges.
     """
-    from cgda_jax.reality.export import trajectory_of
+    from cgda_jax.reality.control_trajectory import trajectory_of
 
     run = _run(run)
     sim = sim if sim is not None else run.simulator()
