@@ -42,6 +42,8 @@ def test_config_limits_override_the_model(tmp_path):
     (["feasibility.penetration=-0.01"], r"key 'feasibility.penetration' must be"),
     (["feasibility.samples=0"], r"key 'feasibility.samples' must be >= 1"),
     (["robot.limits.speed=3"], r"key 'robot.limits.speed': unknown"),
+    (["feasibility.tracking_deg=0"], r"key 'feasibility.tracking_deg' must be"),
+    (["feasibility.saturation=1.5"], r"key 'feasibility.saturation' must be in"),
 ])
 def test_bad_feasibility_settings_name_the_key(overrides, match):
     with pytest.raises(ConfigError, match=match):

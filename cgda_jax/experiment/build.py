@@ -525,7 +525,8 @@ def build_feasibility(cfg: ExperimentConfig, robot, scene):
             self_collision=f.self_collision, exclude=list(f.exclude),
             samples=f.samples, margin=f.margin, certify=f.certify,
             physics_contacts=cfg.robot.mode == "dynamic",
-            max_step=math.radians(f.max_step_deg), geometry=f.geometry)
+            max_step=math.radians(f.max_step_deg), geometry=f.geometry,
+            tracking_deg=f.tracking_deg, saturation=f.saturation)
     except KeyError as e:
         raise ConfigError(f"key 'feasibility.exclude': {e.args[0]}") from None
     except ValueError as e:

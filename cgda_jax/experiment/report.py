@@ -80,6 +80,18 @@ def motion_lines(motion: dict, optimiser_feasible: bool | None) -> list[str]:
         a, b = contact["pair"]
         lines += ["", f"Deepest contact in the physics replay: {a} - {b}, "
                   f"{contact['deepest_m'] * 1e3:.1f} mm."]
+    ex = motion.get("executed")
+    if ex:  # dynamic mode: the replayed path, judged as the search judged its own
+        worst = max(ex["tracking_deg"], key=ex["tracking_deg"].get)
+        into = (f"{ex['pair'][0]} - {ex['pair'][1]}, move {ex['move'] + 1}"
+                if ex["pair"] else "no pairs")
+        lines += ["", f"Executed path (the physics replay, {ex['postures_checked']} "
+                  f"postures): deepest penetration {ex['penetration_m'] * 1e3:.1f} mm "
+                  f"({into}; allowed {ex['penetration_allowed_m'] * 1e3:g} mm); "
+                  f"tracking error {ex['tracking_deg'][worst]:.1f} deg ({worst}; "
+                  f"limit {ex['tracking_limit_deg']:g} deg); at the force limit "
+                  f"{100 * ex['saturation']:.1f} % of the worst move (limit "
+                  f"{100 * ex['saturation_limit']:g} %)."]
     dyn = "measured_speed" in motion
     head = ["joint", "peak speed [rad/s]", "limit", "peak acc. [rad/s^2]", "limit"]
     if dyn:

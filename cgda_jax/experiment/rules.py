@@ -132,12 +132,15 @@ def _validate_feasibility(cfg: ExperimentConfig) -> None:
     """``[feasibility]`` values and the kinds of ``robot.limits`` (the joints and
     numbers are checked against the model when the simulator is built)."""
     f = cfg.feasibility
-    for key in ("penetration", "penalty", "max_step_deg"):
+    for key in ("penetration", "penalty", "max_step_deg", "tracking_deg"):
         v = getattr(f, key)
         if not (math.isfinite(v) and v > 0):
             raise ConfigError(f"key 'feasibility.{key}' must be a number > 0, got {v}")
     if f.samples < 1:
         raise ConfigError(f"key 'feasibility.samples' must be >= 1, got {f.samples}")
+    if not (math.isfinite(f.saturation) and 0 <= f.saturation <= 1):
+        raise ConfigError(f"key 'feasibility.saturation' must be in [0, 1], got "
+                          f"{f.saturation}")
     from cgda_jax.sim.feasibility import GEOMETRIES
 
     if f.geometry not in GEOMETRIES:

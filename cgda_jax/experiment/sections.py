@@ -283,6 +283,10 @@ class FeasibilityConfig:
     one is flailing; the approach from the start posture excepted); ``geometry``:
     "round" (the robot's moving geoms as capsules that hold them: closed-form
     pairs, never more lenient) or "exact" (the geoms themselves).
+    Dynamic mode, what the physics executed (`Feasibility.executed`):
+    ``tracking_deg`` [deg; a slide: mm]: the largest error of an evolved joint
+    from its commanded posture at any physics step; ``saturation``: the largest
+    share of a move's physics steps with an evolved joint at its force limit.
     """
 
     penetration: float = 0.005
@@ -294,6 +298,8 @@ class FeasibilityConfig:
     margin: float = 0.002
     certify: bool = False
     max_step_deg: float = 90.0
+    tracking_deg: float = 30.0
+    saturation: float = 0.75
     geometry: str = "round"
 
 

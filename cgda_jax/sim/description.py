@@ -128,7 +128,8 @@ def _feasibility(sim) -> tuple[dict[str, Any], dict[str, Any]]:
              "collisions": f.collisions, "self_collision": f.self_collision,
              "exclude": list(f.exclude), "samples": f.samples, "margin": f.margin,
              "certify": f.certify, "max_step_deg": math.degrees(f.max_step),
-             "geometry": f.geometry}
+             "geometry": f.geometry, "tracking_deg": f.tracking_deg,
+             "saturation": f.saturation}
     limits = {kind: {j: float(v) for j, v in zip(f.limits.joint_names,
                                                   getattr(f.limits, kind))}
               for kind in ("velocity", "acceleration", "effort")}

@@ -33,11 +33,20 @@ the sub-step postures ``path`` (K, DoF), timed as a minimum-jerk move of
 - **no flailing**: no joint changes by more than ``max_step`` (90 degrees) between
   two waypoints (the approach excepted);
 - **limits**: the move's peak joint speed ``1.875 |dq| / T`` and acceleration
-  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`).
+  ``5.77 |dq| / T^2`` against the robot's limits (`cgda_jax.sim.limits`, `cgda_jax.sim.timing`);
+- **what the physics executed** (dynamic mode, `executed`): the simulated postures
+  of the move (``2 * samples + 1`` of its physics steps) against penetration as
+  above, the tracking error of the evolved joints (simulated against commanded
+  posture at every step) against ``tracking_deg`` and the share of the move's
+  steps with an evolved joint's actuator force at its limit against
+  ``saturation``: a commanded path can be clear while the arm, sagging or
+  lagging behind it, passes through the board.
 
 The violation of a move is a finite, dimensionless number, 0 when feasible:
 ``max(relu(peak / limit - 1) over joints and kinds, relu(depth - penetration) /
-penetration, relu(max |dq| / max_step - 1))``.  The strategies add ``penalty * (1 +
+penetration, relu(max |dq| / max_step - 1))``, in dynamic mode also ``relu(depth'
+- penetration) / penetration``, ``relu(tracking / tracking_deg - 1)`` and
+``relu(share - saturation) / saturation`` of the executed motion.  The strategies add ``penalty * (1 +
 violation)`` to an infeasible candidate's fitness
 (`cgda_jax.strategies.fitness.penalized`), so evolution is pushed back into the feasible
 region and an infeasible candidate never meets a tolerance.
@@ -69,8 +78,9 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION", "GEOMETRIES",
-           "Feasibility", "relevant_pairs", "scene_obstacles"]
+__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
+           "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "EXECUTED_MARGIN",
+           "GEOMETRIES", "Feasibility", "relevant_pairs", "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -80,6 +90,18 @@ DEFAULT_PENETRATION = 0.005
 #: How far (m) the sampled distances must stay above the penetration limit, for
 #: what passes between two samples (`Feasibility`, ``certify=False``).
 DEFAULT_MARGIN = 0.002
+#: Dynamic mode: the largest tracking error of an evolved joint (simulated against
+#: commanded posture at any physics step) [deg; a slide: mm] (`Feasibility.executed`).
+#: TEO's 30 N m servos lag 17.6-26.2 deg behind the paint task's 0.6 s moves (the
+#: limits bound a runaway; the simulated path's penetration is the safety check).
+DEFAULT_TRACKING_DEG = 30.0
+#: Dynamic mode: the largest share of a move's physics steps at which an evolved
+#: joint's actuator force may sit at its limit (`Feasibility.executed`); TEO's
+#: paint task: 49-72 % of its worst move.
+DEFAULT_SATURATION = 0.75
+#: Dynamic mode: the share of the tracking and saturation limits the search keeps
+#: in hand (`Feasibility.executed`; the independent replay checks the full limits).
+EXECUTED_MARGIN = 0.05
 #: What the check's distances measure (`Feasibility`'s ``geometry``).
 GEOMETRIES = ("round", "exact")
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
@@ -120,6 +142,10 @@ class Feasibility:
         physics_contacts: leave out the pairs that MuJoCo's physics collides
             (``contype``/``conaffinity``: a dynamic simulation keeps them apart
             itself, e.g. the hand pushing a box); False: every pair.
+        tracking_deg: dynamic mode: the largest tracking error of an evolved
+            joint [deg; a slide: mm] (`executed`).
+        saturation: dynamic mode: the largest share of a move's physics steps
+            with an evolved joint's force at its limit, in [0, 1] (`executed`).
         geometry: what the check measures: "round" (default) the robot's moving
             geoms as capsules that hold them and the still ones as closed-form
             shapes that hold them (`Collider` with ``rounded``; never more
@@ -156,6 +182,8 @@ class Feasibility:
         max_step: float = math.pi / 2,
         margin: float = DEFAULT_MARGIN,
         certify: bool = False,
+        tracking_deg: float = DEFAULT_TRACKING_DEG,
+        saturation: float = DEFAULT_SATURATION,
         geometry: str = "round",
     ):
         from cgda_jax.sim.limits import JointLimits, read_limits
@@ -184,6 +212,7 @@ class Feasibility:
                              f"penetration ({penetration:g} m), got {margin}")
         self.margin = float(margin)
         self.certify = bool(certify)
+        self._executed_limits(robot, tracking_deg, saturation)
         if geometry not in GEOMETRIES:
             raise ValueError(f"feasibility geometry must be one of {GEOMETRIES}, got "
                              f"{geometry!r}")
@@ -281,6 +310,47 @@ class Feasibility:
         flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
         return jnp.maximum(jnp.maximum(self.limit_violation(dq, duration), over), flail)
+
+    # -- the executed motion (dynamic mode: what the physics did) ----------------
+    def _executed_limits(self, robot, tracking_deg: float, saturation: float):
+        if not (np.isfinite(tracking_deg) and tracking_deg > 0):
+            raise ValueError(f"feasibility tracking_deg must be > 0, got "
+                             f"{tracking_deg}")
+        if not (np.isfinite(saturation) and 0 <= saturation <= 1):
+            raise ValueError(f"feasibility saturation must be in [0, 1], got "
+                             f"{saturation}")
+        self.tracking_deg, self.saturation = float(tracking_deg), float(saturation)
+        slide = np.asarray(robot.mj_model.jnt_type)[np.asarray(robot.joint_ids)] \
+            == int(mujoco.mjtJoint.mjJNT_SLIDE)
+        #: per evolved joint: radians (metres) -> degrees (millimetres)
+        self.tracking_scale = np.where(slide, 1e3, 180.0 / np.pi).astype(np.float32)
+
+    def postures(self, path: Array) -> Array:
+        """Minus the smallest signed distance (m) of the pairs at the postures
+        ``path`` (K, DoF) (-inf without pairs): > 0 penetrates."""
+        if self.check is None:  # the geometry the moves are judged with (`worst`)
+            return jnp.float32(-jnp.inf)
+        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
+        return -jnp.min(d)
+
+    def executed(self, path: Array, tracking: Array, saturation: Array) -> Array:
+        """Violation (scalar, 0 = feasible) of what the physics executed in one
+        move: its simulated postures ``path`` (K, DoF) against penetration (as
+        `move` judges the commanded ones), the tracking error (DoF,) [rad or m]
+        against ``tracking_deg`` and the share of its steps at the force limit
+        against ``saturation``; each a normalized excess, their max."""
+        over = (jnp.maximum(self.postures(path) - self.allowed, 0.0)
+                / self.penetration)
+        # the search keeps EXECUTED_MARGIN of each limit in hand, for what the
+        # finer replay differs (clean_ie_dynamic: 30.5 deg at timestep / 4 where
+        # its own 0.01 s steps stayed within 30)
+        keep = 1.0 - EXECUTED_MARGIN
+        worst = jnp.max(tracking * jnp.asarray(self.tracking_scale))
+        track = jnp.maximum(worst / (keep * self.tracking_deg) - 1.0, 0.0)
+        # (a share of 1 may come out 1 + 1e-7 in float32)
+        sat = jnp.maximum(saturation - keep * self.saturation - 1e-6, 0.0) / max(
+            keep * self.saturation, 1e-3)
+        return jnp.maximum(jnp.maximum(over, track), sat)
 
 
 def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:

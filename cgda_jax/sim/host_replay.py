@@ -54,7 +54,15 @@ class ReplayStep:
         target: (DoF,) the move's clipped waypoint.
     """
 
-    __slots__ = ("model", "data", "physics", "move", "step", "steps", "target")
+    __slots__ = ("model", "data", "physics", "move", "step", "steps", "target",
+                 "_ref")
+
+    @property
+    def commanded(self) -> np.ndarray:
+        """(DoF,) the commanded posture of the evolved joints at this step (the
+        reference the step's control holds)."""
+        q0, q1, shares = self._ref
+        return q0 + shares[self.step - 1] * (q1 - q0)
 
     @property
     def last(self) -> bool:
@@ -92,6 +100,7 @@ def replay_steps(sim, joints: np.ndarray, factor: int = 1) -> Iterator[ReplaySte
         target = np.clip(w, lo, hi)
         ctrl = reference_ctrl(phys, prev, target, shares)
         out.move, out.steps, out.target = j, len(shares), target
+        out._ref = (prev, target, np.asarray(shares, np.float64))
         for k in range(len(shares)):
             d.ctrl[:] = ctrl[k]
             mujoco.mj_step(m, d)

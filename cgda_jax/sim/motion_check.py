@@ -12,7 +12,10 @@ trust the values the optimiser saw.  It
 - in dynamic mode, replays the commanded reference on MuJoCo C at ``timestep /
   factor`` and reads the joints' measured speeds, the actuators' forces and how far
   each joint ends each waypoint from its target (`tracking_note`: one sentence when
-  a joint cannot reach its commanded postures, with the reason);
+  a joint cannot reach its commanded postures, with the reason); and judges the
+  replayed path as the search judged the simulated one (``executed``: every
+  replayed posture against collisions, the tracking error along the path, the
+  worst move's share of steps at the force limit, each with its limit);
 - measures the joint travel (the summed joint motion) and the largest change of a
   joint between consecutive postures (flailing).
 
@@ -96,6 +99,17 @@ def motion_profile(sim, joints: np.ndarray, samples: int = 64) -> MotionProfile:
                          np.concatenate(qdds), np.asarray(reached))
 
 
+def _check_collider(sim):
+    """The collider the check uses: the feasibility's pairs, or every pair of the
+    model and the scene's obstacles without one (None: no pairs)."""
+    collider = getattr(getattr(sim, "feasibility", None), "collider", None)
+    if collider is None:
+        from cgda_jax.sim.feasibility import Feasibility, scene_obstacles
+
+        collider = Feasibility(sim.robot, obstacles=scene_obstacles(sim.scene)).collider
+    return collider
+
+
 def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     """Worst signed distance along the joint path at ``substeps * factor`` postures
     per move, its pair and move (None without a collider)."""
@@ -105,13 +119,9 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
     from cgda_jax.programs import jit_call
 
     feas = getattr(sim, "feasibility", None)
-    collider = getattr(feas, "collider", None)
+    collider = _check_collider(sim)
     if collider is None:
-        from cgda_jax.sim.feasibility import Feasibility, scene_obstacles
-
-        collider = Feasibility(sim.robot, obstacles=scene_obstacles(sim.scene)).collider
-        if collider is None:
-            return None
+        return None
     q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
                             np.asarray(joints, np.float64)])
     k = max(2, int(sim.substeps) * int(factor))
@@ -146,7 +156,10 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
     from cgda_jax.sim.geoms import geom_name
     from cgda_jax.sim.host_replay import replay_steps
 
+    from cgda_jax.sim.physics import saturated
+
     speeds, forces, ends, end_forces = [], [], [], []
+    postures, commanded, moves = [], [], []  # the executed path, per step
     deepest = (np.inf, -1, -1)
     m = gene_dof = robot_geom = None
     for st in replay_steps(sim, joints, factor):
@@ -167,6 +180,9 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
                 deepest = (float(c.dist), int(c.geom1), int(c.geom2))
         speeds.append(d.qvel[gene_dof].copy())
         forces.append(d.qfrc_actuator[gene_dof].copy())
+        postures.append(d.qpos[st.physics.gene_qadr].copy())
+        commanded.append(st.commanded)
+        moves.append(st.move - 1)
         if st.last:
             ends.append(d.qpos[st.physics.gene_qadr] - st.target)
             end_forces.append(forces[-1])
@@ -174,9 +190,50 @@ def _dynamic_replay(sim, joints: np.ndarray, factor: int) -> dict[str, np.ndarra
     if deepest[1] >= 0:
         pair = [geom_name(m, g) for g in deepest[1:]]
         contact = {"deepest_m": max(0.0, -deepest[0]), "pair": pair}
+    at_limit = np.any(saturated(np.asarray(forces), st.physics.force_range), axis=1)
+    moves = np.asarray(moves)
     return {"speed": np.asarray(speeds), "force": np.asarray(forces),
             "tracking": np.abs(np.asarray(ends)), "end_force": np.asarray(end_forces),
-            "timestep": float(m.opt.timestep), "contact": contact}
+            "timestep": float(m.opt.timestep), "contact": contact,
+            "postures": np.asarray(postures), "moves": moves,
+            "path_tracking": np.abs(np.asarray(postures) - np.asarray(commanded)),
+            "saturation": np.bincount(moves, at_limit) / np.bincount(moves)}
+
+
+def _executed(sim, rep: dict[str, Any], penetration: float) -> dict[str, Any]:
+    """The replayed path judged as `Feasibility.executed` judges the simulated
+    one: its deepest penetration (every replayed posture, the check's pairs), the
+    largest tracking error along it and the worst move's share of steps at the
+    force limit, each with its limit (the defaults without feasibility)."""
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.sim.feasibility import DEFAULT_SATURATION, DEFAULT_TRACKING_DEG
+
+    feas = getattr(sim, "feasibility", None)
+    scale = getattr(feas, "tracking_scale", None)
+    if scale is None:
+        scale = np.full(sim.n_dof, np.rad2deg(1.0))
+    track = rep["path_tracking"].max(axis=0) * np.asarray(scale, np.float64)
+    out = {"tracking_deg": dict(zip(sim.robot.joint_names, track.tolist())),
+           "tracking_limit_deg": float(getattr(feas, "tracking_deg",
+                                               DEFAULT_TRACKING_DEG)),
+           "saturation": float(np.max(rep["saturation"])),
+           "saturation_per_move": rep["saturation"].tolist(),
+           "saturation_limit": float(getattr(feas, "saturation", DEFAULT_SATURATION)),
+           "penetration_m": 0.0, "pair": None, "move": None,
+           "postures_checked": int(len(rep["postures"])),
+           "penetration_allowed_m": penetration}
+    collider = _check_collider(sim)
+    if collider is not None:
+        d = np.asarray(jax.jit(jax.vmap(collider.distances))(
+            jnp.asarray(rep["postures"], jnp.float32)), np.float64)  # (T, pairs)
+        step, pair = np.unravel_index(int(np.argmin(d)), d.shape)
+        out.update(penetration_m=max(0.0, -float(d[step, pair])),
+                   pair=list(collider.pair_names[pair]),
+                   move=int(rep["moves"][step]),
+                   samples_penetrating=int(np.sum(d.min(axis=1) < -penetration)))
+    return out
 
 
 def tracking_note(sim, tracking: np.ndarray, end_force: np.ndarray,
@@ -255,7 +312,9 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         per joint ``peak_speed``, ``peak_acceleration`` (commanded profile),
         ``measured_speed`` / ``peak_effort`` / ``tracking_error_deg`` (the largest
         at a waypoint's end; per waypoint ``tracking_deg_per_waypoint``) /
-        ``tracking_note`` / ``control`` (dynamic replay), ``travel_deg``,
+        ``tracking_note`` / ``control`` / ``executed`` (dynamic replay: the
+        replayed path's penetration, tracking error and time at the force limit,
+        with their limits), ``travel_deg``,
         ``largest_step_deg``; ``moves_over_max_step`` (moves that change a joint
         by more than ``max_step_deg``, the feasibility's, default 90);
         ``approach_s``, ``move_s``;
@@ -327,6 +386,18 @@ def motion_report(sim, joints: np.ndarray, factor: int = 4) -> dict[str, Any]:
         out["tracking_note"] = tracking_note(sim, rep["tracking"], rep["end_force"],
                                              contact=rep["contact"])
         out["control"] = sim.physics.control.as_dict()
+        ex = out["executed"] = _executed(sim, rep, penetration)
+        if ex["penetration_m"] > penetration:
+            a, b = ex["pair"]
+            problems.append(f"executed path: {a} {ex['penetration_m'] * 1e3:.1f} mm "
+                            f"into {b} (move {ex['move'] + 1})")
+        worst = max(ex["tracking_deg"], key=ex["tracking_deg"].get)
+        if ex["tracking_deg"][worst] > ex["tracking_limit_deg"] * tol:
+            problems.append(f"{worst}: tracking error {ex['tracking_deg'][worst]:.1f} "
+                            f"deg over its {ex['tracking_limit_deg']:g}")
+        if ex["saturation"] > ex["saturation_limit"] * tol:
+            problems.append(f"at the force limit {100 * ex['saturation']:.0f} % of a "
+                            f"move over the {100 * ex['saturation_limit']:g} % allowed")
         for j, n in enumerate(names):
             if mv[j] > vel[j] * tol:
                 problems.append(f"{n}: measured {mv[j]:.2f} rad/s over its "

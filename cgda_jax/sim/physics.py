@@ -13,7 +13,10 @@ What is simulated (`reduced_model`) is the robot's MJCF rebuilt with ``mujoco.Mj
   rigidly attached where the joint would hold it (TEO has 14 joints; the paper
   moves 3 and holds one).  Fixed joints at another value, passive joints (an
   object's free joint, a valve's hinge) and anything a backend cannot weld stay;
-- a ``framepos`` sensor reads the marker site (what the scenes see at every step);
+- a ``framepos`` sensor reads the marker site (what the scenes see at every step),
+  and per evolved joint a ``jointpos`` and a ``jointactfrc`` sensor (its simulated
+  position and actuator force at every step: what the feasibility check judges as
+  executed, `Physics.executed`);
 - automatic resetting of diverged simulations (``mjDSBL_AUTORESET``) is off, so a
   divergence shows up as non-finite values instead of a silent jump back to qpos0;
 - ``timestep`` (optional) replaces the model's own.
@@ -50,7 +53,8 @@ from jax import Array
 from cgda_jax.sim._mujoco_env import mjx_module
 from cgda_jax.sim.mjx_step import step_fn
 
-__all__ = ["PHYSICS", "MjxBackend", "MujocoBackend", "Physics", "resolve_physics"]
+__all__ = ["PHYSICS", "MjxBackend", "MujocoBackend", "Physics", "resolve_physics",
+           "saturated"]
 
 #: Names accepted by ``physics=``.
 PHYSICS = ("auto", "mjx", "mujoco")
@@ -58,6 +62,7 @@ PHYSICS = ("auto", "mjx", "mujoco")
 _HINGE = int(mujoco.mjtJoint.mjJNT_HINGE)
 _SLIDE = int(mujoco.mjtJoint.mjJNT_SLIDE)
 _MARKER_SENSOR = "cgda_marker"
+_JOINT_SENSORS = ("cgda_q_", "cgda_f_")  # + joint name: jointpos, jointactfrc
 
 #: A C rollout whose |qpos| or |qvel| passes this (rad, m, rad/s, m/s) diverged:
 #: ``mujoco.rollout`` stops a rollout at MuJoCo's "unstable simulation" warning and
@@ -74,6 +79,16 @@ def resolve_physics(name: str) -> str:
     if name == "auto":
         return "mujoco" if jax.default_backend() == "cpu" else "mjx"
     return name
+
+
+def saturated(force, force_range, xp=np):
+    """Where a joint's actuator force (..., DoF) is at its limit ``force_range``
+    (DoF, 2; +-inf: none), within 0.1 % of it: a clamped force equals the limit.
+    ``xp``: ``numpy`` or ``jax.numpy``."""
+    lo, hi = (np.asarray(force_range, np.float64)[:, i] for i in (0, 1))
+    hi = np.where(np.isfinite(hi), hi - 1e-3 * np.abs(hi), np.inf)
+    lo = np.where(np.isfinite(lo), lo + 1e-3 * np.abs(lo), -np.inf)
+    return (force >= xp.asarray(hi, force.dtype)) | (force <= xp.asarray(lo, force.dtype))
 
 
 def _position_actuated(m: mujoco.MjModel) -> dict[int, int]:
@@ -114,11 +129,13 @@ def reduced_model(
     features: Sequence = (),
     control=None,
     model: mujoco.MjModel | None = None,
+    joints: Sequence[str] = (),
 ) -> mujoco.MjModel:
     """Compile `spec` with the drives of `control` (a
     `cgda_jax.sim.drives.ControlPlan` for `model`, the spec's compiled model), the
     joints `weld` deleted (and their actuators), a ``framepos`` sensor on
-    `marker_site`, the sensors of object `features`
+    `marker_site`, a ``jointpos`` and a ``jointactfrc`` sensor on each of
+    `joints` (the evolved ones), the sensors of object `features`
     (`cgda_jax.sim.features.add_sensors`), autoreset off and an optional timestep.
 
     `spec` is modified (pass a copy you own).
@@ -137,6 +154,12 @@ def reduced_model(
     sensor.type = mujoco.mjtSensor.mjSENS_FRAMEPOS
     sensor.objtype = mujoco.mjtObj.mjOBJ_SITE
     sensor.objname = marker_site
+    for kind, prefix in zip((mujoco.mjtSensor.mjSENS_JOINTPOS,
+                             mujoco.mjtSensor.mjSENS_JOINTACTFRC), _JOINT_SENSORS):
+        for name in joints:
+            sensor = spec.add_sensor()
+            sensor.name, sensor.type = prefix + name, kind
+            sensor.objtype, sensor.objname = mujoco.mjtObj.mjOBJ_JOINT, name
     if features:
         from cgda_jax.sim.features import add_sensors
 
@@ -178,6 +201,10 @@ class Physics:
         qpos0: (nq,) start posture of `model` (the robot's start values mapped by
             joint name).
         marker_adr: sensordata address of the marker's ``framepos`` sensor.
+        gene_sensor_adr, force_sensor_adr: (DoF,) sensordata addresses of the
+            evolved joints' positions and actuator forces (``qfrc_actuator``).
+        force_range: (DoF, 2) the evolved joints' force limits [N m or N] (their
+            drives', +-inf: none): a force there is saturated.
     """
 
     def __init__(self, robot, *, timestep: float | None = None, reduce: bool = True,
@@ -214,7 +241,8 @@ class Physics:
         spec = robot.spec()
         self.model = reduced_model(spec, robot.marker_site, weld=self.welded,
                                    timestep=timestep, features=features,
-                                   control=self.control, model=full)
+                                   control=self.control, model=full,
+                                   joints=keep)
         check_transmissions(self.model, robot.source)
         self._spec, self._source = spec, robot.source
         self.object_bodies = tuple(getattr(robot, "object_bodies", ()))
@@ -246,6 +274,12 @@ class Physics:
         self.act_gear = np.asarray(m.actuator_gear[:, 0], np.float32)
         sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, _MARKER_SENSOR)
         self.marker_adr = int(m.sensor_adr[sid])
+        st = mujoco.mjtObj.mjOBJ_SENSOR
+        self.gene_sensor_adr, self.force_sensor_adr = (np.array(
+            [m.sensor_adr[mujoco.mj_name2id(m, st, prefix + n)] for n in keep],
+            np.int32) for prefix in _JOINT_SENSORS)
+        self.force_range = np.array(
+            [self.control.drive(n).force for n in keep], np.float64).reshape(-1, 2)
         self.nsensordata = int(m.nsensordata)
         self.site_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, robot.marker_site)
 
@@ -265,6 +299,18 @@ class Physics:
         """(nq + nv,) state at rest with the evolved joints at ``genes`` (DoF,)."""
         qpos = jnp.asarray(self.qpos0, jnp.float32).at[self.gene_qadr].set(genes)
         return jnp.concatenate([qpos, jnp.zeros(self.nv, jnp.float32)])
+
+    def executed(self, sens: Array, commanded: Array) -> tuple[Array, Array, Array]:
+        """What a segment executed, from its sensordata (T, nsensordata) and the
+        commanded postures of the evolved joints at its steps (T, DoF): (the
+        simulated postures (T, DoF), the tracking error ``max |simulated -
+        commanded|`` per joint (DoF,), the share of the steps at which any evolved
+        joint's actuator force is at its limit (`saturated`), scalar)."""
+        q = sens[:, self.gene_sensor_adr]
+        force = sens[:, self.force_sensor_adr]
+        track = jnp.max(jnp.abs(q - commanded), axis=0)
+        sat = jnp.mean(jnp.any(saturated(force, self.force_range, jnp), axis=-1))
+        return q, track, sat
 
     def ctrl_of(self, qpos: Array) -> Array:
         """(nu,) actuator targets that hold the posture ``qpos`` (..., nq)."""

@@ -29,7 +29,10 @@ Waypoints outside the joint limits are clipped into them (the robot cannot go th
 
 Feasibility (``feasibility``, `cgda_jax.sim.feasibility`): each move is also judged
 as a motion: its sub-step postures (kinematic mode) or its commanded reference at
-``substeps`` points (dynamic mode) against collisions, and its minimum-jerk timing
+``substeps`` points (dynamic mode) against collisions, in dynamic mode also what the
+physics executed (`Feasibility.executed`: the simulated postures at ``2 * samples +
+1`` physics steps of the move against collisions, the tracking error of the
+evolved joints and the share of steps at their force limit), and its minimum-jerk timing
 (``move_fraction * waypoint_s`` seconds in both modes; the first move from the
 start posture, the approach, over its own duration `Feasibility.approach_s`, in
 dynamic mode as a longer first segment of physics)
@@ -275,10 +278,12 @@ class Simulator(Executions):
                                   first=jnp.bool_(True))
         return state
 
-    def _judge(self, state: SimState, new: SimState, judge: bool = True) -> SimState:
+    def _judge(self, state: SimState, new: SimState, judge: bool = True,
+               executed: Array | None = None) -> SimState:
         """``new`` with the violation of the move from ``state`` to it (unchanged
         without feasibility; ``judge=False``: the violations carried unchanged, the
-        move no longer the first)."""
+        move no longer the first); ``executed``: dynamic mode's violation of what
+        the physics did in the move, maxed in."""
         if self.feasibility is None:
             return new
         if not judge:
@@ -286,6 +291,8 @@ class Simulator(Executions):
         duration = jnp.where(state.first, self.approach_s, self.move_s)
         v = self.feasibility.move(state.genes, new.genes - state.genes, duration,
                                   state.first)
+        if executed is not None:
+            v = jnp.maximum(v, executed)
         return new.replace(violation=state.violation + v, move_violation=v,
                            first=jnp.bool_(False))
 
@@ -346,9 +353,13 @@ class Simulator(Executions):
         first = getattr(self, "_approach_profile", None)
         return (self._profile if first is None else first), self._profile
 
-    def _segment(self, state: SimState, target: Array, profile: np.ndarray):
+    def _segment(self, state: SimState, target: Array, profile: np.ndarray,
+                 judge: bool = False):
         """Physics from ``state`` along the min-jerk reference ``profile`` (T,) to
-        ``target``: (physics state, scene state, marker (3,), features (F,))."""
+        ``target``: (physics state, scene state, marker (3,), features (F,), the
+        violation of what was executed: `Feasibility.executed` of the simulated
+        postures at ``2 * samples + 1`` steps, the tracking error and the time at the
+        force limit; 0 unless ``judge`` with feasibility)."""
         phys = self.physics
         ctrl = reference_ctrl(phys, state.genes, target, profile, jnp)  # (T, nu)
         data, sens = self.backend.segment(state.data, ctrl)  # (T, nsensordata)
@@ -358,20 +369,28 @@ class Simulator(Executions):
             features = self._fset.from_sensordata(sens[-1])
         else:
             features = self.scene.features(scene_state, path[-1])
-        return data, scene_state, path[-1], features
+        executed = jnp.float32(0.0)
+        if judge and self.feasibility is not None:
+            commanded = state.genes + jnp.asarray(profile)[:, None] * (
+                target - state.genes)
+            q, track, sat = phys.executed(sens, commanded)
+            k = np.unique(np.round(np.linspace(
+                0, len(profile) - 1, 2 * self.feasibility.samples + 1)).astype(int))
+            executed = self.feasibility.executed(q[k], track, sat)
+        return data, scene_state, path[-1], features, executed
 
     def _step_dynamic(self, state: SimState, target: Array,
                       judge: bool = True) -> tuple[SimState, Array]:
         if self.approach_steps != self.physics_steps and state.first is not None:
-            data, scene_state, marker, features = jax.lax.cond(
+            data, scene_state, marker, features, executed = jax.lax.cond(
                 state.first,
-                lambda: self._segment(state, target, self._approach_profile),
-                lambda: self._segment(state, target, self._profile))
+                lambda: self._segment(state, target, self._approach_profile, judge),
+                lambda: self._segment(state, target, self._profile, judge))
         else:
-            data, scene_state, marker, features = self._segment(state, target,
-                                                                self._profile)
+            data, scene_state, marker, features, executed = self._segment(
+                state, target, self._profile, judge)
         new = state.replace(genes=target, scene=scene_state, data=data,
                             marker=marker)
-        # judged on the commanded reference (the physics path's joints are not
-        # read back; the motion report replays them on MuJoCo C)
-        return self._judge(state, new, judge), features
+        # judged on the commanded reference (limits, flailing, its path) and on
+        # what the physics executed (its postures, tracking, force saturation)
+        return self._judge(state, new, judge, executed), features
