@@ -148,3 +148,17 @@ def test_tracking_error_equals_a_numpy_reference(arms):
     lo, hi = phys.force_range.T
     at = np.any((np.array(f) >= 0.999 * hi) | (np.array(f) <= 0.999 * lo), axis=1)
     assert float(sat) == pytest.approx(at.mean(), abs=0.01)
+
+
+def test_dynamic_plans_judge_every_move_with_the_executed_motion(arms):
+    """Ranked judging (`Settings.judge`) judges moves after stepping, which in
+    dynamic mode would lose what the physics executed: a dynamic plan judges every
+    move in the step, and `Simulator.judge` refuses dynamic mode."""
+    from cgda_jax.strategies.ie import IEPlan
+
+    sim = simulator(arms["weak"])
+    goal = np.asarray([[0.3, 0.0, 0.0], [0.35, 0.0, 0.05]], np.float32)
+    assert IEPlan(sim, goal, population_size=8, judge="ranked").judge_ranks is None
+    state = sim.init_state()
+    with pytest.raises(ValueError, match="kinematic mode"):
+        sim.judge(state, state)

@@ -300,7 +300,16 @@ class Simulator(Executions):
         """``new``, a `step` from ``state`` with ``judge=False``, with its move
         judged: the state that `step` with ``judge=True`` returns, without
         stepping again (a caller that judges only some of its moves, e.g.
-        `cgda_jax.strategies.fitness.judge_best`)."""
+        `cgda_jax.strategies.fitness.judge_best`).  Kinematic mode only: in
+        dynamic mode the violation includes what the physics executed in the
+        move, which only `step` sees.
+
+        Raises:
+            ValueError: in dynamic mode."""
+        if self.mode == "dynamic":
+            raise ValueError("Simulator.judge is for kinematic mode: a dynamic move's "
+                             "violation includes what the physics executed; step "
+                             "with judge=True instead")
         return self._judge(state, new)
 
     def step(self, state: SimState, waypoint: Array, *,

@@ -131,10 +131,13 @@ class PlanBase:
         #: with feasibility and ``judge="ranked"`` (`Settings`): how many of a
         #: generation's best ranks must be exact (CMA-ES: its ``num_elites``, the
         #: candidates with positive weights); only those are sure to be judged
-        #: (`ranked_outcome`). None: every candidate is judged.
+        #: (`ranked_outcome`). None: every candidate is judged.  Kinematic mode
+        #: only: in dynamic mode a move's violation includes what the physics
+        #: executed (`Feasibility.executed`), known only inside the step.
         self.judge_ranks = None
         if (getattr(settings, "judge", "all") == "ranked"
                 and self.feasibility is not None and sharding is None
+                and getattr(self.sim, "mode", "kinematic") == "kinematic"
                 and algorithm_name(algorithm) in RANKED_ALGORITHMS
                 and hasattr(self.sim, "judge")):
             self.judge_ranks = int(self.algo.num_elites)

@@ -118,7 +118,9 @@ class Settings:
             `cgda_jax.sharding`.
         judge: with feasibility, "ranked" (default): judge only the moves whose
             rank matters (CMA-ES: its best half, exact; the rest told a bound;
-            `cgda_jax.strategies.fitness.judge_best`), "all": every candidate.
+            `cgda_jax.strategies.fitness.judge_best`; kinematic mode: dynamic
+            mode judges every move, with what the physics executed), "all":
+            every candidate.
     """
 
     algorithm: Any = option("CMA_ES")
