@@ -113,10 +113,9 @@ def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
     }
 
 
-def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
-    """The ``--judge`` rows of experiment ``name`` (see the module docstring)."""
-    from cgda_jax.strategies import run as run_strategy
-
+def _feasible_setup(name: str):
+    """Experiment ``name`` with feasibility on: its strategy config, simulator,
+    goal and the strategy's keyword settings (as ``cgda run`` passes them)."""
     cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
     goal, demos, _ = build_goal(cfg)
     sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
@@ -124,6 +123,14 @@ def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
     kw = dict(algorithm=s.algorithm, population_size=s.population_size,
               tolerance=s.tolerance, max_generations=s.max_generations,
               chunk_size=s.chunk_size, **s.options)
+    return s, sim, goal, kw
+
+
+def judge_costs(name: str, seeds: list[int], trials: int) -> list[dict]:
+    """The ``--judge`` rows of experiment ``name`` (see the module docstring)."""
+    from cgda_jax.strategies import run as run_strategy
+
+    s, sim, goal, kw = _feasible_setup(name)
 
     def once(judge, seed):
         return run_strategy(s.name, sim, goal, seeds=(seed,), batching="single",
@@ -174,13 +181,7 @@ def evaluation_cost(name: str, repeats: int = 15) -> dict:
     from cgda_jax.strategies import STRATEGIES, run as run_strategy
     from cgda_jax.strategies.evolution import from_joints
 
-    cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
-    goal, demos, _ = build_goal(cfg)
-    sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
-    s = cfg.strategy
-    kw = dict(algorithm=s.algorithm, population_size=s.population_size,
-              tolerance=s.tolerance, max_generations=s.max_generations,
-              chunk_size=s.chunk_size, **s.options)
+    s, sim, goal, kw = _feasible_setup(name)
     res = run_strategy(s.name, sim, goal, seeds=(0,), batching="single", judge="all",
                        **kw)[0]
     plan_cls, settings_cls = STRATEGIES[s.name].plan, STRATEGIES[s.name].settings
