@@ -325,3 +325,20 @@ def test_nothing_outside_the_cli_imports_it():
            if not _inside(name, f"{TOP}.cli")
            for target in targets if _inside(target, f"{TOP}.cli")]
     assert not bad, "\n".join(bad)
+
+
+def test_importing_the_experiment_package_leaves_jax_uninitialised():
+    """A multi-process job joins JAX's distributed runtime before any JAX work
+    (`cgda_jax.cli.trials.join_job`), so importing `cgda_jax.experiment` (the
+    job's workers import it early) must not start a backend: evosax does at import,
+    so the strategies are imported where they are used."""
+    import subprocess
+    import sys
+
+    code = ("import cgda_jax.experiment, cgda_jax.experiment.success_rate, "
+            "cgda_jax.cli.app\nfrom jax._src import xla_bridge as xb\n"
+            "print(bool(xb._backends))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"

@@ -26,7 +26,6 @@ from cgda_jax.experiment.build import (
 from cgda_jax.experiment.config import ExperimentConfig
 from cgda_jax.experiment.rules import strategy_function
 from cgda_jax.experiment.validate import check_and_build
-from cgda_jax.strategies.fitness import point_errors
 
 #: What a run computes: the result dict (final but for its outputs' keys), the
 #: arrays (as in ``arrays.npz``) and, for an execution, the simulator.
@@ -129,6 +128,8 @@ def replay_check(sim, res, factor: int | None = None) -> dict:
     the optimiser exploited the resolution it was evaluated at."""
     fine = sim.finer(factor or REPLAY_FACTOR[sim.mode])
     feats = np.asarray(replayed_features(fine, res.joints), np.float64)
+    from cgda_jax.strategies.fitness import point_errors  # JAX, evosax: lazily
+
     errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
     out = ({"timestep": fine.physics.timestep} if fine.mode == "dynamic"
            else {"substeps": fine.substeps})
@@ -183,6 +184,8 @@ def export_check(sim, res, rate: float = EXPORT_RATE, factor: int = 4,
         return {"exported": False, "reason": str(e), "success": False}
     traj = from_json_dict(json.loads(json.dumps(to_json_dict(traj))))  # the file
     feats = replay_trajectory(sim, traj, factor)
+    from cgda_jax.strategies.fitness import point_errors  # JAX, evosax: lazily
+
     errors = point_errors(res.strategy, feats, res.goal, res.tolerance)
     over = {}
     for kind, values in (("velocity", traj.qd), ("acceleration", traj.qdd)):
@@ -223,6 +226,8 @@ def reality_check(sim, res, table: dict, rate: float = EXPORT_RATE) -> dict:
         return out | {"executed": False, "reason": str(e), "success": False}
     measure(world)
     got = measure(world, traj)
+    from cgda_jax.strategies.fitness import point_errors  # JAX, evosax: lazily
+
     errors = point_errors(res.strategy, got.features, res.goal, res.tolerance)
     return out | {
         "executed": True, "loop": "open",

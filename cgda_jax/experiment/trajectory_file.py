@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 
 from cgda_jax.experiment.compute import EXPORT_RATE
-from cgda_jax.strategies.fitness import point_errors
 from cgda_jax.experiment.load import Run, load_run
 
 __all__ = ["check_exported", "export_trajectory"]
@@ -99,6 +98,8 @@ def check_exported(run: Run | str | os.PathLike, traj, *, sim=None,
     sim = sim if sim is not None else run.simulator()
     feats = replay_trajectory(sim, traj, factor)
     tol = float(run.result["tolerance"])
+    from cgda_jax.strategies.fitness import point_errors  # JAX, evosax: lazily
+
     errors = point_errors(run.result["strategy"], feats, run.arrays["goal"], tol)
     return {"max_point_error": float(errors.max()),
             "max_feature_difference": float(np.abs(
