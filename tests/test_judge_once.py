@@ -65,18 +65,23 @@ def _move_traces(monkeypatch):
     return calls
 
 
-@pytest.mark.parametrize("plan_cls", [IEPlan, IETPlan])
-def test_a_generation_program_carries_one_collision_check(sim, plan_cls, monkeypatch):
-    """Tracing one generation calls `Feasibility.move` at one place (before: IE's
-    context rollout and IET's commit judged their moves again, each a copy of the
-    check in the compiled program: 2 calls)."""
+@pytest.mark.parametrize("plan_cls, judge, checks", [
+    (IEPlan, "all", 1), (IETPlan, "all", 1), (IETPlan, "ranked", 1),
+    # ranked IE: the bests in their contexts, then the candidates in rounds
+    # (`fitness.judge_best`): two distinct sets of moves, two copies
+    (IEPlan, "ranked", 2)])
+def test_a_generation_program_carries_one_collision_check(sim, plan_cls, judge, checks,
+                                                          monkeypatch):
+    """Tracing one generation calls `Feasibility.move` at one place per set of
+    moves it judges (before: IE's context rollout and IET's commit judged their
+    moves again, each a copy of the check in the compiled program: 2 calls)."""
     plan = plan_cls(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
                     tolerance=0.03,
-                    max_generations=20, restarts=0)
+                    max_generations=20, restarts=0, judge=judge)
     carry = plan.init(jax.random.key(0))
     calls = _move_traces(monkeypatch)
     jax.jit(plan.step).lower(carry)
-    assert len(calls) == 1
+    assert len(calls) == checks
 
 
 def test_unjudged_features_equal_the_judged_execution(sim):
