@@ -122,3 +122,17 @@ def experiment_trials(name: str, n_seeds: int, overrides: Sequence[str] = ()):
         population_size=s.population_size, tolerance=s.tolerance,
         max_generations=s.max_generations, chunk_size=s.chunk_size, **s.options)
     return cfg, sim, goal, results, time.perf_counter() - t0
+
+
+def timed_process(cmd: list[str], env: dict) -> float:
+    """Wall seconds of one process ``cmd`` run in the repository with ``env``
+    (its output captured; a failure raises with it)."""
+    import subprocess
+
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, cwd=REPO, capture_output=True, text=True,
+                          check=False)
+    elapsed = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout}\n{proc.stderr}")
+    return elapsed

@@ -28,27 +28,14 @@ import argparse
 import os
 import pathlib
 import statistics
-import subprocess
 import sys
 import tempfile
-import time
 
-from _common import print_table, report_target, write_json
+from _common import print_table, report_target, timed_process, write_json
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 TARGET_CACHED_S = 5.0
 #: ``cgda demo``, whole process: (empty cache, filled cache), issue 14.
 DEMO_TARGETS_S = (20.0, 8.0)
-
-
-def timed(cmd: list[str], env: dict) -> float:
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, cwd=REPO, capture_output=True, text=True,
-                          check=False)
-    elapsed = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout}\n{proc.stderr}")
-    return elapsed
 
 
 def main() -> None:
@@ -75,19 +62,19 @@ def main() -> None:
 
     rows = []
     t = statistics.median(
-        timed([sys.executable, "-c", "import cgda_jax"], env)
+        timed_process([sys.executable, "-c", "import cgda_jax"], env)
         for _ in range(max(args.repeats, 3))
     )
     rows.append({"run": "import cgda_jax", "seconds": t})
     times = []
     for r in range(args.repeats):
-        times.append(timed(run_cmd(f"nocache{r}") + ["--no-cache"], env))
+        times.append(timed_process(run_cmd(f"nocache{r}") + ["--no-cache"], env))
     rows.append({"run": "cgda run --no-cache", "seconds": statistics.median(times)})
     first, second = [], []
     for r in range(args.repeats):
         cache_env = {**env, "CGDA_JAX_CACHE": str(tmp / f"cache{r}")}
-        first.append(timed(run_cmd(f"first{r}"), cache_env))
-        second.append(timed(run_cmd(f"second{r}"), cache_env))
+        first.append(timed_process(run_cmd(f"first{r}"), cache_env))
+        second.append(timed_process(run_cmd(f"second{r}"), cache_env))
     rows.append({"run": "cgda run, empty cache", "seconds": statistics.median(first)})
     rows.append({"run": "cgda run, cache filled", "seconds": statistics.median(second)})
     print(f"config: {args.config}{' (no plots)' if args.no_plots else ''}")
@@ -124,7 +111,7 @@ def demo(cgda: list[str], tmp: pathlib.Path, repeats: int) -> None:
         cache_env = {**env, "CGDA_JAX_CACHE": str(tmp / f"demo_cache{r}")}
         for times in (empty, filled):
             loads.append(os.getloadavg()[0])
-            times.append(timed([*cgda, "demo", "--quiet", "--overwrite", "--out",
+            times.append(timed_process([*cgda, "demo", "--quiet", "--overwrite", "--out",
                                 str(tmp / "demo")], cache_env))
         print(f"repeat {r + 1}/{repeats}: empty {empty[-1]:.1f} s, filled "
               f"{filled[-1]:.1f} s", flush=True)

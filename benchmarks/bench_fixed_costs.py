@@ -35,7 +35,7 @@ import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
-from _common import REPO, print_table, report_target, write_json  # noqa: E402
+from _common import REPO, print_table, report_target, timed_process, write_json  # noqa: E402
 
 #: Targets, whole process (s): (empty cache, filled cache).
 RUN_TARGETS_S = {"clean_ie": (8.0, 4.0)}
@@ -112,16 +112,6 @@ def in_process(name: str, repeats: int) -> list[dict]:
     return rows
 
 
-def _timed_process(cmd: list[str], env: dict) -> float:
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, env=env, cwd=REPO, capture_output=True, text=True,
-                          check=False)
-    elapsed = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stdout}\n{proc.stderr}")
-    return elapsed
-
-
 def _entries(folder: pathlib.Path) -> int:
     return sum(1 for p in folder.rglob("*") if p.is_file()) if folder.exists() else 0
 
@@ -138,7 +128,7 @@ def processes(args_list: list[str], label: str, repeats: int,
         for i, times in enumerate((empty, filled)):
             loads.append(round(os.getloadavg()[0], 1))
             n0 = _entries(cache)
-            times.append(_timed_process(
+            times.append(timed_process(
                 [*cgda, *args_list, "--quiet", "--overwrite", "--out",
                  str(tmp / f"out_{label}")], cache_env))
             if i == 1:
@@ -174,7 +164,7 @@ def main() -> None:
     tmp = pathlib.Path(tempfile.mkdtemp(prefix="cgda_fixed_"))
     if not args.skip_process:
         env = {**os.environ, "JAX_PLATFORMS": os.environ.get("JAX_PLATFORMS", "cpu")}
-        imp = statistics.median(_timed_process([sys.executable, "-c",
+        imp = statistics.median(timed_process([sys.executable, "-c",
                                                 "import cgda_jax"], env)
                                 for _ in range(3))
         prows = processes(["run", args.name], f"cgda run {args.name}", args.repeats,
