@@ -6,6 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from cgda_jax.experiment.compute import replayed_features
 from cgda_jax.sim.simulator import Simulator
 from cgda_jax.sim.robot import Robot, model_path
 from cgda_jax.sim.scenes import ObjectScene
@@ -76,6 +77,29 @@ def test_tiny_arm_presses_a_set_force(sim):
     np.testing.assert_allclose(feats[1, 3] / 0.01, -15.0, atol=1.0)
     np.testing.assert_allclose(feats[:, :3], goal[:, :3], atol=0.01)
     assert feats[0, 3] / 0.01 > 0  # the first point in the air
+
+
+def test_iron_sets_elliptic_cones_and_replays_agree(sim, tmp_path):
+    """The iron's contact model (elliptic cones, impratio 10: static friction
+    without the pyramidal cone's creep) is the world's; with it the pressing force
+    of a coarse run and of its 4x finer replay agree within 0.15 N (pyramidal
+    cones: 0.4 N apart at the hardest press)."""
+    m = sim.physics.model
+    assert m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC and m.opt.impratio == 10
+    joints = np.radians([[0, 45, 110], [0, 58, 120], [10, 60, 118],
+                         [-10, 62, 121]]).astype(np.float32)
+    coarse = replayed_features(sim, joints)
+    fine = replayed_features(sim.finer(4), joints)
+    assert coarse[-1, 3] / 0.01 < -30  # pressing hard
+    np.testing.assert_allclose(coarse[:, 3] / 0.01, fine[:, 3] / 0.01, atol=0.15)
+    np.testing.assert_allclose(coarse[:, :3], fine[:, :3], atol=1e-4)
+    # a robot whose own impratio differs: the piece's cannot be carried over
+    text = open(model_path("tiny_arm.xml")).read().replace(
+        'integrator="Euler"', 'integrator="Euler" impratio="5"')
+    (tmp_path / "arm.xml").write_text(text)
+    with pytest.raises(ValueError, match="impratio=10.0 disagrees with the world's "
+                                         "impratio=5.0"):
+        compile_world(tmp_path / "arm.xml", OBJECTS)
 
 
 def test_kinematic_mode_refuses_a_force():

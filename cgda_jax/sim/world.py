@@ -266,6 +266,7 @@ def _attach(world: mujoco.MjSpec, obj: Mapping, index: int, taken: set[str]) -> 
                 setter(piece, check(obj[key]))
             except ValueError as err:
                 raise ValueError(f"{label}: {err}") from None
+    _carry_contact_options(world, piece, label)
     parent = world.worldbody
     if "body" in obj:
         parent = world.body(obj["body"]) if isinstance(obj["body"], str) else None
@@ -282,6 +283,27 @@ def _attach(world: mujoco.MjSpec, obj: Mapping, index: int, taken: set[str]) -> 
                 element.name = name
     taken |= _element_names(world)
     return name
+
+
+#: The ``<option>`` attributes of the contact model a piece may set for the world
+#: (its contacts were tuned with them): the friction cone and ``impratio``.
+CONTACT_OPTIONS = ("cone", "impratio")
+
+
+def _carry_contact_options(world: mujoco.MjSpec, piece: mujoco.MjSpec,
+                           label: str) -> None:
+    """The piece's friction cone and ``impratio``, where its MJCF changes them from
+    MuJoCo's defaults (pyramidal, 1), set on ``world``; a world whose own
+    differ from the defaults and from the piece's is an error."""
+    default = mujoco.MjSpec().option
+    for key in CONTACT_OPTIONS:
+        want, have = getattr(piece.option, key), getattr(world.option, key)
+        if want == getattr(default, key) or want == have:
+            continue
+        if have != getattr(default, key):
+            raise ValueError(f"{label}: its option {key}={want!r} disagrees with the "
+                             f"world's {key}={have!r}")
+        setattr(world.option, key, want)
 
 
 def _enable_robot_contacts(world: mujoco.MjSpec, contact_geoms: Sequence[str]) -> None:
