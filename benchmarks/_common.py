@@ -101,24 +101,35 @@ def write_json(name: str, payload: dict[str, Any]) -> pathlib.Path:
     return path
 
 
-def experiment_trials(name: str, n_seeds: int, overrides: Sequence[str] = ()):
-    """``experiments/NAME.toml``'s goal and simulator as ``cgda run`` builds them
-    (with ``KEY=VALUE`` `overrides`, as ``cgda run --set``), and seeds
-    0..n_seeds-1 of its strategy as ONE batched `run_trials` call.
+def experiment_setup(name: str, overrides: Sequence[str] = ()):
+    """``experiments/NAME.toml``'s config, simulator and goal as ``cgda run`` builds
+    them (with ``KEY=VALUE`` `overrides`, as ``cgda run --set``)."""
+    from cgda_jax import experiment as ex
+
+    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml", overrides)
+    goal, demos, _ = ex.build_goal(cfg)
+    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
+    return cfg, sim, goal
+
+
+def experiment_trials(name: str, n_seeds: int, overrides: Sequence[str] = (), *,
+                      seed: int = 0, setup=None):
+    """Seeds seed..seed+n_seeds-1 of ``experiments/NAME.toml``'s strategy as ONE
+    batched `run_trials` call, on its goal and simulator (`experiment_setup`, or
+    ``setup``: its (cfg, sim, goal) from an earlier call, whose programs are
+    reused).
 
     Returns:
         (cfg, sim, goal, results, total_s): the config, the simulator, the goal,
         the `ExecutionResult` per seed and the call's wall time (compile included).
     """
-    from cgda_jax import experiment as ex, run_trials
+    from cgda_jax import run_trials
 
-    cfg = ex.load_config(REPO / "experiments" / f"{name}.toml", overrides)
-    goal, demos, _ = ex.build_goal(cfg)
-    sim = ex.build_simulator(cfg, ex.build.default_waypoint_s(demos, len(goal)))
+    cfg, sim, goal = setup or experiment_setup(name, overrides)
     s = cfg.strategy
     t0 = time.perf_counter()
     results = run_trials(
-        s.name, sim, goal, n_seeds, seed=0, algorithm=s.algorithm,
+        s.name, sim, goal, n_seeds, seed=seed, algorithm=s.algorithm,
         population_size=s.population_size, tolerance=s.tolerance,
         max_generations=s.max_generations, chunk_size=s.chunk_size, **s.options)
     return cfg, sim, goal, results, time.perf_counter() - t0

@@ -44,7 +44,10 @@ handle have ``contype`` 0, ``conaffinity`` 2 (only the robot turns them).  The r
 own collisions stay as its MJCF sets them (off for ``teo.xml``).  ``contact_geoms``
 names the robot geoms that should touch the objects (e.g. ``("r_hand", "r_tool")``):
 they get ``contype`` 2 and ``conaffinity`` 1, so they push boxes, tables and valves but
-never collide with each other.
+never collide with each other.  A piece whose MJCF sets the friction cone or
+``impratio`` in its ``<option>`` (`CONTACT_OPTIONS`; the iron: elliptic cones,
+impratio 10, so that a pressed sole holds still at any time step) sets them for the
+whole world; a robot MJCF that sets them otherwise is an error naming both.
 
 Example:
     >>> from cgda_jax.sim.robot import model_path
