@@ -16,8 +16,17 @@ two-action sequence executed on TEO.
    rollout (same features? feasible?), and a figure of goal vs executed.
 3. ``--paint``: PAINT then PAINT on TEO by IET (the paint_iet experiment), the
    second run starting on the wall the first left.
+4. ``--videos N``: the same on tracked videos. N rendered videos per pause setting
+   (`cgda_jax.vision.record.render_sequence`: the desk scene of the camera
+   demonstrations, 2-6 actions drawn at random, at most one PAINT, placed to stay
+   in view; 320 x 240 RGB-D at ``--fps``; seeds from 3000; kept in
+   benchmarks/out/sequence_videos/), tracked (`track_video`: automatic colour
+   pick, the colour model followed, depth), turned into the synthetic set's
+   features (`synthetic_units`) and segmented against the same synthetic library;
+   the truth is the script's. Needs an offscreen OpenGL (MUJOCO_GL=egl).
 
     python benchmarks/bench_sequence.py [--recordings 10] [--seed 1000] [--no-teo] [--out DIR]
+    MUJOCO_GL=egl python benchmarks/bench_sequence.py --recordings 0 --no-teo --videos 5
 """
 
 from __future__ import annotations
@@ -27,7 +36,7 @@ import pathlib
 import time
 
 import numpy as np
-from _common import print_table, write_json
+from _common import OUT, print_table, write_json
 
 from cgda_jax.datasets import clean_circle_demos, synthetic_actions, synthetic_sequence
 from cgda_jax.plotting import plot_segmentation
@@ -36,6 +45,29 @@ from cgda_jax.recognition import ActionLibrary
 from cgda_jax.segmentation import segment
 
 SETTINGS = {"step_s": 0.2, "durations_s": (1.0, 15.0)}
+
+
+def _score(segs, truth) -> tuple[int, list[float]] | None:
+    """(labels right, boundary errors as shares of each true duration), None where
+    the count of actions found is wrong."""
+    if len(segs) != len(truth):
+        return None
+    errs = [max(abs(s.start - t0), abs(s.end - t1)) / (t1 - t0)
+            for s, (_, t0, t1) in zip(segs, truth)]
+    return sum(s.action == a for s, (a, _, _) in zip(segs, truth)), errs
+
+
+def _summary(recordings: int, total: int, right: int, errs, times) -> dict:
+    errs = np.asarray(errs)
+    return {
+        "recordings": recordings, "actions": total, "labelled_right": right,
+        "labelled_right_share": right / total,
+        "boundary_error_share": {"median": float(np.median(errs)),
+                                 "p90": float(np.percentile(errs, 90)),
+                                 "max": float(errs.max()),
+                                 "within_10pct": float(np.mean(errs <= 0.1))},
+        "seconds_per_recording_median": float(np.median(times)),
+    }
 
 
 def segmentation(n: int, out: pathlib.Path, first_seed: int = 1000) -> dict:
@@ -51,13 +83,12 @@ def segmentation(n: int, out: pathlib.Path, first_seed: int = 1000) -> dict:
             if k > 0 or pause[1] > 0:  # the first call compiles
                 times.append(dt)
             total += len(seq.truth)
-            if len(segs) != len(seq.truth):
+            score = _score(segs, seq.truth)
+            if score is None:
                 rows.append({"pauses": str(pause), "seed": first_seed + k,
                              "actions": len(seq.truth), "found": len(segs)})
                 continue
-            e = [max(abs(s.start - t0_), abs(s.end - t1)) / (t1 - t0_)
-                 for s, (_, t0_, t1) in zip(segs, seq.truth)]
-            r = sum(s.action == a for s, (a, _, _) in zip(segs, seq.truth))
+            r, e = score
             right, errs = right + r, errs + e
             rows.append({"pauses": str(pause), "seed": first_seed + k,
                          "actions": len(seq.truth), "found": len(segs), "right": r,
@@ -66,21 +97,72 @@ def segmentation(n: int, out: pathlib.Path, first_seed: int = 1000) -> dict:
                 plot_segmentation(
                     seq.recording, segs,
                     names=with_units(seq.recording.feature_names, MARKER_UNITS),
-                    title=f"synthetic sequence, pauses {pause} s: "
-                    + " ".join(a for a, _, _ in seq.truth),
+                    title=f"synthetic sequence, pauses {pause} s (true starts "
+                    "dashed, ends dotted)", truth=seq.truth,
                     path=out / f"segments_pause{pause[1]:g}.png")
     print_table(rows, ["pauses", "seed", "actions", "found", "right",
                        "worst boundary %", "s"])
-    errs = np.asarray(errs)
-    summary = {
-        "recordings": 2 * n, "actions": total, "labelled_right": right,
-        "labelled_right_share": right / total,
-        "boundary_error_share": {"median": float(np.median(errs)),
-                                 "p90": float(np.percentile(errs, 90)),
-                                 "max": float(errs.max()),
-                                 "within_10pct": float(np.mean(errs <= 0.1))},
-        "seconds_per_recording_median": float(np.median(times)),
-    }
+    summary = _summary(2 * n, total, right, errs, times)
+    print(summary)
+    return summary
+
+
+def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000) -> dict:
+    """Segmentation of tracked videos of sequences (module doc, step 4)."""
+    import json
+
+    from cgda_jax.vision import track_video
+    from cgda_jax.vision.record import render_sequence, synthetic_units
+
+    library = ActionLibrary.from_demonstrations(synthetic_actions(6, seed=0))
+    rows, errs, times = [], [], []
+    right = total = 0
+    for pause in ((0.0, 0.0), (0.5, 2.0)):
+        for k in range(n):
+            seed = first_seed + k + (100 if pause[1] else 0)
+            folder = OUT / "sequence_videos" / f"fps{fps:g}-pause{pause[1]:g}-{seed}"
+            meta = folder / "recording.json"
+            t0 = time.perf_counter()
+            if not meta.is_file():
+                render_sequence(folder, None, seed, fps=fps, pause_s=pause)
+            render_s = time.perf_counter() - t0
+            truth = [tuple(v) for v in json.loads(meta.read_text())["segments"]]
+            t0 = time.perf_counter()
+            track = track_video(folder / "rgb", depth=folder / "depth",
+                                intrinsics=folder / "intrinsics.json", fps=fps)
+            track_s = time.perf_counter() - t0
+            recording = synthetic_units(track.demo)
+            t0 = time.perf_counter()
+            segs = segment(recording, library, **SETTINGS)
+            dt = time.perf_counter() - t0
+            if k > 0 or pause[1] > 0:  # the first call compiles
+                times.append(dt)
+            total += len(truth)
+            score = _score(segs, truth)
+            row = {"pauses": str(pause), "seed": seed, "frames": track.n_frames,
+                   "kept": track.last - track.first + 1,
+                   "actions": " ".join(a for a, _, _ in truth),
+                   "found": " ".join(s.action for s in segs)}
+            if score is not None:
+                r, e = score
+                right, errs = right + r, errs + e
+                row.update({"right": r, "worst boundary %": round(100 * max(e), 1)})
+            row.update({"render s": round(render_s, 1), "track s": round(track_s, 1),
+                        "segment s": round(dt, 2)})
+            rows.append(row)
+            if k == 0:
+                plot_segmentation(
+                    recording, segs,
+                    names=with_units(recording.feature_names, MARKER_UNITS),
+                    title=f"tracked video {seed}, pauses {pause} s (true starts "
+                    "dashed, ends dotted)", truth=truth,
+                    path=out / f"video_segments_pause{pause[1]:g}.png")
+    print_table(rows, ["pauses", "seed", "frames", "kept", "actions", "found",
+                       "right", "worst boundary %", "render s", "track s",
+                       "segment s"])
+    summary = _summary(2 * n, total, right, errs, times)
+    summary["fps"] = fps
+    summary["rows"] = rows
     print(summary)
     return summary
 
@@ -197,12 +279,18 @@ def main() -> None:
     p.add_argument("--no-teo", action="store_true")
     p.add_argument("--paint", action="store_true",
                    help="also the two-PAINT sequence on TEO (IET)")
+    p.add_argument("--videos", type=int, default=0,
+                   help="tracked videos of sequences per pause setting (step 4)")
+    p.add_argument("--fps", type=float, default=30.0,
+                   help="frame rate of the rendered videos")
     p.add_argument("--out", default="results/bench_sequence")
     args = p.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     payload = ({"segmentation": segmentation(args.recordings, out, args.seed)}
                if args.recordings > 0 else {})
+    if args.videos > 0:
+        payload["videos"] = videos(args.videos, out, args.fps)
     if not args.no_teo:
         payload["teo"] = teo_sequence(out)
     if args.paint:
