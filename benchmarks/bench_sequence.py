@@ -19,7 +19,8 @@ two-action sequence executed on TEO.
 4. ``--videos N``: the same on tracked videos. N rendered videos per pause setting
    (`cgda_jax.vision.record.render_sequence`: the desk scene of the camera
    demonstrations, 2-6 actions drawn at random, at most one PAINT, placed to stay
-   in view; 320 x 240 RGB-D at ``--fps``; seeds from 3000; kept in
+   in view; 320 x 240 RGB-D at ``--fps``; seeds from ``--video-seed``, those with
+   pauses from it + 100; kept in
    benchmarks/out/sequence_videos/), tracked (`track_video`: automatic colour
    pick, the colour model followed, depth), turned into the synthetic set's
    features (`synthetic_units`) and segmented against the same synthetic library;
@@ -281,6 +282,9 @@ def main() -> None:
                    help="also the two-PAINT sequence on TEO (IET)")
     p.add_argument("--videos", type=int, default=0,
                    help="tracked videos of sequences per pause setting (step 4)")
+    p.add_argument("--video-seed", type=int, default=3000,
+                   help="first video's seed (3000: the videos the noise floor was "
+                   "found on; 4000: fresh ones)")
     p.add_argument("--fps", type=float, default=30.0,
                    help="frame rate of the rendered videos")
     p.add_argument("--out", default="results/bench_sequence")
@@ -290,7 +294,7 @@ def main() -> None:
     payload = ({"segmentation": segmentation(args.recordings, out, args.seed)}
                if args.recordings > 0 else {})
     if args.videos > 0:
-        payload["videos"] = videos(args.videos, out, args.fps)
+        payload["videos"] = videos(args.videos, out, args.fps, args.video_seed)
     if not args.no_teo:
         payload["teo"] = teo_sequence(out)
     if args.paint:

@@ -197,9 +197,7 @@ def segment_costs(
     # similar lengths share one program
     padded = -(-n_starts // _STARTS_PER_CHUNK) * _STARTS_PER_CHUNK + 1
     grid_p = np.concatenate([grid_x, np.repeat(grid_x[-1:], padded - n_starts - 1, 0)])
-    # each feature in units of the larger noise: the recording's or the
-    # library's (a tracked video can be cleaner than the demonstrations)
-    scale = np.maximum(_noise(recording), _library_noise(library))
+    scale = _scale(recording, library)
     costs = _segment_costs(METRICS[metric], int(n_samples),
                            jnp.asarray(grid_p / scale, jnp.float32),
                            jnp.int32(n_starts + 1),
@@ -219,6 +217,15 @@ def _noise(recording: Demonstration) -> np.ndarray:
              if d2.shape[0] else np.zeros(x.shape[1]))
     sigma = np.maximum(sigma, 1e-3 * np.ptp(x, axis=0))
     return np.where(sigma > 0, sigma, 1.0)
+
+
+def _scale(recording: Demonstration, library: ActionLibrary | None) -> np.ndarray:
+    """(F,) the unit of each feature in the search and the refinement: the larger
+    of its noise in the recording and in the library (a tracked video can be
+    cleaner than the demonstrations were; a feature constant up to rounding has
+    no noise of its own)."""
+    noise = _noise(recording)
+    return noise if library is None else np.maximum(noise, _library_noise(library))
 
 
 def _library_noise(library: ActionLibrary) -> np.ndarray:
@@ -410,7 +417,7 @@ def segment(
                 float(costs[s, index[e - s], a]))
         for s, e, a in path if a < len(library)
     ]
-    return refine_boundaries(recording, found) if refine else found
+    return refine_boundaries(recording, found, library) if refine else found
 
 
 def _fit_gap(t, y, end, start, box_end, box_start):
@@ -508,14 +515,15 @@ def _amplitude(t, y, start, end, duration):
     return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
-def refine_boundaries(recording: Demonstration,
-                      segments: Sequence[Segment]) -> list[Segment]:
+def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
+                      library: ActionLibrary | None = None) -> list[Segment]:
     """The segments' starts and ends refined on the recording's samples.
 
     Each gap between two segments (and the stretches before the first and after
     the last) is fitted by the object at rest between a minimum-jerk end of the
     action before and a minimum-jerk start of the action after (`segment`, step
-    4), each feature in units of its noise, on the samples from 0.2 of the
+    4), each feature in units of its noise (in the recording, or in the library
+    where given and larger: as the search), on the samples from 0.2 of the
     actions' durations inside them; a feature's amplitude is the action's net
     change (medians of the samples within 5 % of its duration of the given start
     and end) where that is at least 80 % of the feature's range over the action,
@@ -529,6 +537,8 @@ def refine_boundaries(recording: Demonstration,
         recording: the recording the segments were found in.
         segments: its action segments in time order (as `segment` with
             ``refine=False`` returns them).
+        library: the library they were found with (`segment` passes it): its
+            noise is each feature's least unit. None: the recording's noise only.
 
     Returns:
         The same segments with refined ``start`` and ``end`` (seconds); actions and
@@ -537,7 +547,7 @@ def refine_boundaries(recording: Demonstration,
     if not segments:
         return []
     t = recording.times
-    y = recording.features / _noise(recording)
+    y = recording.features / _scale(recording, library)
     n = len(segments)
     dur = [s.end - s.start for s in segments]
     box = [(s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
