@@ -24,7 +24,8 @@ two-action sequence executed on TEO.
    benchmarks/out/sequence_videos/), tracked (`track_video`: automatic colour
    pick, the colour model followed, depth), turned into the synthetic set's
    features (`synthetic_units`) and segmented against the same synthetic library;
-   the truth is the script's. Needs an offscreen OpenGL (MUJOCO_GL=egl).
+   the truth is the script's. ``--light-end 0.7``: the scene's light falls
+   linearly to 70 % by each video's end. Needs an offscreen OpenGL (MUJOCO_GL=egl).
 
     python benchmarks/bench_sequence.py [--recordings 10] [--seed 1000] [--no-teo] [--out DIR]
     MUJOCO_GL=egl python benchmarks/bench_sequence.py --recordings 0 --no-teo --videos 5
@@ -108,7 +109,8 @@ def segmentation(n: int, out: pathlib.Path, first_seed: int = 1000) -> dict:
     return summary
 
 
-def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000) -> dict:
+def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000,
+           light_end: float = 1.0) -> dict:
     """Segmentation of tracked videos of sequences (module doc, step 4)."""
     import json
 
@@ -121,11 +123,14 @@ def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000) -> dic
     for pause in ((0.0, 0.0), (0.5, 2.0)):
         for k in range(n):
             seed = first_seed + k + (100 if pause[1] else 0)
-            folder = OUT / "sequence_videos" / f"fps{fps:g}-pause{pause[1]:g}-{seed}"
+            folder = OUT / "sequence_videos" / (f"fps{fps:g}-pause{pause[1]:g}-{seed}"
+                                                 + ("" if light_end == 1 else
+                                                    f"-light{light_end:g}"))
             meta = folder / "recording.json"
             t0 = time.perf_counter()
             if not meta.is_file():
-                render_sequence(folder, None, seed, fps=fps, pause_s=pause)
+                render_sequence(folder, None, seed, fps=fps, pause_s=pause,
+                                light_end=light_end)
             render_s = time.perf_counter() - t0
             truth = [tuple(v) for v in json.loads(meta.read_text())["segments"]]
             t0 = time.perf_counter()
@@ -155,9 +160,11 @@ def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000) -> dic
                 plot_segmentation(
                     recording, segs,
                     names=with_units(recording.feature_names, MARKER_UNITS),
-                    title=f"tracked video {seed}, pauses {pause} s (true starts "
+                    title=f"tracked video {seed}, pauses {pause} s, light to "
+                    f"{light_end:g} (true starts "
                     "dashed, ends dotted)", truth=truth,
-                    path=out / f"video_segments_pause{pause[1]:g}.png")
+                    path=out / f"video_segments_pause{pause[1]:g}"
+                    f"{'' if light_end == 1 else f'_light{light_end:g}'}.png")
     print_table(rows, ["pauses", "seed", "frames", "kept", "actions", "found",
                        "right", "worst boundary %", "render s", "track s",
                        "segment s"])
@@ -285,6 +292,9 @@ def main() -> None:
     p.add_argument("--video-seed", type=int, default=3000,
                    help="first video's seed (3000: the videos the noise floor was "
                    "found on; 4000: fresh ones)")
+    p.add_argument("--light-end", type=float, default=1.0,
+                   help="the videos' light at their end as a share of the start "
+                   "(falling linearly; 1: steady)")
     p.add_argument("--fps", type=float, default=30.0,
                    help="frame rate of the rendered videos")
     p.add_argument("--out", default="results/bench_sequence")
@@ -294,7 +304,8 @@ def main() -> None:
     payload = ({"segmentation": segmentation(args.recordings, out, args.seed)}
                if args.recordings > 0 else {})
     if args.videos > 0:
-        payload["videos"] = videos(args.videos, out, args.fps, args.video_seed)
+        payload["videos"] = videos(args.videos, out, args.fps, args.video_seed,
+                                   args.light_end)
     if not args.no_teo:
         payload["teo"] = teo_sequence(out)
     if args.paint:

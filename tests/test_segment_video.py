@@ -29,7 +29,7 @@ from cgda_jax.datasets import synthetic_actions
 from cgda_jax.recognition import ActionLibrary
 from cgda_jax.segmentation import segment
 from cgda_jax.vision import track_video
-from cgda_jax.vision.record import synthetic_units
+from cgda_jax.vision.record import render_sequence, synthetic_units
 from cgda_jax.vision.scene import SEQUENCE_AREA_M, scripted_sequence
 
 ACTIONS, SEED, FPS = ["MOVE", "PAINT"], 5, 10.0
@@ -99,6 +99,8 @@ def test_sequences_that_cannot_be_filmed_are_refused():
         scripted_sequence(["MOVE", "MOVE", "MOVE"], rng, FPS)
     with pytest.raises(ValueError, match="unknown action"):
         scripted_sequence(["SWIM"], rng, FPS)
+    with pytest.raises(ValueError, match=r"light_end must be in \(0, 1\]"):
+        render_sequence("unused", ["MOVE"], light_end=0.0)
     drawn, truth = scripted_sequence(None, np.random.default_rng(1), FPS)
     assert 2 <= len(truth) <= 6
     assert [a for a, _, _ in truth].count("PAINT") <= 1

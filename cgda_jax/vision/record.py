@@ -185,6 +185,7 @@ def render_sequence(
     width: int = 320,
     height: int = 240,
     pause_s: tuple[float, float] = (0.0, 0.0),
+    light_end: float = 1.0,
     png_compression: int = 1,
 ) -> tuple[Demonstration, list[tuple[str, float, float]]]:
     """Render several scripted actions in a row (`scripted_sequence`: each starts
@@ -200,21 +201,29 @@ def render_sequence(
         fps, width, height, png_compression: as `render_recording` (defaults kept
             small: rendering is the cost).
         pause_s: (shortest, longest) rest between two actions in seconds.
+        light_end: the light (ambient and diffuse) at the last frame as a share of
+            the first, falling linearly (1: steady; 0.7: 30 % darker by the end,
+            the marker's value with it).
 
     Returns:
-        The ground truth per frame (a `Demonstration`) and the true segments.
+        The ground truth per frame (a `Demonstration`; its colour is the
+        material's, not the dimmed one) and the true segments.
 
     Raises:
         ValueError: an unknown action, two PAINTs, a path that does not fit in the
-            view (`scripted_sequence`).
+            view (`scripted_sequence`), a light_end outside (0, 1].
         RuntimeError: no offscreen OpenGL.
     """
+    if not 0.0 < light_end <= 1.0:
+        raise ValueError(f"light_end must be in (0, 1], got {light_end!r}")
     path, truth = scripted_sequence(actions, np.random.default_rng(seed), fps,
                                     pause_s=pause_s)
     meta = {"fps": fps, "actions": [a for a, _, _ in truth], "seed": seed,
-            "pause_s": list(pause_s), "segments": [list(s) for s in truth]}
+            "pause_s": list(pause_s), "light_end": light_end,
+            "segments": [list(s) for s in truth]}
+    light = np.linspace(1.0, light_end, len(path.times))
     demo = _render(folder, path, meta, f"sequence-{seed}", width=width,
-                   height=height, png_compression=png_compression)
+                   height=height, png_compression=png_compression, light=light)
     return demo, truth
 
 
@@ -245,9 +254,10 @@ def synthetic_units(track: Demonstration) -> Demonstration:
 
 def _render(folder, path: Path, meta: dict, name: str, *, width: int, height: int,
             max_frames: int | None = None, segmentation: bool = False,
-            png_compression: int = 9) -> Demonstration:
+            png_compression: int = 9, light: np.ndarray | None = None) -> Demonstration:
     """Render ``path`` into a recording folder (module doc); ``meta`` goes into
-    recording.json with the frame count."""
+    recording.json with the frame count; ``light`` (T,): the scene light's
+    ambient and diffuse per frame as a share of the model's."""
     folder = pathlib.Path(folder).expanduser()
     n = len(path.times) if max_frames is None else min(int(max_frames), len(path.times))
     model = mujoco.MjModel.from_xml_string(SCENE_XML)
@@ -267,7 +277,11 @@ def _render(folder, path: Path, meta: dict, name: str, *, width: int, height: in
     rows, seg_counts = [], []
     marker_geom = model.geom("marker").id
     try:
+        ambient, diffuse = model.light_ambient.copy(), model.light_diffuse.copy()
         for k in range(n):
+            if light is not None:
+                model.light_ambient[:] = ambient * light[k]
+                model.light_diffuse[:] = diffuse * light[k]
             _pose(model, data, path, k)
             images = []
             for r in renderers:
