@@ -26,6 +26,7 @@ pytest.importorskip("cv2")
 
 from cgda_jax import segmentation
 from cgda_jax.datasets import synthetic_actions
+from cgda_jax.plotting import plot_segmentation
 from cgda_jax.recognition import ActionLibrary
 from cgda_jax.segmentation import segment
 from cgda_jax.vision import track_video
@@ -81,6 +82,15 @@ def test_tracked_video_of_a_sequence_is_segmented(video, monkeypatch):
     assert [s.action for s in segs] == ACTIONS
     for s, (_, t0, t1) in zip(segs, truth):
         assert max(abs(s.start - t0), abs(s.end - t1)) <= 0.1 * (t1 - t0), (s, t0, t1)
+    # the figure: the recognized actions shaded, the true starts and ends drawn
+    fig = plot_segmentation(rec, segs, truth=truth)
+    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_linestyle() in ("--", ":")]
+    assert sorted(ln.get_xdata()[0] for ln in lines) == sorted(
+        v for _, t0, t1 in truth for v in (t0, t1))
+    assert [t.get_text() for t in fig.axes[0].texts] == ACTIONS
+    import matplotlib.pyplot as plt  # after cgda_jax.plotting chose the backend
+
+    plt.close(fig)
     # the tracked marker is far cleaner than the demonstrations: in units of its
     # own noise, the library's wiggle in area and Z decides (MOVE MOVE PAINT)
     monkeypatch.setattr(segmentation, "_library_noise",
