@@ -26,6 +26,12 @@ two-action sequence executed on TEO.
    features (`synthetic_units`) and segmented against the same synthetic library;
    the truth is the script's. ``--light-end 0.7``: the scene's light falls
    linearly to 70 % by each video's end. Needs an offscreen OpenGL (MUJOCO_GL=egl).
+5. ``--xgnitive``: real TEO recordings spliced: each paint recording followed by each
+   iron recording and the other way round (the second moved to start where the first
+   left the arms), both arms' X, Y, Z (the left paints, the right irons), segmented
+   against the actions generalized (3 s intervals) from the other recordings; the
+   truth is only the splice (each recording's own rests around it are unknown).
+   Data: $CGDA_XGNITIVE_DIR or ../shared/data/xgnitive.
 
     python benchmarks/bench_sequence.py [--recordings 10] [--seed 1000] [--no-teo] [--out DIR]
     MUJOCO_GL=egl python benchmarks/bench_sequence.py --recordings 0 --no-teo --videos 5
@@ -175,6 +181,67 @@ def videos(n: int, out: pathlib.Path, fps: float, first_seed: int = 3000,
     return summary
 
 
+def _both_arms(root, action: str) -> list:
+    """Each recording of ``action`` as left and right arm X, Y, Z [m] on the left
+    arm's clock (the right arm interpolated there)."""
+    from cgda_jax.data import Demonstration, load_xgnitive
+
+    reps = [1, 3, 4] if action == "paint" else [1, 2, 3, 4]  # paint's right arm: no 2
+    left = load_xgnitive(root, action, "teo/leftArm", ["X", "Y", "Z"], repetitions=reps)
+    right = load_xgnitive(root, action, "teo/rightArm", ["X", "Y", "Z"],
+                          repetitions=reps)
+    names = ("left X [m]", "left Y [m]", "left Z [m]", "right X [m]", "right Y [m]",
+             "right Z [m]")
+    return [Demonstration(l.times, np.hstack([l.features, np.stack(
+        [np.interp(l.times, r.times, r.features[:, f]) for f in range(3)], 1)]),
+        names, f"{action}-{k}") for k, l, r in zip(reps, left, right)]
+
+
+def xgnitive_splices() -> dict:
+    """Real TEO recordings spliced two by two (module doc, step 5)."""
+    import os
+
+    from cgda_jax.data import Demonstration
+
+    root = pathlib.Path(os.environ.get("CGDA_XGNITIVE_DIR",
+                                       OUT.parents[1].parent / "shared" / "data"
+                                       / "xgnitive"))
+    demos = {a: _both_arms(root, a) for a in ("paint", "iron")}
+    rows, right = [], 0
+    for p_i, paint in enumerate(demos["paint"]):
+        for i_i, iron in enumerate(demos["iron"]):
+            library = ActionLibrary.from_demonstrations(
+                {"paint": [d for k, d in enumerate(demos["paint"]) if k != p_i],
+                 "iron": [d for k, d in enumerate(demos["iron"]) if k != i_i]},
+                interval_s=3.0)
+            for first, second in ((paint, iron), (iron, paint)):
+                dt = first.times[1] - first.times[0]
+                x = np.vstack([first.features,
+                               second.features - second.features[0] + first.features[-1]])
+                t = np.r_[first.times, first.times[-1] + dt + second.times]
+                rec = Demonstration(t, x, first.feature_names, "splice")
+                junction = first.times[-1]
+                t0 = time.perf_counter()
+                segs = segment(rec, library, step_s=1.0, durations_s=(8.0, 250.0))
+                found = [s.action for s in segs]
+                truth = [first.name.split("-")[0], second.name.split("-")[0]]
+                ok = found == truth
+                right += ok
+                rows.append({"first": first.name, "second": second.name,
+                             "s": f"{first.duration:.0f} + {second.duration:.0f}",
+                             "found": " ".join(f"{s.action} {s.start:.0f}-{s.end:.0f}"
+                                               for s in segs),
+                             "right": ok, "splice s": round(junction, 1),
+                             "junction off s": round(max(abs(segs[0].end - junction),
+                                                         abs(segs[1].start - junction)), 1)
+                             if ok else None,
+                             "segment s": round(time.perf_counter() - t0, 1)})
+    print_table(rows, list(rows[0]))
+    summary = {"splices": len(rows), "right": right, "rows": rows}
+    print({k: v for k, v in summary.items() if k != "rows"})
+    return summary
+
+
 def teo_sequence(out: pathlib.Path) -> dict:
     from cgda_jax.builtin import experiment_path
     from cgda_jax.experiment.build import build_simulator
@@ -297,12 +364,16 @@ def main() -> None:
                    "(falling linearly; 1: steady)")
     p.add_argument("--fps", type=float, default=30.0,
                    help="frame rate of the rendered videos")
+    p.add_argument("--xgnitive", action="store_true",
+                   help="real TEO paint and iron recordings spliced two by two")
     p.add_argument("--out", default="results/bench_sequence")
     args = p.parse_args()
     out = pathlib.Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     payload = ({"segmentation": segmentation(args.recordings, out, args.seed)}
                if args.recordings > 0 else {})
+    if args.xgnitive:
+        payload["xgnitive"] = xgnitive_splices()
     if args.videos > 0:
         payload["videos"] = videos(args.videos, out, args.fps, args.video_seed,
                                    args.light_end)
