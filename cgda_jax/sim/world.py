@@ -45,7 +45,7 @@ own collisions stay as its MJCF sets them (off for ``teo.xml``).  ``contact_geom
 names the robot geoms that should touch the objects (e.g. ``("r_hand", "r_tool")``):
 they get ``contype`` 2 and ``conaffinity`` 1, so they push boxes, tables and valves but
 never collide with each other.  A piece whose MJCF sets the friction cone or
-``impratio`` in its ``<option>`` (`CONTACT_OPTIONS`; the iron: elliptic cones,
+``impratio`` in its ``<option>`` (``CONTACT_OPTIONS``; the iron: elliptic cones,
 impratio 10, so that a pressed sole holds still at any time step) sets them for the
 whole world; a robot MJCF that sets them otherwise is an error naming both.
 
