@@ -280,12 +280,16 @@ class Feasibility:
         whole move: > 0 penetrates, < 0 is the clearance."""
         if self.check is None:
             return jnp.float32(-jnp.inf)
-        alphas = jnp.arange(self.samples + 1, dtype=jnp.float32) / self.samples
-        path = q0 + alphas[:, None] * dq  # (S + 1, DoF)
+        alphas = jnp.arange(1, self.samples + 1, dtype=jnp.float32) / self.samples
+        path = q0 + alphas[:, None] * dq  # (S, DoF), the start apart
         # the depth is what counts: with the exact geometry, separated box-box
         # and box-cylinder pairs get a lower bound of their distance
-        # (Collider.distances); the round one is closed form throughout
-        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
+        # (Collider.distances); the round one is closed form throughout.  The
+        # start posture's distances depend on q0 alone: under a vmap over moves
+        # from one state (a population's candidates) they are computed once
+        d0 = self.check.distances(q0, exact=False)
+        d = jnp.concatenate([d0[None], jax.vmap(
+            lambda q: self.check.distances(q, exact=False))(path)])
         if not self.certify:
             return -jnp.min(d)
         # between two samples h = 1/S apart the distance changes at most at the
