@@ -117,25 +117,6 @@ def test_the_sampled_check_with_its_margin_lets_no_deep_move_through(teo_paint):
         Feasibility(teo_paint.robot, margin=0.005)
 
 
-def test_a_moves_samples_with_its_start_apart_equal_every_posture(teo_paint):
-    """`Feasibility.worst` takes the start posture's distances apart (computed
-    once per state under a vmap over a population's moves); the reference is
-    the smallest distance over the ``samples + 1`` postures of the move, start
-    included, in one batch, bit for bit, for moves from many states and from
-    one."""
-    feas = teo_paint.feasibility
-    q0, dq, _ = _random_moves(teo_paint, 40, seed=2)
-
-    def every_posture(a, d):
-        alphas = jnp.arange(feas.samples + 1, dtype=jnp.float32) / feas.samples
-        return -jnp.min(jax.vmap(lambda q: feas.check.distances(q, exact=False))(
-            a + alphas[:, None] * d))
-
-    for f in (jax.vmap, lambda g: (lambda a, d: jax.vmap(lambda d: g(a[0], d))(d))):
-        np.testing.assert_array_equal(np.asarray(jax.jit(f(feas.worst))(q0, dq)),
-                                      np.asarray(jax.jit(f(every_posture))(q0, dq)))
-
-
 def test_speed_limit_makes_a_fast_move_infeasible(tiny):
     limits = read_limits(tiny.mj_model, tiny.joint_names, {"velocity": 1.0})
     sim = Simulator(tiny, MarkerScene(), feasibility=Feasibility(tiny, limits),
