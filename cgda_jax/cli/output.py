@@ -330,6 +330,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     """
     import jax
 
+    from cgda_jax.programs import set_program_store
     from cgda_jax.results_folder.rules import FolderError, check_writable
 
     path = path or _cache_dir()
@@ -345,4 +346,5 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    set_program_store(path / "programs")  # found there without tracing
     return path

@@ -21,8 +21,10 @@ from cgda_jax.experiment.compute import compute_execution, compute_recognition
 from cgda_jax.experiment.config import ExperimentConfig, dump_config
 from cgda_jax.experiment.figures import draw_figures, render_run
 from cgda_jax.experiment.load import run_in_memory
+from cgda_jax.experiment.programs_key import run_programs_key
 from cgda_jax.experiment.report import report_markdown, write_json
 from cgda_jax.experiment.validate import check_and_build
+from cgda_jax.programs import program_scope
 from cgda_jax.results_folder.rules import expand
 from cgda_jax.results_folder.writing import RunFolder
 
@@ -103,11 +105,13 @@ def start_run(
     built here)."""
     t0 = time.perf_counter()
     (folder / "config.toml").write_text(dump_config(cfg))
-    if cfg.kind == "recognition":
-        pending = Outputs(cfg, folder, *compute_recognition(cfg, folder))
-    else:
-        pending = Outputs(cfg, folder, *compute_execution(cfg, folder, progress_fn,
-                                                          built))
+    # its programs found without tracing when this config ran before
+    with program_scope(run_programs_key(cfg, "compute")):
+        if cfg.kind == "recognition":
+            pending = Outputs(cfg, folder, *compute_recognition(cfg, folder))
+        else:
+            pending = Outputs(cfg, folder, *compute_execution(cfg, folder,
+                                                              progress_fn, built))
     pending.compute_s = time.perf_counter() - t0
     return pending
 
