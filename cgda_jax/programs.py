@@ -49,6 +49,7 @@ import logging
 import os
 import pathlib
 import pickle
+import re
 import sys
 import tempfile
 import threading
@@ -80,9 +81,8 @@ _LOCK = threading.Lock()
 _STORE: list[pathlib.Path | None] = [None]
 
 
-def _key(lowered: jax.stages.Lowered) -> str | None:
+def _key(lowered: jax.stages.Lowered, text: str) -> str | None:
     """The program's key, or None for one that must not be shared."""
-    text = lowered.as_text()
     if "callback" in text:  # host callbacks: named by index, not by what they do
         return None
     devices = [(d.platform, d.id) for d in jax.devices()]
@@ -110,12 +110,14 @@ def compile_lowered(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     Args:
         lowered: ``jax.jit(f, ...).lower(*args)``.
     """
-    return _compile(lowered)[0]
+    return _compile(lowered, lowered.as_text())[0]
 
 
-def _compile(lowered: jax.stages.Lowered) -> tuple[jax.stages.Compiled, bool]:
-    """`compile_lowered`, and whether the program may be shared."""
-    key = _key(lowered)
+def _compile(lowered: jax.stages.Lowered, text: str
+             ) -> tuple[jax.stages.Compiled, bool]:
+    """`compile_lowered` of ``lowered`` (its text ``text``), and whether the program
+    may be shared."""
+    key = _key(lowered, text)
     if key is None:
         with _LOCK:
             _STATS["uncached"] += 1
@@ -207,10 +209,11 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
     lowered = jax.jit(fn, **jit_kw).lower(*args)
     with _LOCK:
         _STATS["traced"] += 1
-    compiled, shareable = _compile(lowered)
+    text = lowered.as_text()
+    compiled, shareable = _compile(lowered, text)
     if key is not None and shareable:
         _remember(_KEYED, key, compiled)
-        _save(key, compiled)
+        _save(key, compiled, set(_CUSTOM_CALL.findall(text)))
     return compiled
 
 
@@ -234,6 +237,29 @@ def program_store() -> pathlib.Path | None:
     return _STORE[0]
 
 
+#: A custom call in a program's text: its target's name.
+_CUSTOM_CALL = re.compile(r"custom_call @([\w.$-]+)")
+
+
+def _storable(targets: set[str]) -> bool:
+    """A program whose custom calls are all LAPACK's (CMA-ES's ``eigh``: its
+    handlers are set up before loading, `_prepare`) or none; another custom call's
+    handler may need a set-up that lowering does and loading does not, so such a
+    program is kept in memory only."""
+    return all(t.startswith("lapack_") for t in targets)
+
+
+def _prepare(targets: Iterable[str]) -> None:
+    """Set up what a loaded program's custom calls need (LAPACK's kernels are set
+    up by lowering a LAPACK call, which a loaded program skips: without it the
+    call crashes the process)."""
+    if any(t.startswith("lapack_") for t in targets):
+        import numpy as np
+        from jaxlib import lapack
+
+        lapack.prepare_lapack_call("syevd", np.float32)
+
+
 def _path(key: str) -> pathlib.Path | None:
     folder = _STORE[0]
     return None if folder is None else folder / f"{key}.v{STORE_VERSION}.prog"
@@ -251,7 +277,10 @@ def _load(key: str) -> jax.stages.Compiled | None:
         digest, body = data[len(head):len(head) + 32], data[len(head) + 32:]
         if not data.startswith(head) or hashlib.sha256(body).digest() != digest:
             raise ValueError("not a complete program file of this version")
-        payload, in_tree, out_tree = pickle.loads(body)
+        payload, in_tree, out_tree, targets = pickle.loads(body)
+        if not _storable(targets):
+            raise ValueError(f"custom calls {sorted(targets)} cannot be loaded")
+        _prepare(targets)
         compiled = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
     except Exception as err:  # noqa: BLE001 - any unreadable file is a miss
         with _LOCK:
@@ -268,14 +297,14 @@ def _load(key: str) -> jax.stages.Compiled | None:
     return compiled
 
 
-def _save(key: str, compiled: jax.stages.Compiled) -> None:
+def _save(key: str, compiled: jax.stages.Compiled, targets: set[str]) -> None:
     path = _path(key)
-    if path is None:
+    if path is None or not _storable(targets):
         return
     from jax.experimental import serialize_executable
 
     try:
-        body = pickle.dumps(serialize_executable.serialize(compiled),
+        body = pickle.dumps((*serialize_executable.serialize(compiled), targets),
                             protocol=pickle.HIGHEST_PROTOCOL)
     except Exception as err:  # noqa: BLE001 - a program that cannot be stored
         log.debug("program %s not stored: %s", key, err)
