@@ -322,7 +322,9 @@ def _cache_dir() -> pathlib.Path:
 
 
 def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
-    """Turn on JAX's persistent compilation cache, small programs included.
+    """Turn on JAX's persistent compilation cache, small programs included, and
+    keep the programs of a run, found without tracing, in its ``programs/``
+    (`cgda_jax.programs.set_program_store`).
 
     Raises:
         FolderError: the folder cannot be created or written (names it and

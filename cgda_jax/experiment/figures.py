@@ -4,11 +4,13 @@ video (MP4 + GIF, 640x480) and frame strip, with the goal drawn in."""
 
 from __future__ import annotations
 
+import importlib
 import logging
 import math
 import os
 import pathlib
 import textwrap
+import threading
 from typing import Any
 
 import numpy as np
@@ -26,6 +28,31 @@ def _close_all() -> None:
     import matplotlib.pyplot as plt
 
     plt.close("all")
+
+
+def import_drawing(plots: bool, render: bool) -> threading.Thread | None:
+    """Import what drawing needs (the figures with matplotlib; MuJoCo's renderer
+    and the video writer) in a thread, while the run computes (its programs run
+    without Python's lock); the drawing finds them loaded, or waits for the
+    import under way (Python's import lock)."""
+    if not (plots or render):
+        return None
+
+    def load() -> None:
+        try:
+            from cgda_jax import plotting
+
+            for name in plotting.__all__:  # each figure's module, matplotlib
+                getattr(plotting, name)
+            if render:
+                importlib.import_module("cgda_jax.sim.render")
+                importlib.import_module("cgda_jax.sim.video")
+        except Exception:  # noqa: BLE001 - the drawing imports it and says why
+            return
+
+    thread = threading.Thread(target=load, name="cgda-import-drawing", daemon=True)
+    thread.start()
+    return thread
 
 
 def draw_figures(run: Run, out: str | os.PathLike) -> list[pathlib.Path]:

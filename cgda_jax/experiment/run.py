@@ -19,7 +19,7 @@ import numpy as np
 from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.compute import compute_execution, compute_recognition
 from cgda_jax.experiment.config import ExperimentConfig, dump_config
-from cgda_jax.experiment.figures import draw_figures, render_run
+from cgda_jax.experiment.figures import draw_figures, import_drawing, render_run
 from cgda_jax.experiment.load import run_in_memory
 from cgda_jax.experiment.programs_key import run_programs_key
 from cgda_jax.experiment.report import report_markdown, write_json
@@ -104,6 +104,7 @@ def start_run(
     ``built``, what its checks built (`check_and_build`; default: checked and
     built here)."""
     t0 = time.perf_counter()
+    import_drawing(cfg.output.plots, cfg.output.render)  # while computing
     (folder / "config.toml").write_text(dump_config(cfg))
     # its programs found without tracing when this config ran before
     with program_scope(run_programs_key(cfg, "compute")):
