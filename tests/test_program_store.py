@@ -42,7 +42,7 @@ def _config(model: pathlib.Path, *extra: str):
 def _run(cfg, folder: pathlib.Path) -> tuple[dict, dict, dict]:
     """The result (clocks aside), its arrays, and what `cache_stats` counted."""
     before = cache_stats()
-    result = run_experiment(cfg, folder)
+    run_experiment(cfg, folder)
     after = cache_stats()
     arrays = dict(np.load(folder / "arrays.npz"))
     kept = {k: v for k, v in json.loads((folder / "result.json").read_text()).items()

@@ -68,10 +68,12 @@ class Outputs:
         if not (self.cfg.output.plots or self.cfg.output.render):
             return
         run = run_in_memory(self.folder, self.cfg, self.result, self.arrays)
-        if self.cfg.output.plots:
-            draw_figures(run, self.folder / "plots")
-        if self.cfg.output.render and self.sim is not None:
-            self.result["render"] = render_run(run, self.folder / "plots", self.sim)
+        plots = self.folder / "plots"
+        figures = (lambda: draw_figures(run, plots)) if self.cfg.output.plots else None
+        if self.cfg.output.render and self.sim is not None:  # the figures meanwhile
+            self.result["render"] = render_run(run, plots, self.sim, alongside=figures)
+        elif figures is not None:
+            figures()
 
     def finish(self) -> dict:
         """`draw`, then write ``result.json`` and ``report.md``; the result dict
