@@ -35,7 +35,8 @@ backend) are never shared either way: their text names the callback by an index,
 not by what it calls.  At most `MAX_PROGRAMS` of each kind are kept in memory
 (least recently used dropped).  The source digest is taken once per process, on
 first use: edit the package while a process runs and that process keeps its
-digest.
+digest; code replaced in a running process (a test's monkeypatch of a function a
+program calls) is not seen by the key either: run such code outside a scope.
 """
 
 from __future__ import annotations
