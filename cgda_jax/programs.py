@@ -388,15 +388,34 @@ def _version(dist: str) -> str:
         return "-"
 
 
+@functools.cache
+def _host() -> str:
+    """The machine and, on Linux, the CPU's model and instruction-set flags (XLA
+    compiles CPU programs for the host's: a store shared by two machines must not
+    give one the other's)."""
+    import platform
+
+    lines = []
+    with contextlib.suppress(OSError):
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.startswith(("model name", "flags", "Features")):
+                    lines.append(line.strip())
+                if len(lines) >= 2:
+                    break
+    return repr((platform.machine(), platform.processor(), lines))
+
+
 def environment_digest() -> str:
     """SHA-256 of what a program depends on besides its experiment: the package's
     source (every ``cgda_jax/**/*.py``), the versions of Python, jax, jaxlib,
-    MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices, JAX's
-    numerics flags and ``$XLA_FLAGS``."""
+    MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices, the
+    host's CPU (model, instruction sets), JAX's numerics flags and
+    ``$XLA_FLAGS``."""
     flags = {k: getattr(jax.config, k, None) for k in (
         "jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_rank_promotion",
         "jax_default_prng_impl", "jax_threefry_partitionable", "jax_disable_jit")}
-    what = repr((_source_digest(), sys.version,
+    what = repr((_source_digest(), _host(), sys.version,
                  [_version(d) for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx",
                                         "evosax", "optax", "numpy")],
                  jax.default_backend(),
