@@ -6,8 +6,11 @@ with a warning."""
 
 import json
 import logging
+import os
 import pathlib
 import shutil
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -144,3 +147,30 @@ def test_a_damaged_store_file_is_compiled_again_with_a_warning(store, caplog):
     assert sum("could not be read" in r.getMessage() for r in caplog.records) == 3
     _same(first, again)
     assert all(f.stat().st_size > 1000 for f in files)  # written again, whole
+
+
+LAPACK = """
+import sys
+import jax.numpy as jnp
+import numpy as np
+from cgda_jax.programs import cache_stats, compile_jit, program_scope, set_program_store
+set_program_store(sys.argv[1])
+x = jnp.asarray(np.diag([3.0, 1.0, 2.0]).astype(np.float32))
+with program_scope("a test's key"):  # CMA-ES's eigh: a LAPACK custom call
+    w = compile_jit("test.eigh", lambda a: jnp.linalg.eigh(a)[0], x)(x)
+s = cache_stats()
+print(np.asarray(w).tolist(), s["traced"], s["store_hits"])
+"""
+
+
+def test_a_stored_lapack_program_runs_in_a_new_process(tmp_path):
+    """LAPACK's kernels are set up by lowering a call to them, which a program
+    read from the store skips: without `_prepare` the second process crashed."""
+    out = []
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, "-c", LAPACK, str(tmp_path)],
+                              capture_output=True, text=True, timeout=300,
+                              env={**os.environ, "JAX_PLATFORMS": "cpu"})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        out.append(proc.stdout.strip().splitlines()[-1])
+    assert out == ["[1.0, 2.0, 3.0] 1 0", "[1.0, 2.0, 3.0] 0 1"]
