@@ -13,7 +13,11 @@ in which several library actions follow each other (with or without pauses) into
    library action by the recognition metric (`cgda_jax.recognition.METRICS`: the
    paper's DTW by default). Both are taken *relative to their first sample*: an
    action in a sequence starts where the previous one left the object, not where
-   its demonstrations started. A pause is one more label, ``"rest"``: the
+   its demonstrations started. Each feature is in units of its noise: the
+   recording's, or the library's where that is larger (a rendered or finely
+   tracked recording is cleaner than the demonstrations were; in units of its own
+   tiny noise, the library's residual wiggle in features that do not change
+   decided the labels). A pause is one more label, ``"rest"``: the
    object held where the segment started (a constant template). One batched
    ``vmap`` call gives the (S, L, A + 1) costs.
 3. A dynamic programme over the boundaries (one ``lax.scan`` over the grid) picks
@@ -172,7 +176,8 @@ def segment_costs(
         ``(grid_times (G + 1,), lengths (L,) in grid steps (1, 2, ... the
         longest), costs (G, L, A + 1))``: ``costs[s, k, a]`` is the metric's cost
         of grid points ``s .. s + lengths[k]`` (resampled to ``n_samples``, less
-        its first sample) against action ``a`` (``library.names`` order; the last
+        its first sample; each feature in units of the larger of the recording's
+        and the library's noise) against action ``a`` (``library.names`` order; the last
         label is `REST`, a constant template), ``inf`` where the segment runs past
         the recording's end or is an action shorter than the shortest duration.
     """
@@ -192,7 +197,7 @@ def segment_costs(
     # similar lengths share one program
     padded = -(-n_starts // _STARTS_PER_CHUNK) * _STARTS_PER_CHUNK + 1
     grid_p = np.concatenate([grid_x, np.repeat(grid_x[-1:], padded - n_starts - 1, 0)])
-    scale = _noise(recording)
+    scale = _scale(recording, library)
     costs = _segment_costs(METRICS[metric], int(n_samples),
                            jnp.asarray(grid_p / scale, jnp.float32),
                            jnp.int32(n_starts + 1),
@@ -212,6 +217,26 @@ def _noise(recording: Demonstration) -> np.ndarray:
              if d2.shape[0] else np.zeros(x.shape[1]))
     sigma = np.maximum(sigma, 1e-3 * np.ptp(x, axis=0))
     return np.where(sigma > 0, sigma, 1.0)
+
+
+def _scale(recording: Demonstration, library: ActionLibrary | None) -> np.ndarray:
+    """(F,) the unit of each feature in the search and the refinement: the larger
+    of its noise in the recording and in the library (a tracked video can be
+    cleaner than the demonstrations were; a feature constant up to rounding has
+    no noise of its own)."""
+    noise = _noise(recording)
+    return noise if library is None else np.maximum(noise, _library_noise(library))
+
+
+def _library_noise(library: ActionLibrary) -> np.ndarray:
+    """(F,) each feature's noise in the library's actions: `_noise`'s estimator
+    on the second differences of every action's knots, pooled (most knots of most
+    features are at rest or smooth, so the median is their noise)."""
+    d2 = np.concatenate([np.diff(np.asarray(a.knots, np.float64), n=2, axis=0)
+                         for a in library.values()])
+    if not d2.shape[0]:
+        return np.zeros(len(library.feature_names))  # actions of 2 knots or fewer
+    return np.median(np.abs(d2), axis=0) / (0.6745 * np.sqrt(6.0))
 
 
 def _templates(library: ActionLibrary, n: int) -> jax.Array:
@@ -392,7 +417,7 @@ def segment(
                 float(costs[s, index[e - s], a]))
         for s, e, a in path if a < len(library)
     ]
-    return refine_boundaries(recording, found) if refine else found
+    return refine_boundaries(recording, found, library) if refine else found
 
 
 def _fit_gap(t, y, end, start, box_end, box_start):
@@ -490,14 +515,15 @@ def _amplitude(t, y, start, end, duration):
     return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
-def refine_boundaries(recording: Demonstration,
-                      segments: Sequence[Segment]) -> list[Segment]:
+def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
+                      library: ActionLibrary | None = None) -> list[Segment]:
     """The segments' starts and ends refined on the recording's samples.
 
     Each gap between two segments (and the stretches before the first and after
     the last) is fitted by the object at rest between a minimum-jerk end of the
     action before and a minimum-jerk start of the action after (`segment`, step
-    4), each feature in units of its noise, on the samples from 0.2 of the
+    4), each feature in units of its noise (in the recording, or in the library
+    where given and larger: as the search), on the samples from 0.2 of the
     actions' durations inside them; a feature's amplitude is the action's net
     change (medians of the samples within 5 % of its duration of the given start
     and end) where that is at least 80 % of the feature's range over the action,
@@ -511,6 +537,8 @@ def refine_boundaries(recording: Demonstration,
         recording: the recording the segments were found in.
         segments: its action segments in time order (as `segment` with
             ``refine=False`` returns them).
+        library: the library they were found with (`segment` passes it): its
+            noise is each feature's least unit. None: the recording's noise only.
 
     Returns:
         The same segments with refined ``start`` and ``end`` (seconds); actions and
@@ -519,7 +547,7 @@ def refine_boundaries(recording: Demonstration,
     if not segments:
         return []
     t = recording.times
-    y = recording.features / _noise(recording)
+    y = recording.features / _scale(recording, library)
     n = len(segments)
     dur = [s.end - s.start for s in segments]
     box = [(s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,

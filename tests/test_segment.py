@@ -167,6 +167,34 @@ def test_refinement_finds_minimum_jerk_ends_exactly():
     assert refine_boundaries(rec, []) == []
 
 
+def test_refinement_measures_clean_features_in_the_library_s_noise():
+    # a clean recording (a tracked video): two minimum-jerk moves and a feature
+    # constant up to rounding; in units of its own noise (1e-16) that rounding
+    # decides the fit, in the library's noise (its knots') it is nothing
+    rate = 30.0
+    t = np.arange(int(12 * rate)) / rate
+    rng = np.random.default_rng(0)
+
+    def ramp(t0, d):
+        u = np.clip((t - t0) / d, 0.0, 1.0)
+        return u**3 * (10 - 15 * u + 6 * u**2)
+
+    x = np.stack([100 * ramp(1.0, 4.0) - 60 * ramp(6.0, 5.0),
+                  60.0 + 1e-13 * rng.standard_normal(t.size)], 1)
+    rec = Demonstration(t, x, ("a", "hue"), "clean")
+    demo = Demonstration(t, x + rng.normal(0.0, [3.0, 1.5], x.shape), ("a", "hue"), "d")
+    lib = ActionLibrary.from_demonstrations({"up": [demo]})
+    rough = [Segment("up", 1.4, 4.6, 0.0), Segment("up", 5.6, 10.5, 0.0)]
+    truth = [(1.0, 5.0), (6.0, 11.0)]
+
+    def worst(segments):
+        return max(max(abs(s.start - t0), abs(s.end - t1))
+                   for s, (t0, t1) in zip(segments, truth))
+
+    assert worst(refine_boundaries(rec, rough, lib)) <= 1 / rate + 1e-9
+    assert worst(refine_boundaries(rec, rough)) > 0.2  # the recording's noise only
+
+
 def test_synthetic_sequence_generator():
     seq = synthetic_sequence(["MOVE", "CLEAN", "PAINT"], seed=3, pause_s=(1.0, 1.0))
     rec, truth = seq

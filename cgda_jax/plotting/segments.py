@@ -22,6 +22,7 @@ def plot_segmentation(
     *,
     names: Sequence[str] | None = None,
     title: str | None = None,
+    truth: Sequence[tuple[str, float, float]] | None = None,
     path: str | os.PathLike | None = None,
 ) -> Figure:
     """One panel per feature over the recording's time; every segment shaded in its
@@ -34,6 +35,8 @@ def plot_segmentation(
         names: the F axis labels, units included (``"X [mm]"``); default the
             recording's feature names.
         title: figure title.
+        truth: the true ``(action, start, end)`` of each action (seconds), drawn
+            as dashed lines at the starts and dotted ones at the ends.
         path: PNG file to write.
     """
     t = np.asarray(recording.times, float)
@@ -47,6 +50,9 @@ def plot_segmentation(
     for i, ax in enumerate(axes[:, 0]):
         for s in segments:
             ax.axvspan(s.start, s.end, color=colours[s.action], alpha=0.22, lw=0)
+        for _, start, end in truth or ():
+            ax.axvline(start, color="0.3", lw=0.7, ls="--")
+            ax.axvline(end, color="0.3", lw=0.7, ls=":")
         ax.plot(t, x[:, i], color="0.15", lw=0.8)
         ax.set_ylabel(labels[i], fontsize=7, rotation=0, ha="right", va="center")
         ax.tick_params(labelsize=7)

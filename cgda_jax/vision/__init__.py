@@ -15,6 +15,9 @@ importing this package works without it, a call that needs it says what to insta
   of scripted MOVE / ROTATE / CLEAN / PAINT demonstrations, with ground truth;
   `render_shaded` (`cgda_jax.vision.shaded`): a box or cylinder turning under
   moving or dimming light, with MuJoCo's segmentation image as the truth.
+* `render_sequence` (`cgda_jax.vision.record`): several scripted actions in a row,
+  the true segments from the script; `synthetic_units` turns its track into the
+  synthetic set's features, for `cgda_jax.segment` against the synthetic library.
 
 References:
     Morante et al., "Humanoid Robot Imitation through Continuous Goal-Directed

@@ -23,23 +23,38 @@ Depth is MuJoCo's depth render, which `mujoco.Renderer` turns from the OpenGL de
 buffer into linear depth in metres with znear / zfar from ``model.vis.map`` times
 ``model.stat.extent``. Rendering needs an offscreen OpenGL (``MUJOCO_GL=egl`` or
 ``osmesa``; see `cgda_jax.sim.render`).
+
+`render_sequence` renders several actions in a row (`scripted_sequence`), with the
+true segments in recording.json, and `synthetic_units` turns its track into the
+synthetic set's features, for `cgda_jax.segmentation.segment` against the
+synthetic action library.
 """
 
 from __future__ import annotations
 
 import json
 import pathlib
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
 
 from cgda_jax.data import Demonstration, save_csv
+from cgda_jax.datasets.synthetic import MARKER_FEATURES
 from cgda_jax.sim import make_renderer
 from cgda_jax.vision.camera import Intrinsics, save_intrinsics
 from cgda_jax.vision.cv import cv2
-from cgda_jax.vision.scene import MARKER_HALF, SCENE_XML, Path, scripted_path
+from cgda_jax.vision.scene import (
+    MARKER_HALF,
+    SCENE_XML,
+    Path,
+    scripted_path,
+    scripted_sequence,
+)
+from cgda_jax.vision.track import DEPTH_FEATURES
 
-__all__ = ["TRUTH_FEATURES", "camera_intrinsics", "hsv_to_rgb", "render_recording"]
+__all__ = ["TRUTH_FEATURES", "camera_intrinsics", "hsv_to_rgb", "render_recording",
+           "render_sequence", "synthetic_units"]
 
 TRUTH_FEATURES = (
     "u_px", "v_px", "X_m", "Y_m", "Z_m", "area_px", "area_m2", "hue_0_180",
@@ -154,8 +169,96 @@ def render_recording(
         ValueError: an unknown action.
         RuntimeError: no offscreen OpenGL.
     """
-    folder = pathlib.Path(folder).expanduser()
     path = scripted_path(action, np.random.default_rng(seed), fps, occlude=occlude)
+    meta = {"fps": fps, "action": action, "seed": seed, "occlude": occlude}
+    return _render(folder, path, meta, f"{action}-{seed}", width=width, height=height,
+                   max_frames=max_frames, segmentation=segmentation,
+                   png_compression=png_compression)
+
+
+def render_sequence(
+    folder: str | pathlib.Path,
+    actions: Sequence[str] | None,
+    seed: int = 0,
+    *,
+    fps: float = 8.0,
+    width: int = 320,
+    height: int = 240,
+    pause_s: tuple[float, float] = (0.0, 0.0),
+    light_end: float = 1.0,
+    png_compression: int = 1,
+) -> tuple[Demonstration, list[tuple[str, float, float]]]:
+    """Render several scripted actions in a row (`scripted_sequence`: each starts
+    where the previous left the marker; with or without pauses) into a recording
+    folder, as `render_recording` writes one; ``recording.json`` also holds the
+    true ``"segments"``: ``[action, start_s, end_s]`` of each motion.
+
+    Args:
+        folder: the recording folder to write.
+        actions: the action names in order (at most one PAINT), or None: 2 to 6
+            drawn at random (`scripted_sequence`).
+        seed: seed of the repetitions' variability and placement.
+        fps, width, height, png_compression: as `render_recording` (defaults kept
+            small: rendering is the cost).
+        pause_s: (shortest, longest) rest between two actions in seconds.
+        light_end: the light (ambient and diffuse) at the last frame as a share of
+            the first, falling linearly (1: steady; 0.7: 30 % darker by the end,
+            the marker's value with it).
+
+    Returns:
+        The ground truth per frame (a `Demonstration`; its colour is the
+        material's, not the dimmed one) and the true segments.
+
+    Raises:
+        ValueError: an unknown action, two PAINTs, a path that does not fit in the
+            view (`scripted_sequence`), a light_end outside (0, 1].
+        RuntimeError: no offscreen OpenGL.
+    """
+    if not 0.0 < light_end <= 1.0:
+        raise ValueError(f"light_end must be in (0, 1], got {light_end!r}")
+    path, truth = scripted_sequence(actions, np.random.default_rng(seed), fps,
+                                    pause_s=pause_s)
+    meta = {"fps": fps, "actions": [a for a, _, _ in truth], "seed": seed,
+            "pause_s": list(pause_s), "light_end": light_end,
+            "segments": [list(s) for s in truth]}
+    light = np.linspace(1.0, light_end, len(path.times))
+    demo = _render(folder, path, meta, f"sequence-{seed}", width=width,
+                   height=height, png_compression=png_compression, light=light)
+    return demo, truth
+
+
+def synthetic_units(track: Demonstration) -> Demonstration:
+    """A track of a recording of this scene (`track_video` with depth and the
+    folder's intrinsics: `DEPTH_FEATURES`) in the features and units of the
+    synthetic set (`cgda_jax.datasets.synthetic.MARKER_FEATURES`), so the synthetic
+    action library recognizes it: X, Y, Z in millimetres in the synthetic set's
+    camera frame (X right, Y away from the demonstrator: up the image, the OpenCV
+    frame's -Y; Z depth), area in pixels, hue, saturation, value, angle in degrees
+    (counter-clockwise in the image, as both measure it).
+
+    Raises:
+        ValueError: a demonstration without the tracker's depth features (names the
+            missing ones).
+    """
+    names = track.feature_names
+    missing = [n for n in DEPTH_FEATURES if n not in names]
+    if missing:
+        raise ValueError(f"{track.name!r}: not a track with depth (no {missing}); "
+                         "track the recording with its depth folder and intrinsics")
+    col = {n: track.features[:, names.index(n)] for n in DEPTH_FEATURES}
+    x = np.stack([1000.0 * col["X_m"], -1000.0 * col["Y_m"], 1000.0 * col["Z_m"],
+                  col["area_px"], col["hue_0_180"], col["saturation_0_255"],
+                  col["value_0_255"], col["angle_deg"]], 1)
+    return Demonstration(track.times, x, MARKER_FEATURES, track.name)
+
+
+def _render(folder, path: Path, meta: dict, name: str, *, width: int, height: int,
+            max_frames: int | None = None, segmentation: bool = False,
+            png_compression: int = 9, light: np.ndarray | None = None) -> Demonstration:
+    """Render ``path`` into a recording folder (module doc); ``meta`` goes into
+    recording.json with the frame count; ``light`` (T,): the scene light's
+    ambient and diffuse per frame as a share of the model's."""
+    folder = pathlib.Path(folder).expanduser()
     n = len(path.times) if max_frames is None else min(int(max_frames), len(path.times))
     model = mujoco.MjModel.from_xml_string(SCENE_XML)
     model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
@@ -174,7 +277,11 @@ def render_recording(
     rows, seg_counts = [], []
     marker_geom = model.geom("marker").id
     try:
+        ambient, diffuse = model.light_ambient.copy(), model.light_diffuse.copy()
         for k in range(n):
+            if light is not None:
+                model.light_ambient[:] = ambient * light[k]
+                model.light_diffuse[:] = diffuse * light[k]
             _pose(model, data, path, k)
             images = []
             for r in renderers:
@@ -196,12 +303,10 @@ def render_recording(
         for r in renderers:
             r.close()
     save_intrinsics(cam, folder / "intrinsics.json")
-    (folder / "recording.json").write_text(json.dumps(
-        {"fps": fps, "action": action, "seed": seed, "frames": n, "occlude": occlude}
-    ) + "\n", encoding="utf-8")
+    (folder / "recording.json").write_text(
+        json.dumps({**meta, "frames": n}) + "\n", encoding="utf-8")
     if segmentation:
         np.save(folder / "segment.npy", np.asarray(seg_counts))
-    truth = Demonstration(path.times[:n], np.asarray(rows), TRUTH_FEATURES,
-                          f"{action}-{seed}")
+    truth = Demonstration(path.times[:n], np.asarray(rows), TRUTH_FEATURES, name)
     save_csv(truth, folder / "truth.csv")
     return truth

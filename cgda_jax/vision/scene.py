@@ -22,12 +22,14 @@ hesitation, a minimum-jerk profile; per-repetition place, heading, duration):
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
 from cgda_jax.datasets.synthetic import ACTIONS, repetition_progress
 
-__all__ = ["CAMERA_HEIGHT", "MARKER_HALF", "SCENE_XML", "Path", "scripted_path"]
+__all__ = ["CAMERA_HEIGHT", "MARKER_HALF", "SCENE_XML", "SEQUENCE_AREA_M", "Path",
+           "scripted_path", "scripted_sequence"]
 
 CAMERA_HEIGHT = 0.88
 MARKER_HALF = (0.04, 0.02, 0.001)  # half sizes (m) of the marker box
@@ -104,14 +106,8 @@ def _extent(yaw: np.ndarray, direction: np.ndarray) -> np.ndarray:
             + MARKER_HALF[1] * np.abs((ay * direction).sum(-1)))
 
 
-def scripted_path(
-    action: str, rng: np.random.Generator, fps: float, *, occlude: bool = False
-) -> Path:
-    """One repetition of ``action`` sampled at ``fps`` (module doc).
-
-    ``occlude``: a dark sheet passes over the marker for a few frames in the middle
-    (for the lost-object rule).
-    """
+def _motion(action: str, rng: np.random.Generator, fps: float):
+    """One repetition's marker (times, xy, yaw, hsv, scribble) and its progress p."""
     if action not in ACTIONS:
         raise ValueError(f"unknown action {action!r}; expected one of {ACTIONS}")
     duration = _DURATION_S[action] * rng.uniform(0.75, 1.35)
@@ -140,14 +136,117 @@ def scripted_path(
         scribble = 0.012 * np.stack([np.sin(w), np.sin(1.7 * w)], -1)
         scribble *= ((p > 0.0) & (p < 1.0))[:, None]
     hsv = _GREEN_HSV + (_BLUE_HSV - _GREEN_HSV) * coverage[:, None]
-    # The hand holds the marker's edge facing the demonstrator's shoulder.
+    return times, xy, yaw, hsv, scribble, p
+
+
+def _with_hand(times, xy, yaw, hsv, scribble, cover) -> Path:
+    """The path with the hand holding the marker's edge that faces the
+    demonstrator's shoulder."""
     to_shoulder = _SHOULDER - xy
     to_shoulder /= np.linalg.norm(to_shoulder, axis=-1, keepdims=True)
     gap = _extent(yaw, to_shoulder) + 0.045 + np.abs(scribble).sum(-1)
     hand = xy + gap[:, None] * to_shoulder + scribble
     hand_yaw = np.arctan2(to_shoulder[:, 1], to_shoulder[:, 0])
+    return Path(times, xy, yaw, hsv, hand, hand_yaw, cover)
+
+
+def scripted_path(
+    action: str, rng: np.random.Generator, fps: float, *, occlude: bool = False
+) -> Path:
+    """One repetition of ``action`` sampled at ``fps`` (module doc).
+
+    ``occlude``: a dark sheet passes over the marker for a few frames in the middle
+    (for the lost-object rule).
+    """
+    times, xy, yaw, hsv, scribble, _ = _motion(action, rng, fps)
+    n = len(times)
     cover = np.full((n, 2), np.nan)
     if occlude:
         mid = n // 2
         cover[mid - 2:mid + 2] = xy[mid - 2:mid + 2]
-    return Path(times, xy, yaw, hsv, hand, hand_yaw, cover)
+    return _with_hand(times, xy, yaw, hsv, scribble, cover)
+
+
+#: Where a sequence's marker centre may go on the desk (m): in the camera's view
+#: with a margin for the marker and the hand, clear of the cup.
+SEQUENCE_AREA_M = ((-0.38, 0.28), (-0.25, 0.2))
+
+
+def scripted_sequence(
+    actions: Sequence[str] | None, rng: np.random.Generator, fps: float, *,
+    pause_s: tuple[float, float] = (0.0, 0.0),
+) -> tuple[Path, list[tuple[str, float, float]]]:
+    """Several actions in a row: each a fresh repetition (`scripted_path`'s
+    variability), cut to its motion and moved to start where the previous one left
+    the marker (place, heading, colour), as `cgda_jax.datasets.synthetic_sequence`
+    builds its recordings. The marker rests 0.3-1 s before the first and after the
+    last, and for a time drawn from ``pause_s`` between two actions (``(0, 0)``: back
+    to back). The whole path is placed at random where it stays in
+    `SEQUENCE_AREA_M`. ``actions=None`` draws 2 to 6 actions at random (drawn
+    again until at most one is a PAINT and the path fits in the view).
+
+    Returns:
+        The path and the true ``(action, start, end)`` of each motion in seconds:
+        from the last frame at rest before it to the first at rest after it.
+
+    Raises:
+        ValueError: an unknown action, more than one PAINT (a second would paint
+            the blue marker black), or a sequence that does not fit in the view.
+    """
+    lo, hi = pause_s
+    if not 0.0 <= lo <= hi:
+        raise ValueError(f"pause_s must be (shortest, longest) with 0 <= shortest "
+                         f"<= longest, got {pause_s!r}")
+    if actions is None:
+        for _ in range(1000):
+            drawn = [str(a) for a in rng.choice(ACTIONS, size=rng.integers(2, 7))]
+            try:
+                return scripted_sequence(drawn, rng, fps, pause_s=pause_s)
+            except ValueError:
+                continue
+        raise ValueError("no sequence drawn in 1000 tries fits in the view")
+    actions = list(actions)
+    if not actions:
+        raise ValueError("a sequence needs at least one action")
+    if actions.count("PAINT") > 1:
+        raise ValueError(f"{actions}: at most one PAINT (the marker is painted once)")
+    xy, yaw, hsv, scribble, truth = [], [], [], [], []
+    here = (np.zeros(2), None, _GREEN_HSV)
+
+    def rest(seconds):
+        n = int(round(seconds * fps))
+        xy.append(np.tile(here[0], (n, 1)))
+        yaw.append(np.full(n, here[1]))
+        hsv.append(np.tile(here[2], (n, 1)))
+        scribble.append(np.zeros((n, 2)))
+
+    count = 0
+    for k, action in enumerate(actions):
+        _, m_xy, m_yaw, m_hsv, m_scr, p = _motion(action, rng, fps)
+        moving = np.flatnonzero((p > 0.0) & (p < 1.0))
+        first, last = max(moving[0] - 1, 0), min(moving[-1] + 1, len(p) - 1)
+        cut = slice(first, last + 1)
+        if here[1] is None:
+            here = (here[0], m_yaw[first], here[2])
+        if k == 0 or hi > 0:
+            rest(rng.uniform(0.3, 1.0) if k == 0 else rng.uniform(lo, hi))
+            count += len(xy[-1])
+        xy.append(m_xy[cut] - m_xy[first] + here[0])
+        yaw.append(m_yaw[cut] - m_yaw[first] + here[1])
+        hsv.append(m_hsv[cut] - m_hsv[first] + here[2])
+        scribble.append(m_scr[cut])
+        truth.append((action, float(count / fps), float((count + last - first) / fps)))
+        count += last - first + 1
+        here = (xy[-1][-1], yaw[-1][-1], hsv[-1][-1])
+    rest(rng.uniform(0.3, 1.0))
+    xy = np.concatenate(xy)
+    (x0, x1), (y0, y1) = SEQUENCE_AREA_M
+    low = np.array([x0, y0]) - xy.min(0)
+    high = np.array([x1, y1]) - xy.max(0)
+    if np.any(low > high):
+        raise ValueError(f"{actions}: the marker's path ({np.ptp(xy, 0)} m) does not "
+                         f"fit in the camera's view {SEQUENCE_AREA_M}")
+    xy = xy + rng.uniform(low, high)
+    times = np.arange(len(xy)) / fps
+    return (_with_hand(times, xy, np.concatenate(yaw), np.concatenate(hsv),
+                       np.concatenate(scribble), np.full((len(xy), 2), np.nan)), truth)
