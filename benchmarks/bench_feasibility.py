@@ -36,6 +36,20 @@ against one seed's single run (``judge = "ranked"``, the pooled-trials target: w
         [--export] [--on-only]
     python benchmarks/bench_feasibility.py --judge [--seeds 0 1 2 3] [--trials 10]
         [--only clean_ie paint_iet]
+
+``--ratios`` measures issue 39's targets for a single run, both sides in one
+process: for each experiment (default clean_ie, paint_iet, iron_ie_xgnitive,
+clean_fte) the unconstrained run (``strategy.feasibility = false``) and the feasible
+one (the defaults: round geometry, ``judge = "ranked"``) of seed 0, each compiled by
+its first run (``compile_time_s``, the unconstrained side first), then
+``--repeats`` runs of each alternately (median run time): the feasible run within
+3x of the unconstrained, its compile within 1.5x.  With ``--trials R`` (> 1) it
+adds the pooled row for clean_ie: R seeds in one ``run_trials`` call (its second
+call timed) against one seed's single run (within 3x) and against the sum of the
+R seeds' single runs.
+
+    python benchmarks/bench_feasibility.py --ratios [--repeats 5] [--trials 10]
+        [--only clean_ie ...]
 """
 
 from __future__ import annotations
@@ -220,6 +234,71 @@ def evaluation_cost(name: str, repeats: int = 15) -> dict:
             "best_half_same": bool(same)}
 
 
+RATIO_EXPERIMENTS = ["clean_ie", "paint_iet", "iron_ie_xgnitive", "clean_fte"]
+
+
+def ratios(names: list[str], repeats: int, trials: int) -> list[dict]:
+    """``--ratios``: feasible against unconstrained, seed 0 (module docstring)."""
+    from cgda_jax.strategies import run as run_strategy
+
+    rows = []
+    for name in names:
+        sides = {}
+        for feasible in (False, True):
+            cfg = load_config(resolve_config(name),
+                              [f"strategy.feasibility={str(feasible).lower()}"])
+            goal, demos, _ = build_goal(cfg)
+            sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+            s = cfg.strategy
+            kw = dict(algorithm=s.algorithm, population_size=s.population_size,
+                      tolerance=s.tolerance, max_generations=s.max_generations,
+                      chunk_size=s.chunk_size, **s.options)
+            sides[feasible] = (s, sim, goal, kw)
+
+        def once(feasible, seed=0):
+            s, sim, goal, kw = sides[feasible]
+            return run_strategy(s.name, sim, goal, seeds=(seed,), batching="single",
+                                **kw)[0]
+
+        first = {f: once(f) for f in (False, True)}  # compiles
+        runs = {False: [], True: []}
+        for _ in range(repeats):
+            for f in (False, True):
+                runs[f].append(once(f))
+        row = {"experiment": name}
+        for f, label in ((False, "off"), (True, "on")):
+            r = runs[f][-1]
+            row[f"{label}_run_s"] = float(np.median([x.wall_time_s for x in runs[f]]))
+            row[f"{label}_compile_s"] = float(first[f].compile_time_s)
+            row[f"{label}_generations"] = int(r.generations)
+            row[f"{label}_success"] = bool(r.success)
+        s, sim, goal, kw = sides[True]
+        r = runs[True][-1]
+        row["on_checked"] = (bool(motion_report(sim, np.asarray(r.joints))["feasible"])
+                             if r.success else None)
+        row["run_ratio"] = row["on_run_s"] / max(row["off_run_s"], 1e-9)
+        row["ms_per_generation_ratio"] = (
+            (row["on_run_s"] / max(row["on_generations"], 1))
+            / max(row["off_run_s"] / max(row["off_generations"], 1), 1e-12))
+        row["compile_ratio"] = row["on_compile_s"] / max(row["off_compile_s"], 1e-9)
+        if trials > 1 and name == "clean_ie":
+            for _ in range(2):  # the second call is the timed one
+                res = run_trials(s.name, sim, goal, trials, seed=0, **kw)
+            row["trials"] = trials
+            row["trials_run_s"] = float(res[0].wall_time_s)
+            row["trials_success"] = sum(bool(x.success) for x in res)
+            row["trials_over_one_seed"] = row["trials_run_s"] / max(row["on_run_s"],
+                                                                    1e-9)
+            # the same seeds run one by one: the work the batch shares
+            row["sum_of_singles_s"] = float(sum(once(True, k).wall_time_s
+                                                for k in range(trials)))
+            row["trials_over_sum_of_singles"] = row["trials_run_s"] / max(
+                row["sum_of_singles_s"], 1e-9)
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def judge_main(names: list[str], seeds: list[int], trials: int) -> None:
     """``--judge``: the rows of every experiment, then the ratios."""
     cost = [evaluation_cost(name) for name in names]
@@ -271,7 +350,17 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2, 3])
     ap.add_argument("--cost-only", action="store_true",
                     help="with --judge: only the evaluation cost (no runs)")
+    ap.add_argument("--ratios", action="store_true",
+                    help="feasible vs unconstrained run and compile, seed 0, one "
+                         "process (see the docstring)")
+    ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
+    if args.ratios:
+        os.environ.setdefault("CGDA_XGNITIVE_DIR", "../shared/data/xgnitive")
+        rows = ratios(args.only or RATIO_EXPERIMENTS, args.repeats, args.trials)
+        print_table(rows, list(dict.fromkeys(k for r in rows for k in r)))
+        write_json("feasibility_ratios", {"rows": rows})
+        return
     if args.judge:
         names = args.only or ["clean_ie", "paint_iet"]
         if args.cost_only:

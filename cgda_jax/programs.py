@@ -1,49 +1,89 @@
-"""Compiled programs reused within a process, keyed by what they compute.
+"""Compiled programs reused within a process and across processes.
 
 A run builds its plan, its simulator and its checks anew, as closures over new
 objects; ``jax.jit`` keys its cache on the Python function, so the same
-experiment run again in one process would compile every program again (clean_ie:
-12 programs, most of a second run's time).  `compile_lowered` keys a compiled
-program by its lowered StableHLO text instead (constants included, no source
-locations), its argument and result trees, and the backend and devices, the
-and every argument's type (an unused argument is pruned from the text but
-still checked by the call), the same content JAX's persistent cache keys on: a program identical to one compiled
-before in the process is taken from memory, and any difference (another goal,
-another robot, another population size, a constant changed by a setting) gives
-another text and a fresh compile.  Tracing and lowering still run (a few tenths
-of a second for clean_ie), compiling does not.
+experiment run again would trace, lower and compile every program again.  Two
+ways to find a program compiled before:
 
-Programs that call back into Python (``jax.pure_callback``: the MuJoCo C
-physics backend) are never shared: their text names the callback by an index,
-not by what it calls.  At most `MAX_PROGRAMS` are kept (least recently used
-dropped).  Across processes the persistent cache (``cgda`` turns it on,
-`cgda_jax.cli.enable_compilation_cache`) serves the same programs from disk.
+By what determines it, before tracing (`program_scope`, `compile_jit`): inside a
+scope whose key names everything a run's programs depend on (the experiment's
+resolved config, the content of every file it reads, the package's source, the
+versions of jax, jaxlib, MuJoCo, evosax and optax, the backend and its devices,
+JAX's numerics flags: `environment_digest`, `files_digest`, and
+`cgda_jax.experiment.programs_key.run_programs_key`), a program is keyed by the
+scope's key, the name of the place that builds it, its arguments' types and
+shardings, its ``jax.jit`` options and how many programs of that place and types the
+scope asked for before it (a run is deterministic: the same inputs ask for the
+same programs in the same order).  Found in memory or in the store on disk
+(`set_program_store`; ``cgda`` keeps it in its compilation cache folder), it is
+used without tracing; any change of config, data, model or code gives another
+key, hence a miss (traced, compiled, kept).  A stored program is the executable
+XLA compiled (``jax.experimental.serialize_executable``), written atomically in a
+versioned file with its key and a checksum; a file that cannot be read back (cut
+short, corrupt, another version) is dropped with a warning and the program
+compiled again.  The store is bounded (`MAX_STORE_BYTES`, oldest dropped).
+
+By what it computes (`compile_lowered`): outside a scope, a program is keyed by
+its lowered StableHLO text (constants included, no source locations), its
+argument and result trees, every argument's type (an unused argument is pruned
+from the text but still checked by the call) and the backend and devices, the
+same content JAX's persistent cache keys on.  Tracing and lowering still run,
+compiling does not.
+
+Programs that call back into Python (``jax.pure_callback``: the MuJoCo C physics
+backend) are never shared either way: their text names the callback by an index,
+not by what it calls.  At most `MAX_PROGRAMS` of each kind are kept in memory
+(least recently used dropped).  The source digest is taken once per process, on
+first use: edit the package while a process runs and that process keeps its
+digest; code replaced in a running process (a test's monkeypatch of a function a
+program calls) is not seen by the key either: run such code outside a scope.
 """
 
 from __future__ import annotations
 
 import collections
+import contextlib
+import contextvars
+import functools
 import hashlib
+import logging
+import os
+import pathlib
+import pickle
+import re
+import sys
+import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import jax
 
-__all__ = ["MAX_PROGRAMS", "cache_stats", "clear_programs", "compile_lowered",
-           "jit_call"]
+__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "STORE_VERSION", "cache_stats",
+           "clear_programs", "compile_jit", "compile_lowered", "environment_digest",
+           "files_digest", "jit_call", "program_scope", "program_store",
+           "set_program_store"]
 
-#: Compiled programs kept in memory at most.
+log = logging.getLogger("cgda_jax")
+
+#: Compiled programs kept in memory at most (each way of finding them).
 MAX_PROGRAMS = 64
+#: Bytes the program store on disk holds at most (oldest files dropped past it).
+MAX_STORE_BYTES = 512 * 2**20
+#: The store's file format; another version's files are misses.
+STORE_VERSION = 1
+_MAGIC = b"cgda-program"
 
 _PROGRAMS: collections.OrderedDict[str, Any] = collections.OrderedDict()
-_STATS = {"hits": 0, "misses": 0, "uncached": 0}
+_KEYED: collections.OrderedDict[str, Any] = collections.OrderedDict()
+_STATS = {"hits": 0, "misses": 0, "uncached": 0, "keyed_hits": 0, "store_hits": 0,
+          "traced": 0, "store_errors": 0}
 _LOCK = threading.Lock()
+_STORE: list[pathlib.Path | None] = [None]
 
 
-def _key(lowered: jax.stages.Lowered) -> str | None:
+def _key(lowered: jax.stages.Lowered, text: str) -> str | None:
     """The program's key, or None for one that must not be shared."""
-    text = lowered.as_text()
     if "callback" in text:  # host callbacks: named by index, not by what they do
         return None
     devices = [(d.platform, d.id) for d in jax.devices()]
@@ -56,6 +96,14 @@ def _key(lowered: jax.stages.Lowered) -> str | None:
     return h.hexdigest()
 
 
+def _remember(store: collections.OrderedDict, key: str, compiled: Any) -> None:
+    with _LOCK:
+        store[key] = compiled
+        store.move_to_end(key)
+        while len(store) > MAX_PROGRAMS:
+            store.popitem(last=False)
+
+
 def compile_lowered(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     """``lowered.compile()``, or the program compiled before in this process from
     the same lowered text (see the module doc).
@@ -63,44 +111,334 @@ def compile_lowered(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     Args:
         lowered: ``jax.jit(f, ...).lower(*args)``.
     """
-    key = _key(lowered)
+    return _compile(lowered, lowered.as_text())[0]
+
+
+def _compile(lowered: jax.stages.Lowered, text: str
+             ) -> tuple[jax.stages.Compiled, bool]:
+    """`compile_lowered` of ``lowered`` (its text ``text``), and whether the program
+    may be shared."""
+    key = _key(lowered, text)
     if key is None:
         with _LOCK:
             _STATS["uncached"] += 1
-        return lowered.compile()
+        return lowered.compile(), False
     with _LOCK:
         found = _PROGRAMS.get(key)
         if found is not None:
             _PROGRAMS.move_to_end(key)
             _STATS["hits"] += 1
-            return found
+            return found, True
     compiled = lowered.compile()
     with _LOCK:
         _STATS["misses"] += 1
-        _PROGRAMS[key] = compiled
-        while len(_PROGRAMS) > MAX_PROGRAMS:
-            _PROGRAMS.popitem(last=False)
+    _remember(_PROGRAMS, key, compiled)
+    return compiled, True
+
+
+# ------------------------------------------------------------- keyed before tracing
+class _Scope:
+    def __init__(self, key: str):
+        self.key = key
+        self.asked: collections.Counter[str] = collections.Counter()
+
+
+_SCOPE: contextvars.ContextVar[_Scope | None] = contextvars.ContextVar(
+    "cgda_program_scope", default=None)
+
+
+@contextlib.contextmanager
+def program_scope(key: str | None) -> Iterator[None]:
+    """Inside, `compile_jit` finds the programs compiled before under ``key`` (in
+    this process or in the store) without tracing them.
+
+    Args:
+        key: a digest of everything the programs compiled inside depend on besides
+            their arguments' types (`environment_digest`, `files_digest`, the
+            config); None: no reuse by key (`compile_lowered` still applies).
+    """
+    token = _SCOPE.set(None if key is None else _Scope(key))
+    try:
+        yield
+    finally:
+        _SCOPE.reset(token)
+
+
+def _leaf_type(x: Any) -> tuple:
+    sharding = getattr(x, "sharding", None)
+    return (type(x).__name__, tuple(getattr(x, "shape", ())),
+            str(getattr(x, "dtype", type(x).__name__)), getattr(x, "weak_type", None),
+            repr(sharding) if sharding is not None else None)
+
+
+def _program_key(scope: _Scope, name: str, args: tuple, jit_kw: dict) -> str:
+    leaves, tree = jax.tree.flatten(args)
+    what = repr((name, str(tree), [_leaf_type(x) for x in leaves],
+                 sorted((k, repr(v)) for k, v in jit_kw.items())))
+    with _LOCK:
+        n = scope.asked[what]
+        scope.asked[what] += 1
+    return hashlib.sha256(f"{scope.key}\n{what}\n{n}".encode()).hexdigest()
+
+
+def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
+                ) -> jax.stages.Compiled:
+    """``jax.jit(fn, **jit_kw).lower(*args).compile()``: inside a `program_scope`
+    found by key without tracing when compiled before (in memory or in the store),
+    else traced and compiled through `compile_lowered` and kept under its key.
+
+    Args:
+        name: the place that builds ``fn`` (one name per place: a module and what
+            it compiles).
+        fn, args: the function and its arguments (arrays or
+            ``jax.ShapeDtypeStruct``).
+        jit_kw: ``jax.jit`` options (shardings).
+    """
+    scope = _SCOPE.get()
+    key = None if scope is None else _program_key(scope, name, args, jit_kw)
+    if key is not None:
+        with _LOCK:
+            found = _KEYED.get(key)
+            if found is not None:
+                _KEYED.move_to_end(key)
+                _STATS["keyed_hits"] += 1
+                return found
+        found = _load(key)
+        if found is not None:
+            _remember(_KEYED, key, found)
+            return found
+    lowered = jax.jit(fn, **jit_kw).lower(*args)
+    with _LOCK:
+        _STATS["traced"] += 1
+    text = lowered.as_text()
+    compiled, shareable = _compile(lowered, text)
+    if key is not None and shareable:
+        _remember(_KEYED, key, compiled)
+        _save(key, compiled, set(_CUSTOM_CALL.findall(text)))
     return compiled
 
 
-def jit_call(fn: Callable, *args: Any) -> Any:
-    """``jax.jit(fn)(*args)``, its program compiled through `compile_lowered`: for
-    a function built anew on each call (a closure over a new simulator) whose
-    program is often the same."""
-    return compile_lowered(jax.jit(fn).lower(*args))(*args)
+def jit_call(fn: Callable, *args: Any, name: str | None = None) -> Any:
+    """``jax.jit(fn)(*args)`` through `compile_jit` (named after ``fn`` unless
+    ``name``): for a function built anew on each call (a closure over a new
+    simulator) whose program is often the same."""
+    name = name or f"{getattr(fn, '__module__', '')}.{getattr(fn, '__qualname__', fn)}"
+    return compile_jit(name, fn, *args)(*args)
+
+
+# -------------------------------------------------------------------------- store
+def set_program_store(folder: str | os.PathLike | None) -> None:
+    """Keep the programs compiled in a `program_scope` in ``folder`` too (None: in
+    memory only)."""
+    _STORE[0] = None if folder is None else pathlib.Path(folder)
+
+
+def program_store() -> pathlib.Path | None:
+    """The folder `set_program_store` set, or None."""
+    return _STORE[0]
+
+
+#: A custom call in a program's text: its target's name.
+_CUSTOM_CALL = re.compile(r"custom_call @([\w.$-]+)")
+
+
+def _storable(targets: set[str]) -> bool:
+    """A program whose custom calls are all LAPACK's (CMA-ES's ``eigh``: its
+    handlers are set up before loading, `_prepare`) or none; another custom call's
+    handler may need a set-up that lowering does and loading does not, so such a
+    program is kept in memory only."""
+    return all(t.startswith("lapack_") for t in targets)
+
+
+def _prepare(targets: Iterable[str]) -> None:
+    """Set up what a loaded program's custom calls need (LAPACK's kernels are set
+    up by lowering a LAPACK call, which a loaded program skips: without it the
+    call crashes the process)."""
+    if any(t.startswith("lapack_") for t in targets):
+        import numpy as np
+        from jaxlib import lapack
+
+        lapack.prepare_lapack_call("syevd", np.float32)
+
+
+def _path(key: str) -> pathlib.Path | None:
+    folder = _STORE[0]
+    return None if folder is None else folder / f"{key}.v{STORE_VERSION}.prog"
+
+
+def _load(key: str) -> jax.stages.Compiled | None:
+    path = _path(key)
+    if path is None or not path.is_file():
+        return None
+    from jax.experimental import serialize_executable
+
+    try:
+        data = path.read_bytes()
+        head = _MAGIC + f" {STORE_VERSION} {key}\n".encode()
+        digest, body = data[len(head):len(head) + 32], data[len(head) + 32:]
+        if not data.startswith(head) or hashlib.sha256(body).digest() != digest:
+            raise ValueError("not a complete program file of this version")
+        payload, in_tree, out_tree, targets = pickle.loads(body)
+        if not _storable(targets):
+            raise ValueError(f"custom calls {sorted(targets)} cannot be loaded")
+        _prepare(targets)
+        compiled = serialize_executable.deserialize_and_load(payload, in_tree, out_tree)
+    except Exception as err:  # noqa: BLE001 - any unreadable file is a miss
+        with _LOCK:
+            _STATS["store_errors"] += 1
+        log.warning("stored program %s could not be read (%s: %s); compiling it "
+                    "again", path, type(err).__name__, err)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    with _LOCK:
+        _STATS["store_hits"] += 1
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used: dropped last
+    return compiled
+
+
+def _save(key: str, compiled: jax.stages.Compiled, targets: set[str]) -> None:
+    path = _path(key)
+    if path is None or not _storable(targets):
+        return
+    from jax.experimental import serialize_executable
+
+    try:
+        body = pickle.dumps((*serialize_executable.serialize(compiled), targets),
+                            protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as err:  # noqa: BLE001 - a program that cannot be stored
+        log.debug("program %s not stored: %s", key, err)
+        return
+    data = (_MAGIC + f" {STORE_VERSION} {key}\n".encode()
+            + hashlib.sha256(body).digest() + body)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+        _bound(path.parent)
+    except OSError as err:
+        log.warning("program store %s not written: %s", path.parent, err)
+        with contextlib.suppress(OSError, UnboundLocalError):
+            os.unlink(tmp)
+
+
+def _bound(folder: pathlib.Path) -> None:
+    """Drop the least recently used program files past `MAX_STORE_BYTES`."""
+    files = []
+    for p in folder.glob("*.prog"):
+        with contextlib.suppress(OSError):
+            st = p.stat()
+            files.append((st.st_mtime, st.st_size, p))
+    total = sum(f[1] for f in files)
+    for _, size, p in sorted(files, key=lambda f: f[0]):
+        if total <= MAX_STORE_BYTES:
+            break
+        with contextlib.suppress(OSError):
+            p.unlink()
+            total -= size
+
+
+# ------------------------------------------------------------------------ digests
+def files_digest(paths: Iterable[str | os.PathLike], max_bytes: int = 256 << 20,
+                 max_files: int = 5000) -> str | None:
+    """SHA-256 over the names and contents of ``paths`` (a folder: every file
+    under it, sorted); None when they hold more than ``max_bytes`` or
+    ``max_files`` (too much to read for a key: no reuse by key)."""
+    h = hashlib.sha256()
+    total = 0
+    count = 0
+    for root in sorted({pathlib.Path(p).resolve() for p in paths}):
+        files = []
+        if root.is_dir():
+            for q in root.rglob("*"):
+                count += 1
+                if count > max_files:
+                    return None
+                if q.is_file():
+                    files.append(q)
+            files.sort()
+        elif root.is_file():
+            files = [root]
+        h.update(f"{root}:{len(files)}\n".encode())
+        for f in files:
+            total += f.stat().st_size
+            if total > max_bytes:
+                return None
+            h.update(f"{f.relative_to(root) if root.is_dir() else f.name}\n".encode())
+            with open(f, "rb") as fh:
+                h.update(hashlib.file_digest(fh, "sha256").digest())
+    return h.hexdigest()
+
+
+@functools.cache
+def _source_digest() -> str:
+    package = pathlib.Path(__file__).resolve().parent
+    return files_digest(sorted(package.rglob("*.py"))) or ""
+
+
+def _version(dist: str) -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return "-"
+
+
+@functools.cache
+def _host() -> str:
+    """The machine and, on Linux, the CPU's model and instruction-set flags (XLA
+    compiles CPU programs for the host's: a store shared by two machines must not
+    give one the other's)."""
+    import platform
+
+    lines = []
+    with contextlib.suppress(OSError):
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.startswith(("model name", "flags", "Features")):
+                    lines.append(line.strip())
+                if len(lines) >= 2:
+                    break
+    return repr((platform.machine(), platform.processor(), lines))
+
+
+def environment_digest() -> str:
+    """SHA-256 of what a program depends on besides its experiment: the package's
+    source (every ``cgda_jax/**/*.py``), the versions of Python, jax, jaxlib,
+    MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices, the
+    host's CPU (model, instruction sets), JAX's numerics flags and
+    ``$XLA_FLAGS``."""
+    flags = {k: getattr(jax.config, k, None) for k in (
+        "jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_rank_promotion",
+        "jax_default_prng_impl", "jax_threefry_partitionable", "jax_disable_jit")}
+    what = repr((_source_digest(), _host(), sys.version,
+                 [_version(d) for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx",
+                                        "evosax", "optax", "numpy")],
+                 jax.default_backend(),
+                 [(d.platform, d.device_kind, d.id) for d in jax.devices()],
+                 sorted(flags.items()), os.environ.get("XLA_FLAGS", "")))
+    return hashlib.sha256(what.encode()).hexdigest()
 
 
 def cache_stats() -> dict[str, int]:
-    """``hits``, ``misses`` (compiled and kept) and ``uncached`` (host callbacks)
-    of `compile_lowered` since the process started (or `clear_programs`), and
-    ``programs`` kept now."""
+    """Since the process started (or `clear_programs`): `compile_lowered`'s
+    ``hits``, ``misses`` (compiled and kept) and ``uncached`` (host callbacks);
+    `compile_jit`'s ``keyed_hits`` (in memory), ``store_hits`` (read from the
+    store), ``store_errors`` (files dropped) and ``traced`` (programs traced and
+    lowered); ``programs`` and ``keyed`` kept now."""
     with _LOCK:
-        return dict(_STATS, programs=len(_PROGRAMS))
+        return dict(_STATS, programs=len(_PROGRAMS), keyed=len(_KEYED))
 
 
 def clear_programs() -> None:
-    """Forget every kept program and zero `cache_stats`."""
+    """Forget every program kept in memory and zero `cache_stats` (the store on
+    disk stays)."""
     with _LOCK:
         _PROGRAMS.clear()
+        _KEYED.clear()
         for k in _STATS:
             _STATS[k] = 0

@@ -70,6 +70,34 @@ def test_judge_best_judges_a_round_when_the_best_are_feasible():
     np.testing.assert_array_equal(np.asarray(got)[20:], np.arange(20, 32) + 1e3)
 
 
+@pytest.mark.parametrize("n,ranks", [(32, 16), (9, 4)])
+def test_judge_best_with_a_lead_judges_it_first_and_the_rest_as_without(n, ranks):
+    """``lead``: a move judged whatever its fitness (IE's best in context) joins
+    the first round; the other candidates' values, violations and rounds are
+    those of `judge_best` without it (the reference), bit for bit."""
+    rng = np.random.default_rng(n)
+    size = judged_round(ranks)
+
+    runs = {lead: jax.jit(lambda f, v, lead=lead: judge_best(
+        f, lambda idx: v[idx], 1e3, ranks, size, lead=lead)) for lead in (0, 1)}
+
+    def run(f, v, lead):
+        return [np.asarray(x) for x in runs[lead](f, v)]
+
+    for _ in range(40):
+        f = (rng.random(n) * rng.choice([0.01, 1.0, 100.0])).astype(np.float32)
+        f[rng.random(n) < 0.1] = np.inf
+        v = np.where(rng.random(n) < rng.random(), rng.random(n) * 3, 0.0)
+        v = v.astype(np.float32)
+        lead_v = np.float32(rng.random() * (rng.random() < 0.5))
+        got, viol = run(jnp.asarray(f), jnp.asarray(v), 0)
+        got1, viol1 = run(jnp.concatenate([jnp.zeros(1), jnp.asarray(f)]),
+                          jnp.concatenate([jnp.asarray([lead_v]), jnp.asarray(v)]), 1)
+        np.testing.assert_array_equal(got1[1:], got)
+        np.testing.assert_array_equal(viol1[1:], viol)
+        assert viol1[0] == lead_v  # judged whatever its (zero) fitness
+
+
 def test_formulas():
     feats = np.array([[0.0, 3.0], [1.0, 1.0]], np.float32)
     goal = np.array([[4.0, 0.0], [1.0, 1.0]], np.float32)

@@ -67,9 +67,9 @@ def _move_traces(monkeypatch):
 
 @pytest.mark.parametrize("plan_cls, judge, checks", [
     (IEPlan, "all", 1), (IETPlan, "all", 1), (IETPlan, "ranked", 1),
-    # ranked IE: the bests in their contexts, then the candidates in rounds
-    # (`fitness.judge_best`): two distinct sets of moves, two copies
-    (IEPlan, "ranked", 2)])
+    # ranked IE: the bests in their contexts join the candidates' first round
+    # (`fitness.judge_best`'s ``lead``): one call, one copy
+    (IEPlan, "ranked", 1)])
 def test_a_generation_program_carries_one_collision_check(sim, plan_cls, judge, checks,
                                                           monkeypatch):
     """Tracing one generation calls `Feasibility.move` at one place per set of

@@ -110,6 +110,10 @@ def _dispatch(args, session: Session, signals: Signals) -> int:
         join_job(args, session)  # a multi-process --trials job: before any JAX work
         if not args.no_cache:
             enable_compilation_cache()
+        else:  # nor the program store an earlier call in this process set
+            from cgda_jax.programs import set_program_store
+
+            set_program_store(None)
         if args.command == "run":
             return cmd_run(args, session)
         if args.command == "plot":

@@ -322,7 +322,9 @@ def _cache_dir() -> pathlib.Path:
 
 
 def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
-    """Turn on JAX's persistent compilation cache, small programs included.
+    """Turn on JAX's persistent compilation cache, small programs included, and
+    keep the programs of a run, found without tracing, in its ``programs/``
+    (`cgda_jax.programs.set_program_store`).
 
     Raises:
         FolderError: the folder cannot be created or written (names it and
@@ -330,6 +332,7 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     """
     import jax
 
+    from cgda_jax.programs import set_program_store
     from cgda_jax.results_folder.rules import FolderError, check_writable
 
     path = path or _cache_dir()
@@ -345,4 +348,5 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    set_program_store(path / "programs")  # found there without tracing
     return path

@@ -41,7 +41,9 @@ another's ``_private`` name:
 12. :mod:`~cgda_jax.experiment.figures`: the figures and the robot's video of a run,
     drawn from what its folder stores (also ``cgda plot``).
 13. :mod:`~cgda_jax.experiment.run`: one run into its folder (`start_run`,
-    `run_experiment`): computes, then draws and writes its outputs.
+    `run_experiment`): computes, then draws and writes its outputs; its programs
+    are found without tracing by the key of
+    :mod:`~cgda_jax.experiment.programs_key` (`run_programs_key`).
 14. :mod:`~cgda_jax.experiment.success_rate`: many seeds of one experiment (``cgda
     trials``).
 

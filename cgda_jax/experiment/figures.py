@@ -4,11 +4,14 @@ video (MP4 + GIF, 640x480) and frame strip, with the goal drawn in."""
 
 from __future__ import annotations
 
+import importlib
 import logging
 import math
 import os
 import pathlib
 import textwrap
+import threading
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -26,6 +29,31 @@ def _close_all() -> None:
     import matplotlib.pyplot as plt
 
     plt.close("all")
+
+
+def import_drawing(plots: bool, render: bool) -> threading.Thread | None:
+    """Import what drawing needs (the figures with matplotlib; MuJoCo's renderer
+    and the video writer) in a thread, while the run computes (its programs run
+    without Python's lock); the drawing finds them loaded, or waits for the
+    import under way (Python's import lock)."""
+    if not (plots or render):
+        return None
+
+    def load() -> None:
+        try:
+            from cgda_jax import plotting
+
+            for name in plotting.__all__:  # each figure's module, matplotlib
+                getattr(plotting, name)
+            if render:
+                importlib.import_module("cgda_jax.sim.render")
+                importlib.import_module("cgda_jax.sim.video")
+        except Exception:  # noqa: BLE001 - the drawing imports it and says why
+            return
+
+    thread = threading.Thread(target=load, name="cgda-import-drawing", daemon=True)
+    thread.start()
+    return thread
 
 
 def draw_figures(run: Run, out: str | os.PathLike) -> list[pathlib.Path]:
@@ -268,7 +296,8 @@ def frames_per_waypoint(sim) -> int:
 
 
 def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
-               size: tuple[int, int] = VIDEO_SIZE) -> dict:
+               size: tuple[int, int] = VIDEO_SIZE,
+               alongside: Callable[[], object] | None = None) -> dict:
     """The robot executing the run's best joints: ``execution.mp4``,
     ``execution.gif`` (``size`` pixels; the start, then `frames_per_waypoint`
     frames per goal point; the GIF in one shared palette) and the frame strip
@@ -279,34 +308,41 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
     being reached (paint: its target and the painted percentage). Shadows are off
     (half a frame's time; no pixel of the built-in scenes changes, `cgda_jax.sim.render`).
 
-    Never raises: when offscreen OpenGL (or anything else in rendering) fails,
-    logs one warning on the ``cgda_jax`` logger and returns ``{"ok": False,
-    "reason": ...}``; otherwise ``{"ok": True, "gif": ..., "mp4": ..., "frames": ...,
-    "backend": ...}`` (paths relative to the results folder).
+    ``alongside`` (e.g. the figures) is called in this thread while the frames
+    render and the videos are written in another (OpenGL and the encoders run
+    without Python's lock; matplotlib stays in this thread); its errors are
+    raised once the videos are done.
+
+    Never raises (but for ``alongside``): when offscreen OpenGL (or anything else
+    in rendering) fails, logs one warning on the ``cgda_jax`` logger and returns
+    ``{"ok": False, "reason": ...}``; otherwise ``{"ok": True, "gif": ..., "mp4":
+    ..., "frames": ..., "backend": ...}`` (paths relative to the results folder).
     """
     out = pathlib.Path(out)
+    done: dict[str, Any] = {}
+
+    def videos() -> None:
+        try:
+            done["frames"] = _render_videos(run, out, sim, size)
+        except Exception as err:  # noqa: BLE001 - reported below, never fatal
+            done["error"] = err
+
+    if alongside is None:
+        videos()
+    else:
+        thread = threading.Thread(target=videos, name="cgda-render", daemon=True)
+        thread.start()
+        try:
+            alongside()
+        finally:
+            thread.join()
     try:
+        if "error" in done:
+            raise done["error"]
         from cgda_jax import plotting
         from cgda_jax.sim import last_backend
-        from cgda_jax.sim.render import render_frames
-        from cgda_jax.sim.video import write_video
 
-        sim = sim if sim is not None else run.simulator()
-        joints = np.asarray(run.arrays["joints"], np.float32)
-        fpw = frames_per_waypoint(sim)
-        marker = type(sim.scene).__name__ == "MarkerScene"
-        goal = np.asarray(run.arrays["goal"], float)
-        camera = _camera(sim, goal if marker else None, joints,
-                         getattr(run.config.output, "camera", None))
-        frames = render_frames(
-            sim, joints, frames_per_waypoint=fpw, width=size[0], height=size[1],
-            goal_points=goal if marker else None, captions=_captions(run, sim),
-            shadows=False, trace=True, **camera,
-        )
-        out.mkdir(parents=True, exist_ok=True)
-        fps = max(4, 2 * fpw)
-        write_video(frames.images, out / "execution.mp4", fps)
-        write_video(frames.images, out / "execution.gif", fps)
+        frames = done["frames"]
         at = frames.at_points()  # start, point 1, ..., point N
         pick = np.unique(np.linspace(0, len(at) - 1, min(n_strip, len(at)))
                          .round().astype(int))
@@ -325,3 +361,27 @@ def render_run(run: Run, out: str | os.PathLike, sim=None, *, n_strip: int = 8,
     return {"ok": True, "gif": "plots/execution.gif", "mp4": "plots/execution.mp4",
             "frames": "plots/frames.png", "size": list(size),
             "backend": last_backend()}
+
+
+def _render_videos(run: Run, out: pathlib.Path, sim, size: tuple[int, int]):
+    """`render_run`'s frames and its two videos (no matplotlib: any thread)."""
+    from cgda_jax.sim.render import render_frames
+    from cgda_jax.sim.video import write_video
+
+    sim = sim if sim is not None else run.simulator()
+    joints = np.asarray(run.arrays["joints"], np.float32)
+    fpw = frames_per_waypoint(sim)
+    marker = type(sim.scene).__name__ == "MarkerScene"
+    goal = np.asarray(run.arrays["goal"], float)
+    camera = _camera(sim, goal if marker else None, joints,
+                     getattr(run.config.output, "camera", None))
+    frames = render_frames(
+        sim, joints, frames_per_waypoint=fpw, width=size[0], height=size[1],
+        goal_points=goal if marker else None, captions=_captions(run, sim),
+        shadows=False, trace=True, **camera,
+    )
+    out.mkdir(parents=True, exist_ok=True)
+    fps = max(4, 2 * fpw)
+    write_video(frames.images, out / "execution.mp4", fps)
+    write_video(frames.images, out / "execution.gif", fps)
+    return frames

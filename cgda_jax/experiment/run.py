@@ -19,10 +19,12 @@ import numpy as np
 from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.compute import compute_execution, compute_recognition
 from cgda_jax.experiment.config import ExperimentConfig, dump_config
-from cgda_jax.experiment.figures import draw_figures, render_run
+from cgda_jax.experiment.figures import draw_figures, import_drawing, render_run
 from cgda_jax.experiment.load import run_in_memory
+from cgda_jax.experiment.programs_key import run_programs_key
 from cgda_jax.experiment.report import report_markdown, write_json
 from cgda_jax.experiment.validate import check_and_build
+from cgda_jax.programs import program_scope
 from cgda_jax.results_folder.rules import expand
 from cgda_jax.results_folder.writing import RunFolder
 
@@ -66,10 +68,12 @@ class Outputs:
         if not (self.cfg.output.plots or self.cfg.output.render):
             return
         run = run_in_memory(self.folder, self.cfg, self.result, self.arrays)
-        if self.cfg.output.plots:
-            draw_figures(run, self.folder / "plots")
-        if self.cfg.output.render and self.sim is not None:
-            self.result["render"] = render_run(run, self.folder / "plots", self.sim)
+        plots = self.folder / "plots"
+        figures = (lambda: draw_figures(run, plots)) if self.cfg.output.plots else None
+        if self.cfg.output.render and self.sim is not None:  # the figures meanwhile
+            self.result["render"] = render_run(run, plots, self.sim, alongside=figures)
+        elif figures is not None:
+            figures()
 
     def finish(self) -> dict:
         """`draw`, then write ``result.json`` and ``report.md``; the result dict
@@ -102,12 +106,15 @@ def start_run(
     ``built``, what its checks built (`check_and_build`; default: checked and
     built here)."""
     t0 = time.perf_counter()
+    import_drawing(cfg.output.plots, cfg.output.render)  # while computing
     (folder / "config.toml").write_text(dump_config(cfg))
-    if cfg.kind == "recognition":
-        pending = Outputs(cfg, folder, *compute_recognition(cfg, folder))
-    else:
-        pending = Outputs(cfg, folder, *compute_execution(cfg, folder, progress_fn,
-                                                          built))
+    # its programs found without tracing when this config ran before
+    with program_scope(run_programs_key(cfg, "compute")):
+        if cfg.kind == "recognition":
+            pending = Outputs(cfg, folder, *compute_recognition(cfg, folder))
+        else:
+            pending = Outputs(cfg, folder, *compute_execution(cfg, folder,
+                                                              progress_fn, built))
     pending.compute_s = time.perf_counter() - t0
     return pending
 

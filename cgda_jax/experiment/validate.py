@@ -34,12 +34,14 @@ import numpy as np
 
 from cgda_jax.experiment.build import BuiltExecution
 from cgda_jax.experiment.config import OBJECT_SOURCES, ConfigError, ExperimentConfig
+from cgda_jax.experiment.programs_key import run_programs_key
 from cgda_jax.experiment.rules import (
     MAX_INTERVALS,
     check_camera,
     check_interval_count,
     validate_config,
 )
+from cgda_jax.programs import program_scope
 from cgda_jax.sizes import (
     SizeError,
     check_estimate,
@@ -391,9 +393,11 @@ def check_and_build(cfg: ExperimentConfig, trials: int | None = None,
     built once per run."""
     validate_config(cfg)
     _check_static(cfg, trials)
-    if cfg.kind == "recognition":
-        return _check_recognition(cfg), None
-    return _check_execution(cfg, trials, processes, local)
+    # its programs found without tracing when this config was checked before
+    with program_scope(run_programs_key(cfg, f"check {trials} {processes} {local}")):
+        if cfg.kind == "recognition":
+            return _check_recognition(cfg), None
+        return _check_execution(cfg, trials, processes, local)
 
 
 def check_experiment(cfg: ExperimentConfig, trials: int | None = None,

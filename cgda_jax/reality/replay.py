@@ -62,13 +62,11 @@ class SceneTracker:
     def _advance(self, state, path):
         """``_go`` compiled once per path shape (a program compiled before in the
         process for the same scene is reused: `cgda_jax.programs`)."""
-        import jax
-
-        from cgda_jax.programs import compile_lowered
+        from cgda_jax.programs import compile_jit
 
         if path.shape not in self._programs:
-            self._programs[path.shape] = compile_lowered(
-                jax.jit(self._go).lower(state, path))
+            self._programs[path.shape] = compile_jit("replay.advance", self._go,
+                                                     state, path)
         return self._programs[path.shape](state, path)
 
     def advance(self, markers: np.ndarray) -> np.ndarray:

@@ -286,17 +286,36 @@ class PlanBase:
         says why the best ranks are exact), and the moves' violations (P,; NaN
         where not judged).  Every candidate is stepped once, unjudged; the
         judged ones' moves are judged from those steps (`Simulator.judge`)."""
-        q = self.joints(pop_u)
-        news, feats = self.map_population(lambda w: self.advance(state, w), q)
-        fitness = self.outcome_fitness(state, pop_u, feats, None, goal_point, prefix_sq)
+        fitness, violation, _ = self.ranked_outcome_with(state, pop_u, goal_point,
+                                                         None, prefix_sq)
+        return fitness, violation
+
+    def ranked_outcome_with(self, state: Any, pop_u: jax.Array, goal_point: jax.Array,
+                            first_u: jax.Array | None,
+                            prefix_sq: jax.Array | None = None
+                            ) -> tuple[jax.Array, jax.Array, Any]:
+        """`ranked_outcome`, and with ``first_u`` (DoF,) also the move to that
+        posture judged, in the same call of the check (``judge_best``'s
+        ``lead``: the compiled program carries one copy of it): ``(fitness (P,),
+        violations (P,), (its features (F,), its violation))`` (None without)."""
+        lead = 0 if first_u is None else 1
+        u = pop_u if first_u is None else jnp.concatenate([first_u[None], pop_u])
+        news, feats = self.map_population(lambda w: self.advance(state, w),
+                                          self.joints(u))
+        fitness = self.outcome_fitness(state, pop_u, feats[lead:], None, goal_point,
+                                       prefix_sq)
 
         def judge(idx):
             picked = jax.tree.map(lambda x: x[idx], news)
             return jax.vmap(lambda new: self.sim.judge(state, new).move_violation)(
                 picked)
 
-        return judge_best(fitness, judge, self.feasibility.penalty, self.judge_ranks,
-                          judged_round(self.judge_ranks))
+        fitness, violation = judge_best(
+            jnp.concatenate([jnp.zeros((lead,), fitness.dtype), fitness]), judge,
+            self.feasibility.penalty, self.judge_ranks, judged_round(self.judge_ranks),
+            lead=lead)
+        first = None if first_u is None else (feats[0], violation[0])
+        return fitness[lead:], violation[lead:], first
 
     def stop(self, evo: Evolution) -> jax.Array:
         """Per-point stop: error below the aim (``aim * tolerance``) or

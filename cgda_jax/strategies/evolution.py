@@ -38,6 +38,8 @@ from evosax.algorithms import algorithms as _EVOSAX_ALGORITHMS
 from evosax.algorithms.population_based.base import PopulationBasedAlgorithm
 from flax import struct
 
+from cgda_jax.programs import jit_call
+
 __all__ = ["ALGORITHMS", "INVALID_PENALTY", "Evolution", "FitnessFn", "algorithm_name",
            "default_kwargs", "evolution_ask", "evolution_init", "evolution_step",
            "evolution_tell", "freeze", "from_joints", "make_algorithm", "screen",
@@ -159,9 +161,11 @@ def make_algorithm(
         raise ValueError(f"bad algorithm_kwargs for {name}: {err}") from None
     # evosax computes its default parameters with many small eager ops (each one a
     # compile on first use); tracing them as ONE program costs one compile instead
-    # (a few, e.g. LM_MA_ES, need concrete values: computed eagerly then).
+    # (a few, e.g. LM_MA_ES, need concrete values: computed eagerly then); compiled
+    # once per process, not per call (`cgda_jax.programs.jit_call`)
     try:
-        params = jax.jit(lambda: algo.default_params)()
+        params = jit_call(lambda: algo.default_params,
+                          name=f"evolution.default_params.{name}")
     except jax.errors.ConcretizationTypeError:
         params = algo.default_params
     overrides = dict(algorithm_params or {})

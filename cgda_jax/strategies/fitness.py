@@ -166,7 +166,7 @@ def judged_round(ranks: int) -> int:
 
 
 def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
-               size: int) -> tuple[Array, Array]:
+               size: int, lead: int = 0) -> tuple[Array, Array]:
     """The `penalized` fitness of a population where only the candidates whose
     rank matters are judged (traced; fixed shapes).
 
@@ -193,17 +193,33 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
     takes a slightly different step; the best, the mean update and the stop
     tests are exact.
 
+    With ``lead``, the first ``lead`` candidates are other moves that must be
+    judged whatever their fitness (IE's bests in their contexts,
+    `cgda_jax.strategies.base.PlanBase.ranked_outcome`): they join the first
+    round (``size + lead`` judged), count for no rank and leave every round's
+    set of the other candidates as without them, so that one call of ``judge``
+    judges both and the compiled program carries one copy of the check.
+
     Returns:
         ``(fitness (P,), violation (P,))``: penalized fitness as above; the
         judged candidates' violations, NaN where not judged.
     """
-    n = fitness.shape[0]
-    size = min(int(size), n)
-    rounds = -(-n // size)
-    key = jnp.where(jnp.isfinite(fitness), fitness, jnp.inf)
-    order = jnp.argsort(key)  # best first (stable: ties by index)
-    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:], (rounds * size - n,))])
-    need = min(int(ranks), n)
+    n, lead = fitness.shape[0], int(lead)
+    size = min(int(size), n - lead)
+    rounds = -(-(n - lead) // size)
+    first = jnp.arange(n) < lead  # judged in the first round, counted for no rank
+    key = jnp.where(first, -jnp.inf, jnp.where(jnp.isfinite(fitness), fitness, jnp.inf))
+    order = jnp.argsort(key)  # the leads, then best first (stable: ties by index)
+    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:],
+                                                     (rounds * size + lead - n,))])
+    # each round's positions in ``order``: the first round the leads and ``size``
+    # more, every later round its ``size`` (the last repeated ``lead`` times)
+    at = np.stack([np.concatenate([lead + r * size + np.arange(size),
+                                   np.full(lead, lead + r * size + size - 1)])
+                   for r in range(rounds)])
+    at[0] = np.arange(size + lead)
+    at = jnp.asarray(at, jnp.int32)
+    need = min(int(ranks), n - lead)
 
     def told(violation, judged):
         return jnp.where(judged, penalized(fitness, violation, penalty),
@@ -211,14 +227,14 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
 
     def enough(carry):
         r, violation, judged = carry
-        left = judged | ~jnp.isfinite(fitness)
+        left = judged | ~(jnp.isfinite(fitness) | first)
         m = jnp.min(jnp.where(left, jnp.inf, key))
-        ok = judged & (told(violation, judged) <= m)
+        ok = judged & ~first & (told(violation, judged) <= m)
         return (jnp.sum(ok) >= need) | jnp.all(left)
 
     def body(carry):
         r, violation, judged = carry
-        idx = jax.lax.dynamic_slice(order, (r * size,), (size,)).astype(jnp.int32)
+        idx = order[at[r]].astype(jnp.int32)
         v = jnp.asarray(judge(idx), jnp.float32)
         return r + 1, violation.at[idx].set(v), judged.at[idx].set(True)
 

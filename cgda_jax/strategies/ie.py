@@ -505,11 +505,11 @@ class IEPlan(PlanBase):
             )(states, cands)
             fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
                                                      violation[:, 1:], self.goal)
-        else:  # the bests judged, the candidates where their rank matters
-            feats, violation = jax.vmap(
-                lambda st, u: self.point_outcome(st, u[None]))(states, best_u)
-            fitness = jax.vmap(lambda st, pop, g: self.ranked_outcome(st, pop, g)[0])(
-                states, pops, self.goal)
+        else:  # the bests judged with the candidates whose rank matters
+            fitness, _, (feats, violation) = jax.vmap(
+                lambda st, pop, g, b: self.ranked_outcome_with(st, pop, g, b))(
+                states, pops, self.goal, best_u)
+            feats, violation = feats[:, None], violation[:, None]
         errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
         return (jnp.where(jnp.isfinite(errors), errors, jnp.inf), violation[:, 0],

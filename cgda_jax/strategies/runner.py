@@ -84,7 +84,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import NamedSharding, PartitionSpec
 
-from cgda_jax.programs import compile_lowered
+from cgda_jax.programs import compile_jit
 from cgda_jax.sharding import axis_shardings, resolve_devices, shard_leading
 from cgda_jax.sizes import check_estimate
 from cgda_jax.strategies.base import check_config
@@ -162,11 +162,13 @@ def compile_plan(
         init_kw = {"in_shardings": sharding, "out_shardings": cs}
         chunk_kw = {"in_shardings": (cs,), "out_shardings": (cs, ms)}
         carry_kw = {"in_shardings": (cs,)}
-    return tuple(  # a program compiled before in this process is reused
-        compile_lowered(jax.jit(f, **kw).lower(x)) for f, kw, x in (
-            (over_trials(plan.init), init_kw, keys), (chunk, chunk_kw, carry_shape),
-            (all_done, carry_kw, carry_shape),
-            (over_trials(plan.finish), carry_kw, carry_shape)))
+    return tuple(  # a program compiled before is reused (`cgda_jax.programs`)
+        compile_jit(f"runner.{plan.name}.{part}.{chunk_size}", f, x, **kw)
+        for part, f, kw, x in (
+            ("init", over_trials(plan.init), init_kw, keys),
+            ("chunk", chunk, chunk_kw, carry_shape),
+            ("done", all_done, carry_kw, carry_shape),
+            ("finish", over_trials(plan.finish), carry_kw, carry_shape)))
 
 
 def drive(
@@ -402,7 +404,7 @@ class _Programs:
         key = (name, str(key))
         if key not in self.cache:
             t0 = time.perf_counter()
-            self.cache[key] = compile_lowered(jax.jit(fn).lower(*args))
+            self.cache[key] = compile_jit(f"runner.trials.{name}", fn, *args)
             self.compile_s += time.perf_counter() - t0
         return self.cache[key]
 

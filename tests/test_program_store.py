@@ -1,0 +1,175 @@
+"""Programs found without tracing (issue 39, `cgda_jax.programs.program_scope`):
+a config run again finds every program by its key, in memory or in the store on
+disk (as a new process would), with the same results; any change of the config,
+the model file or a data file is a miss; a damaged store file is compiled again
+with a warning."""
+
+import json
+import logging
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cgda_jax import model_path
+from cgda_jax.experiment import load_config, run_experiment
+from cgda_jax.experiment.programs_key import run_programs_key
+from cgda_jax.programs import (
+    cache_stats,
+    clear_programs,
+    files_digest,
+    program_store,
+    set_program_store,
+)
+
+# IE on the tiny arm's clean circle, small and short, unconstrained (fewer programs)
+TINY = ["kind=execution", "data.source=clean_circle", "scene.kind=marker",
+        "strategy.name=ie", "strategy.population_size=8",
+        "strategy.max_generations=5", "strategy.tolerance=0.03",
+        "strategy.feasibility=false", "robot.substeps=2", "output.render=false",
+        "output.plots=false",
+        'robot.joints=["yaw", "shoulder", "elbow"]', "robot.fixed={}"]
+#: What differs between two runs of one config: the clocks.
+TIMES = {"wall_time_s", "compile_time_s", "compute_s", "outputs_s", "total_time_s",
+         "folder"}
+
+
+def _config(model: pathlib.Path, *extra: str):
+    return load_config(None, [*TINY, f"robot.model={model}", *extra])
+
+
+def _run(cfg, folder: pathlib.Path) -> tuple[dict, dict, dict]:
+    """The result (clocks aside), its arrays, and what `cache_stats` counted."""
+    before = cache_stats()
+    run_experiment(cfg, folder)
+    after = cache_stats()
+    arrays = dict(np.load(folder / "arrays.npz"))
+    kept = {k: v for k, v in json.loads((folder / "result.json").read_text()).items()
+            if k not in TIMES}
+    return kept, arrays, {k: after[k] - before[k] for k in after}
+
+
+def _same(a, b) -> None:
+    assert a[0] == b[0]
+    assert a[1].keys() == b[1].keys()
+    for k in a[1]:  # NaNs (the padding of the fitness history) equal
+        np.testing.assert_array_equal(a[1][k], b[1][k], err_msg=k)
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """A model file of its own, a store on disk, and the first run (all traced)."""
+    root = tmp_path_factory.mktemp("programs")
+    model = root / "arm" / "tiny_arm.xml"
+    model.parent.mkdir()
+    shutil.copy(model_path("tiny_arm.xml"), model)
+    before = program_store()
+    set_program_store(root / "store")
+    clear_programs()
+    try:
+        first = _run(_config(model), root / "first")
+        yield root, model, (*first, sorted((root / "store").glob("*.prog")))
+    finally:
+        set_program_store(before)
+
+
+def test_a_config_run_again_traces_nothing_and_finds_the_same(store):
+    root, model, first = store
+    assert first[2]["traced"] >= 5 and first[2]["keyed_hits"] == 0
+    assert len(first[3]) == first[2]["traced"]
+    again = _run(_config(model), root / "again")  # in memory
+    assert again[2]["traced"] == 0 and again[2]["keyed_hits"] == first[2]["traced"]
+    _same(first, again)
+    clear_programs()  # as a new process: every program read from the store
+    fresh = _run(_config(model), root / "fresh")
+    assert fresh[2]["traced"] == 0 and fresh[2]["store_hits"] == first[2]["traced"]
+    _same(first, fresh)
+
+
+def test_another_setting_or_model_is_a_miss(store):
+    root, model, first = store
+    # a constant of the search, no shape changed: its programs must not be taken
+    other = _run(_config(model, "strategy.tolerance=0.05"), root / "tolerance")
+    assert other[2]["traced"] >= 4 and other[2]["keyed_hits"] == 0
+    changed = root / "changed" / "tiny_arm.xml"
+    changed.parent.mkdir()
+    changed.write_text(model.read_text().replace("</mujoco>",
+                                                 "<!-- edited -->\n</mujoco>"))
+    cfg, edited = _config(model), _config(changed)
+    assert run_programs_key(cfg, "compute") != run_programs_key(edited, "compute")
+    # the same file edited in place: another key
+    key = run_programs_key(cfg, "compute")
+    text = model.read_text()
+    try:
+        model.write_text(text + "\n")
+        assert run_programs_key(cfg, "compute") != key
+    finally:
+        model.write_text(text)
+    assert run_programs_key(cfg, "compute") == key
+    assert run_programs_key(cfg, "check") != key
+
+
+def test_a_data_file_changed_is_another_key(tmp_path):
+    data = tmp_path / "data"
+    (data / "sub").mkdir(parents=True)
+    (data / "sub" / "demo.csv").write_text("1,2,3\n")
+    cfg = load_config(None, ["kind=recognition", "data.source=xgnitive",
+                             f"data.data_dir={data}"])
+    key = run_programs_key(cfg, "compute")
+    assert key == run_programs_key(cfg, "compute")
+    (data / "sub" / "demo.csv").write_text("1,2,4\n")
+    assert run_programs_key(cfg, "compute") != key
+    (data / "sub" / "demo.csv").rename(data / "demo.csv")  # a file moved
+    assert files_digest([data]) != files_digest([tmp_path / "none"])
+    moved = run_programs_key(cfg, "compute")
+    (data / "demo.csv").rename(data / "sub" / "demo.csv")
+    assert moved != run_programs_key(cfg, "compute")
+    assert files_digest([data], max_bytes=3) is None  # too large to read: no key
+
+
+def test_a_damaged_store_file_is_compiled_again_with_a_warning(store, caplog):
+    root, model, first = store
+    files = sorted(first[3], key=lambda f: f.stat().st_size)[:3]  # quick ones
+    files[0].write_bytes(files[0].read_bytes()[:100])  # cut short
+    body = bytearray(files[1].read_bytes())
+    body[-10] ^= 0xFF  # one byte flipped
+    files[1].write_bytes(bytes(body))
+    files[2].write_bytes(b"")
+    clear_programs()
+    with caplog.at_level(logging.WARNING, logger="cgda_jax"):
+        again = _run(_config(model), root / "damaged")
+    assert again[2]["store_errors"] == 3 and again[2]["traced"] == 3
+    assert sum("could not be read" in r.getMessage() for r in caplog.records) == 3
+    _same(first, again)
+    assert all(f.stat().st_size > 1000 for f in files)  # written again, whole
+
+
+LAPACK = """
+import sys
+import jax.numpy as jnp
+import numpy as np
+from cgda_jax.programs import cache_stats, compile_jit, program_scope, set_program_store
+set_program_store(sys.argv[1])
+x = jnp.asarray(np.diag([3.0, 1.0, 2.0]).astype(np.float32))
+with program_scope("a test's key"):  # CMA-ES's eigh: a LAPACK custom call
+    w = compile_jit("test.eigh", lambda a: jnp.linalg.eigh(a)[0], x)(x)
+s = cache_stats()
+print(np.asarray(w).tolist(), s["traced"], s["store_hits"])
+"""
+
+
+def test_a_stored_lapack_program_runs_in_a_new_process(tmp_path):
+    """LAPACK's kernels are set up by lowering a call to them, which a program
+    read from the store skips: without `_prepare` the second process crashed."""
+    out = []
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, "-c", LAPACK, str(tmp_path)],
+                              capture_output=True, text=True, timeout=300,
+                              env={**os.environ, "JAX_PLATFORMS": "cpu"})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        out.append(proc.stdout.strip().splitlines()[-1])
+    assert out == ["[1.0, 2.0, 3.0] 1 0", "[1.0, 2.0, 3.0] 0 1"]
