@@ -127,10 +127,12 @@ def run(name: str, trials: int, feasible: bool, export: bool = False) -> dict:
     }
 
 
-def _feasible_setup(name: str):
-    """Experiment ``name`` with feasibility on: its strategy config, simulator,
-    goal and the strategy's keyword settings (as ``cgda run`` passes them)."""
-    cfg = load_config(resolve_config(name), ["strategy.feasibility=true"])
+def _feasible_setup(name: str, feasible: bool = True):
+    """Experiment ``name`` with feasibility on (or off): its strategy config,
+    simulator, goal and the strategy's keyword settings (as ``cgda run`` passes
+    them)."""
+    cfg = load_config(resolve_config(name),
+                      [f"strategy.feasibility={str(feasible).lower()}"])
     goal, demos, _ = build_goal(cfg)
     sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
     s = cfg.strategy
@@ -245,15 +247,7 @@ def ratios(names: list[str], repeats: int, trials: int) -> list[dict]:
     for name in names:
         sides = {}
         for feasible in (False, True):
-            cfg = load_config(resolve_config(name),
-                              [f"strategy.feasibility={str(feasible).lower()}"])
-            goal, demos, _ = build_goal(cfg)
-            sim = build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
-            s = cfg.strategy
-            kw = dict(algorithm=s.algorithm, population_size=s.population_size,
-                      tolerance=s.tolerance, max_generations=s.max_generations,
-                      chunk_size=s.chunk_size, **s.options)
-            sides[feasible] = (s, sim, goal, kw)
+            sides[feasible] = _feasible_setup(name, feasible)
 
         def once(feasible, seed=0):
             s, sim, goal, kw = sides[feasible]

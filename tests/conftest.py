@@ -3,6 +3,8 @@ import os
 import pathlib
 import resource
 import signal
+import subprocess
+import sys
 
 import pytest
 
@@ -44,3 +46,25 @@ def full_disk():
             resource.setrlimit(resource.RLIMIT_FSIZE, old_limit)
             signal.signal(signal.SIGXFSZ, old_handler)
     return limited
+
+
+@pytest.fixture(scope="session")
+def offscreen_script():
+    """``offscreen_script(script, out)`` runs a Python ``script`` (given ``out`` as
+    its argument; it prints DONE at the end) in a subprocess under MUJOCO_GL=egl,
+    then osmesa; skips when neither gives an offscreen OpenGL context, fails on
+    any other error."""
+    def run(script: str, out: pathlib.Path) -> pathlib.Path:
+        for backend in ("egl", "osmesa"):
+            env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend,
+                       JAX_PLATFORMS="cpu", PYTHONPATH=str(REPO))
+            proc = subprocess.run([sys.executable, "-c", script, str(out)], env=env,
+                                  capture_output=True, text=True, timeout=300,
+                                  check=False)
+            if proc.returncode == 0 and "DONE" in proc.stdout:
+                return out
+            gl_words = ("offscreen", "EGL", "OSMesa", "OpenGL", "libGL")
+            if not any(word in proc.stderr for word in gl_words):
+                raise AssertionError(proc.stderr[-3000:])
+        pytest.skip("no offscreen OpenGL (MUJOCO_GL=egl or osmesa) on this machine")
+    return run

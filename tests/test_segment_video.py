@@ -13,10 +13,6 @@ the test skips without one.
 from __future__ import annotations
 
 import json
-import os
-import pathlib
-import subprocess
-import sys
 import warnings
 
 import numpy as np
@@ -44,20 +40,8 @@ print("DONE")
 
 
 @pytest.fixture(scope="module")
-def video(tmp_path_factory):
-    out = tmp_path_factory.mktemp("sequence")
-    root = pathlib.Path(__file__).resolve().parents[1]
-    for backend in ("egl", "osmesa"):
-        env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend,
-                   JAX_PLATFORMS="cpu", PYTHONPATH=str(root))
-        proc = subprocess.run([sys.executable, "-c", SCRIPT, str(out)], env=env,
-                              capture_output=True, text=True, timeout=300, check=False)
-        if proc.returncode == 0 and "DONE" in proc.stdout:
-            return out
-        gl_words = ("offscreen", "EGL", "OSMesa", "OpenGL", "libGL")
-        if not any(word in proc.stderr for word in gl_words):
-            raise AssertionError(proc.stderr[-3000:])
-    pytest.skip("no offscreen OpenGL (MUJOCO_GL=egl or osmesa) on this machine")
+def video(tmp_path_factory, offscreen_script):
+    return offscreen_script(SCRIPT, tmp_path_factory.mktemp("sequence"))
 
 
 def test_tracked_video_of_a_sequence_is_segmented(video, monkeypatch):

@@ -13,10 +13,6 @@ process (MuJoCo reads MUJOCO_GL at import), and the test skips without one.
 
 from __future__ import annotations
 
-import os
-import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -45,20 +41,8 @@ print("DONE")
 
 
 @pytest.fixture(scope="module")
-def clips(tmp_path_factory):
-    out = tmp_path_factory.mktemp("shaded")
-    root = pathlib.Path(__file__).resolve().parents[1]
-    for backend in ("egl", "osmesa"):
-        env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend,
-                   JAX_PLATFORMS="cpu", PYTHONPATH=str(root))
-        proc = subprocess.run([sys.executable, "-c", SCRIPT, str(out)], env=env,
-                              capture_output=True, text=True, timeout=300, check=False)
-        if proc.returncode == 0 and "DONE" in proc.stdout:
-            return out
-        gl_words = ("offscreen", "EGL", "OSMesa", "OpenGL", "libGL")
-        if not any(word in proc.stderr for word in gl_words):
-            raise AssertionError(proc.stderr[-3000:])
-    pytest.skip("no offscreen OpenGL (MUJOCO_GL=egl or osmesa) on this machine")
+def clips(tmp_path_factory, offscreen_script):
+    return offscreen_script(SCRIPT, tmp_path_factory.mktemp("shaded"))
 
 
 def _errors(track, truth):
