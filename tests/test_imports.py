@@ -267,8 +267,8 @@ def test_no_import_loop_with_type_only_imports():
 
 #: The modules of two packages in their import order (their package docstrings).
 ORDER = {
-    "experiment": ("sections", "config", "demo_suite", "locate", "rules", "build",
-                   "validate", "compute", "report", "load", "trajectory_file",
+    "experiment": ("sections", "config", "demo_suite", "locate", "programs_key",
+                   "rules", "build", "validate", "compute", "report", "load", "trajectory_file",
                    "figures", "run", "success_rate"),
     "cli": ("output", "list", "plot", "export", "track", "segment", "trials", "run",
             "demo", "app", "__main__"),

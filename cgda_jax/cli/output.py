@@ -32,6 +32,8 @@ EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
 EXIT_DIVERGED = EXIT_FAILURE
 #: Interrupted by a signal: 128 + its number.
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
+#: ``1`` turns on the store of a run's compiled programs in the cache folder.
+PROGRAM_STORE_ENV = "CGDA_JAX_PROGRAM_STORE"
 
 
 @dataclasses.dataclass
@@ -322,9 +324,10 @@ def _cache_dir() -> pathlib.Path:
 
 
 def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
-    """Turn on JAX's persistent compilation cache, small programs included, and
-    keep the programs of a run, found without tracing, in its ``programs/``
-    (`cgda_jax.programs.set_program_store`).
+    """Turn on JAX's persistent compilation cache, small programs included; with
+    ``$CGDA_JAX_PROGRAM_STORE=1`` also keep the programs of a run, found without
+    tracing, in its ``programs/`` (`cgda_jax.programs.set_program_store`; off by
+    default, see the comment below).
 
     Raises:
         FolderError: the folder cannot be created or written (names it and
@@ -348,5 +351,13 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    set_program_store(path / "programs")  # found there without tracing
+    # The store of serialized executables is opt-in: on the CPU, some executables
+    # read back in a new process failed when run ("NOT_FOUND: Function
+    # bitcast_concatenate_fusion.6 not found", CI of 2026-12-06, tests that share
+    # one cache folder across processes), so by default only the in-process reuse
+    # and JAX's persistent cache apply.
+    if os.environ.get(PROGRAM_STORE_ENV) == "1":
+        set_program_store(path / "programs")  # found there without tracing
+    else:
+        set_program_store(None)
     return path
