@@ -63,6 +63,14 @@ def _same(a, b) -> None:
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
     """A model file of its own, a store on disk, and the first run (all traced)."""
+    import jax
+
+    if jax.config.jax_compilation_cache_dir:
+        # another test in this worker turned JAX's persistent cache on: compiled
+        # programs may come from it, and such an executable serializes into one
+        # that fails when run (the known bug that keeps the store opt-in; see
+        # cgda_jax.cli.output.enable_compilation_cache)
+        pytest.skip("JAX's persistent compilation cache is on in this process")
     root = tmp_path_factory.mktemp("programs")
     model = root / "arm" / "tiny_arm.xml"
     model.parent.mkdir()

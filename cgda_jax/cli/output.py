@@ -351,11 +351,13 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    # The store of serialized executables is opt-in: on the CPU, some executables
-    # read back in a new process failed when run ("NOT_FOUND: Function
-    # bitcast_concatenate_fusion.6 not found", CI of 2026-12-06, tests that share
-    # one cache folder across processes), so by default only the in-process reuse
-    # and JAX's persistent cache apply.
+    # The store of serialized executables is opt-in: on the CPU (jax 0.10.2) an
+    # executable that XLA's compile took from JAX's persistent cache serializes
+    # into a program that fails when run in a new process ("Function
+    # concatenate_bitcast_fusion not found"; a freshly compiled one reads back and
+    # runs), which CI met in processes sharing one cache folder.  Until the store
+    # keeps only freshly compiled programs, only the in-process reuse and JAX's
+    # persistent cache apply by default.
     if os.environ.get(PROGRAM_STORE_ENV) == "1":
         set_program_store(path / "programs")  # found there without tracing
     else:
