@@ -15,10 +15,13 @@ scope's key, the name of the place that builds it, its arguments' types and
 shardings, its ``jax.jit`` options and how many programs of that place and types the
 scope asked for before it (a run is deterministic: the same inputs ask for the
 same programs in the same order).  Found in memory or in the store on disk
-(`set_program_store`; ``cgda`` keeps it in its compilation cache folder), it is
+(`set_program_store`; ``cgda`` keeps it in its compilation cache folder when
+``$CGDA_JAX_PROGRAM_STORE=1``), it is
 used without tracing; any change of config, data, model or code gives another
 key, hence a miss (traced, compiled, kept).  A stored program is the executable
-XLA compiled (``jax.experimental.serialize_executable``), written atomically in a
+XLA compiled in the process (one JAX's persistent cache served is not stored: on
+the CPU it serializes into a program that fails in a new process), by
+``jax.experimental.serialize_executable``, written atomically in a
 versioned file with its key and a checksum; a file that cannot be read back (cut
 short, corrupt, another version) is dropped with a warning and the program
 compiled again.  The store is bounded (`MAX_STORE_BYTES`, oldest dropped).
@@ -114,26 +117,49 @@ def compile_lowered(lowered: jax.stages.Lowered) -> jax.stages.Compiled:
     return _compile(lowered, lowered.as_text())[0]
 
 
+#: Per thread: how many programs JAX's persistent cache has served it.
+_PERSISTENT = threading.local()
+_LISTENING: list[bool] = [False]
+
+
+def _count_persistent_hit(event: str, **_: Any) -> None:
+    if event == "/jax/compilation_cache/cache_hits":
+        _PERSISTENT.hits = getattr(_PERSISTENT, "hits", 0) + 1
+
+
+def _xla_compile(lowered: jax.stages.Lowered) -> tuple[jax.stages.Compiled, bool]:
+    """``lowered.compile()``, and whether XLA compiled it here (False: JAX's
+    persistent cache served it; on the CPU such an executable, serialized, fails
+    when run in a new process, so the store keeps only fresh ones)."""
+    with _LOCK:
+        if not _LISTENING[0]:
+            jax.monitoring.register_event_listener(_count_persistent_hit)
+            _LISTENING[0] = True
+    before = getattr(_PERSISTENT, "hits", 0)
+    compiled = lowered.compile()
+    return compiled, getattr(_PERSISTENT, "hits", 0) == before
+
+
 def _compile(lowered: jax.stages.Lowered, text: str
-             ) -> tuple[jax.stages.Compiled, bool]:
-    """`compile_lowered` of ``lowered`` (its text ``text``), and whether the program
-    may be shared."""
+             ) -> tuple[jax.stages.Compiled, bool, bool]:
+    """`compile_lowered` of ``lowered`` (its text ``text``), whether the program
+    may be shared, and whether XLA compiled it in this process (`_xla_compile`)."""
     key = _key(lowered, text)
     if key is None:
         with _LOCK:
             _STATS["uncached"] += 1
-        return lowered.compile(), False
+        return lowered.compile(), False, False
     with _LOCK:
         found = _PROGRAMS.get(key)
         if found is not None:
             _PROGRAMS.move_to_end(key)
             _STATS["hits"] += 1
-            return found, True
-    compiled = lowered.compile()
+            return found[0], True, found[1]
+    compiled, fresh = _xla_compile(lowered)
     with _LOCK:
         _STATS["misses"] += 1
-    _remember(_PROGRAMS, key, compiled)
-    return compiled, True
+    _remember(_PROGRAMS, key, (compiled, fresh))
+    return compiled, True, fresh
 
 
 # ------------------------------------------------------------- keyed before tracing
@@ -211,10 +237,11 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
     with _LOCK:
         _STATS["traced"] += 1
     text = lowered.as_text()
-    compiled, shareable = _compile(lowered, text)
+    compiled, shareable, fresh = _compile(lowered, text)
     if key is not None and shareable:
         _remember(_KEYED, key, compiled)
-        _save(key, compiled, set(_CUSTOM_CALL.findall(text)))
+        if fresh:
+            _save(key, compiled, set(_CUSTOM_CALL.findall(text)))
     return compiled
 
 

@@ -67,9 +67,9 @@ def store(tmp_path_factory):
 
     if jax.config.jax_compilation_cache_dir:
         # another test in this worker turned JAX's persistent cache on: compiled
-        # programs may come from it, and such an executable serializes into one
-        # that fails when run (the known bug that keeps the store opt-in; see
-        # cgda_jax.cli.output.enable_compilation_cache)
+        # programs may come from it, and those are not stored (such an executable
+        # serializes into one that fails when run; see
+        # test_a_program_from_the_persistent_cache_is_not_stored)
         pytest.skip("JAX's persistent compilation cache is on in this process")
     root = tmp_path_factory.mktemp("programs")
     model = root / "arm" / "tiny_arm.xml"
@@ -181,3 +181,44 @@ def test_a_stored_lapack_program_runs_in_a_new_process(tmp_path):
         assert proc.returncode == 0, proc.stderr[-2000:]
         out.append(proc.stdout.strip().splitlines()[-1])
     assert out == ["[1.0, 2.0, 3.0] 1 0", "[1.0, 2.0, 3.0] 0 1"]
+
+
+PERSISTENT = """
+import sys
+import jax
+import jax.numpy as jnp
+import numpy as np
+from cgda_jax.programs import cache_stats, compile_jit, program_scope, set_program_store
+jax.config.update("jax_compilation_cache_dir", sys.argv[1])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+set_program_store(sys.argv[2])
+def f(x, y):
+    z = jnp.concatenate([x, y * 2.0, jnp.sin(x)])
+    return jnp.cumsum(z.reshape(3, -1).T @ z.reshape(3, -1), axis=0).sum()
+x, y = jnp.arange(300.0), jnp.ones(300)
+with program_scope("a test's key"):
+    v = compile_jit("test.concat", f, x, y)(x, y)
+s = cache_stats()
+print(float(v), s["traced"], s["store_hits"])
+"""
+
+
+def test_a_program_from_the_persistent_cache_is_not_stored(tmp_path):
+    """On the CPU an executable that JAX's persistent cache served serializes into
+    one that fails in a new process ("Function ... not found"): the store keeps
+    only programs XLA compiled in the process, and those run when read back."""
+    def run(store):
+        proc = subprocess.run(
+            [sys.executable, "-c", PERSISTENT, str(tmp_path / "jax"), str(store)],
+            capture_output=True, text=True, timeout=300,
+            env={**os.environ, "JAX_PLATFORMS": "cpu"})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return proc.stdout.strip().splitlines()[-1].split()
+
+    fresh = run(tmp_path / "fresh")  # compiled here: stored
+    assert fresh[1:] == ["1", "0"] and len(list((tmp_path / "fresh").glob("*.prog"))) == 1
+    served = run(tmp_path / "served")  # the persistent cache's: not stored
+    assert served[1:] == ["1", "0"] and not list((tmp_path / "served").glob("*.prog"))
+    back = run(tmp_path / "fresh")  # read back from the store, run in a new process
+    assert back == [fresh[0], "0", "1"]

@@ -355,9 +355,9 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     # executable that XLA's compile took from JAX's persistent cache serializes
     # into a program that fails when run in a new process ("Function
     # concatenate_bitcast_fusion not found"; a freshly compiled one reads back and
-    # runs), which CI met in processes sharing one cache folder.  Until the store
-    # keeps only freshly compiled programs, only the in-process reuse and JAX's
-    # persistent cache apply by default.
+    # runs), which CI met in processes sharing one cache folder.  The store now
+    # keeps only programs XLA compiled in the process (`cgda_jax.programs`); it
+    # stays opt-in until the whole suite has run with it on.
     if os.environ.get(PROGRAM_STORE_ENV) == "1":
         set_program_store(path / "programs")  # found there without tracing
     else:
