@@ -33,10 +33,14 @@ SETTINGS = {
 }
 
 
-def arm(n_joints: int, seed: int) -> tuple[Simulator, np.ndarray]:
+def arm(n_joints: int, seed: int, feasibility: bool = False
+        ) -> tuple[Simulator, np.ndarray]:
+    """The random arm's simulator (``feasibility``: every move judged, the model's
+    limits, `Simulator`'s ``feasibility=True``) and its reachable goal."""
     model = mujoco.MjModel.from_xml_string(random_arm_mjcf(n_joints, seed))
     robot = Robot(model, arm_joints(n_joints), "marker")
-    return Simulator(robot, MarkerScene(), substeps=4), reachable_goal(robot, 6, seed)
+    sim = Simulator(robot, MarkerScene(), substeps=4, feasibility=feasibility or None)
+    return sim, reachable_goal(robot, 6, seed)
 
 
 def main() -> None:

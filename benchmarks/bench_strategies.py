@@ -26,6 +26,16 @@ For experiments/clean_ie.toml, clean_fte.toml and paint_iet.toml (TEO's right ar
     python benchmarks/bench_strategies.py [--repeats 3] [--trials 30] [--quick]
 
 ``--quick`` lowers the generation budgets and trial count (a smoke test only).
+
+``--to-success`` (paint IET, issue 39) compares time to success: ours as ``cgda run``
+runs it (the experiment's restarts, backtracks and stagnation stop; steady =
+``wall_time_s``, median of ``--repeats``) and the peer given the same restarts and
+backtracks (`peer_strategies.pycma_iet` with `iet_search`), median of
+``--peer-repeats`` runs, for each of ``--seeds``, both in this process; the ratio
+counts only when both succeed (target >= 30x).
+
+    python benchmarks/bench_strategies.py --to-success [--seeds 0] [--repeats 3]
+        [--peer-repeats 3]
 Targets (2-core CPU): clean IE >= 30x faster than the peer (steady state); cold
 start incl. compile < 2 s (issue 14; it was 3 s); paint IET >= 10x faster than the
 peer; 30 batched trials >= 3x the run-time throughput of 30 sequential runs (>= 10x on
@@ -50,6 +60,9 @@ from cgda_jax import experiment as ex
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 TARGETS = {"ie": 30.0, "iet": 10.0, "fte": None}
+#: Paint IET's time to success over the peer's with its restarts and backtracks
+#: (issue 39).
+TO_SUCCESS_TARGET = 30.0
 
 
 def setup(name: str, overrides: list[str]):
@@ -116,9 +129,12 @@ def run_ours(cfg, goal, sim, repeats: int, **settings) -> dict:
     }
 
 
-def run_peer(cfg, goal, sim) -> dict:
+def run_peer(cfg, goal, sim, to_success: bool = False) -> dict:
     """The peer's search (`peer_strategies`), with the same feasibility checks as
-    ours (`peer_feasibility`, MuJoCo C) when the simulator has them."""
+    ours (`peer_feasibility`, MuJoCo C) when the simulator has them.
+
+    ``to_success`` (IET): the peer also restarts and backtracks as ours does as
+    ``cgda run`` runs it (`iet_search`), instead of the paper's plain search."""
     from peer_feasibility import FeasibleMarker
 
     from cgda_jax.strategies.ie import STAGNATION
@@ -132,6 +148,8 @@ def run_peer(cfg, goal, sim) -> dict:
     t0 = time.perf_counter()
     if s.name == "ie":  # SAME_SEARCH: no stagnation stop
         out = peer_strategies.pycma_ie(*args, seed=s.seed)
+    elif s.name == "iet" and to_success:
+        out = peer_strategies.pycma_iet(*args, seed=s.seed, **iet_search(cfg))
     elif s.name == "iet":  # ours keeps its stagnation stop under SAME_SEARCH
         stagnation = {**s.options, **SAME_SEARCH["iet"]}.get("stagnation", STAGNATION)
         out = peer_strategies.pycma_iet(*args, seed=s.seed, stagnation=stagnation)
@@ -141,6 +159,17 @@ def run_peer(cfg, goal, sim) -> dict:
         )
     out["time_s"] = time.perf_counter() - t0
     return out
+
+
+def iet_search(cfg) -> dict:
+    """The restarts, backtracks and stagnation stop of the experiment's IET as
+    ``cgda run`` runs it (its options over the library's defaults), for the peer."""
+    from cgda_jax.strategies.iet import IETSettings
+
+    st = IETSettings.of(None, **{k: v for k, v in cfg.strategy.options.items()
+                                 if k in ("restarts", "backtracks", "stagnation")})
+    return {"restarts": st.restarts, "backtracks": st.backtracks,
+            "stagnation": st.stagnation}
 
 
 def iet_point_times(cfg, goal, sim) -> list[float]:
@@ -203,6 +232,36 @@ def trials_benchmark(cfg, goal, sim, n_trials: int) -> dict:
     }
 
 
+def to_success(name: str, seeds: list[int], repeats: int, peer_repeats: int
+               ) -> list[dict]:
+    """Time to success of ours (as ``cgda run``) and of the peer with the same
+    restarts and backtracks, per seed (see the module doc)."""
+    rows = []
+    for seed in seeds:
+        cfg, goal, sim = setup(name, [f"strategy.seed={seed}"])
+        ours = run_ours(cfg, goal, sim, repeats)
+        peers_ = [run_peer(cfg, goal, sim, to_success=True)
+                  for _ in range(peer_repeats)]
+        peer = peers_[0]
+        peer_s = statistics.median(p["time_s"] for p in peers_)
+        both = bool(ours["success"] and peer["success"])
+        rows.append({
+            "experiment": name, "seed": seed, **iet_search(cfg),
+            "ours_steady_s": ours["steady_s"], "ours_compile_s": ours["compile_s"],
+            "ours_evals": ours["evaluations"], "ours_ok": ours["success"],
+            "peer_s": peer_s, "peer_runs": len(peers_),
+            "peer_evals": peer["evaluations"], "peer_ok": peer["success"],
+            "peer_backtracks": peer["backtracks_used"],
+            "peer_restarts": int(np.sum(peer["tries"])) - len(peer["tries"]),
+            "peer_worst": float(np.max(peer["point_errors"])),
+            "peer_violation": peer.get("violation", ""),
+            "ratio": peer_s / ours["steady_s"] if both else float("nan"),
+            "met": both and peer_s / ours["steady_s"] >= TO_SUCCESS_TARGET,
+        })
+        print(rows[-1], flush=True)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=3)
@@ -214,7 +273,23 @@ def main() -> None:
     parser.add_argument(
         "--only", nargs="*", default=["clean_ie", "clean_fte", "paint_iet", "trials"]
     )
+    parser.add_argument("--to-success", action="store_true",
+                        help="paint IET: time to success, the peer with our "
+                        "restarts and backtracks (see the module doc)")
+    parser.add_argument("--seeds", type=int, nargs="*", default=[0])
+    parser.add_argument("--peer-repeats", type=int, default=3)
     args = parser.parse_args()
+    if args.to_success:
+        names = [n for n in args.only if n not in ("clean_ie", "clean_fte", "trials")]
+        rows = [r for n in names or ["paint_iet"]
+                for r in to_success(n, args.seeds, args.repeats, args.peer_repeats)]
+        print_table(rows, list(rows[0]))
+        for r in rows:
+            report_target(f"{r['experiment']} seed {r['seed']} time to success >= "
+                          f"{TO_SUCCESS_TARGET:g}x pycma + MuJoCo C with restarts and "
+                          "backtracks", r["ratio"], r["met"])
+        write_json("bench_strategies_to_success", {"rows": rows})
+        return
     overrides = ["strategy.max_generations=20"] if args.quick else []
     n_trials = 4 if args.quick else args.trials
 

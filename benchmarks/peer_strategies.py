@@ -36,7 +36,8 @@ def to_joints(u, lower, upper) -> np.ndarray:
     return mid + half * np.sin(0.5 * np.pi * np.asarray(u))
 
 
-def _cma(n_genes: int, popsize: int, sigma0: float, seed: int, max_gens: int):
+def _cma(n_genes: int, popsize: int, sigma0: float, seed: int, max_gens: int,
+         x0=None):
     import cma
 
     opts = {
@@ -54,14 +55,15 @@ def _cma(n_genes: int, popsize: int, sigma0: float, seed: int, max_gens: int):
         "tolstagnation": max_gens + 1,
         "tolxstagnation": False,
     }
-    return cma.CMAEvolutionStrategy(np.zeros(n_genes), sigma0, opts)
+    mean = np.zeros(n_genes) if x0 is None else np.asarray(x0, np.float64)
+    return cma.CMAEvolutionStrategy(mean, sigma0, opts)
 
 
 class _Evolution:
     """One pycma evolution with our bookkeeping (best so far, stall, generations)."""
 
-    def __init__(self, n_genes, popsize, sigma0, seed, max_gens):
-        self.es = _cma(n_genes, popsize, sigma0, seed, max_gens)
+    def __init__(self, n_genes, popsize, sigma0, seed, max_gens, x0=None):
+        self.es = _cma(n_genes, popsize, sigma0, seed, max_gens, x0)
         self.best_u, self.best_f = np.zeros(n_genes), np.inf
         self.stall = self.generation = 0
         self.popsize = popsize
@@ -82,11 +84,12 @@ class _Evolution:
         return self.generation * self.popsize
 
 
-def _evolve(fitness, n_genes, popsize, sigma0, seed, max_gens, stop):
-    """ask/tell until ``stop(best, stall, generation)`` or pycma stops.
+def _evolve(fitness, n_genes, popsize, sigma0, seed, max_gens, stop, x0=None):
+    """ask/tell from the mean ``x0`` (None: 0) until ``stop(best, stall,
+    generation)`` or pycma stops.
 
     Returns (best_u, best_f, generations, evaluations)."""
-    evo = _Evolution(n_genes, popsize, sigma0, seed, max_gens)
+    evo = _Evolution(n_genes, popsize, sigma0, seed, max_gens, x0)
     while not evo.es.stop():
         evo.generation_step(fitness)
         if stop(evo.best_f, evo.stall, evo.generation):
@@ -226,37 +229,60 @@ def pycma_fte(
 
 
 def pycma_iet(c_sim, goal, popsize, tolerance, max_gens, seed=0, sigma0=1.0,
-              stagnation=None) -> dict:
+              stagnation=None, restarts=0, backtracks=0) -> dict:
     """IET: point i evolved with points 0..i-1 frozen, fitness = the distance of
     executed features 0..i to goal 0..i; the state reached by the frozen prefix is
     carried (one step per candidate), as cgda_jax does.  A point's evolution stops
     when its own error is below the tolerance (fitness^2 - prefix), after
-    ``max_gens`` or ``stagnation`` generations without improvement (None: never);
-    its best is committed either way (no restarts, no backtracks)."""
+    ``max_gens`` or ``stagnation`` generations without improvement (None: never).
+
+    A point that missed is evolved again (``restarts`` times, each from a random
+    mean, the best over its tries kept), then the run backtracks (``backtracks``
+    per run: the k-th backtrack in a row from the same point re-evolves from k
+    points back, with fresh random means), as `cgda_jax.strategies.iet.IETPlan`
+    does (its restart means: random, as ours on a stateful scene such as paint,
+    which samples none); a point that still misses when both are spent is
+    committed with its best.  0 and 0: the paper's Algorithm 1."""
     sim = Stepper(c_sim, tolerance)
     lo, hi = sim.lower, sim.upper
-    state, prefix_sq = c_sim.init_state(), 0.0
-    point_times, point_fitness, evals = [], [], 0
-    joints = []
     goal = np.asarray(goal, np.float64)
-    for i, g in enumerate(goal):
-        t0 = time.perf_counter()
-
-        fitness = sim.point_fitness(state, g, prefix_sq)
+    n = len(goal)
+    states, prefix = [c_sim.init_state()] + [None] * n, [0.0] + [0.0] * n
+    joints, point_fitness = np.zeros((n, len(lo))), np.full(n, np.inf)
+    point_times, evals = [0.0] * n, 0
+    tries, i, restart, used, stuck, depth = [0] * n, 0, 0, 0, -1, 0
+    best_u, best_f = None, np.inf
+    while i < n:
+        t0, t, g, prefix_sq = time.perf_counter(), tries[i], goal[i], prefix[i]
+        tries[i] += 1
+        x0 = None if t == 0 else np.random.default_rng(
+            (seed, i, t)).uniform(-1.0, 1.0, len(lo))
 
         def stop(f, stall, gen, prefix_sq=prefix_sq):
             return (f**2 - prefix_sq < tolerance**2 or gen >= max_gens
                     or (stagnation is not None and stall >= stagnation))
 
-        u, best, _, n_eval = _evolve(fitness, len(lo), popsize, sigma0,
-                                     seed + 1000 * i, max_gens, stop)
-        q = to_joints(u, lo, hi)
-        state, feats, _ = sim.step(state, q)
-        prefix_sq += float(np.sum((feats - g) ** 2))
-        joints.append(q)
+        u, f, _, n_eval = _evolve(sim.point_fitness(states[i], g, prefix_sq),
+                                  len(lo), popsize, sigma0,
+                                  seed + 1000 * i + 100_000 * t, max_gens, stop, x0)
         evals += n_eval
-        point_fitness.append(best)
-        point_times.append(time.perf_counter() - t0)
-    return sim.outcome(np.array(joints), goal, {
+        if restart == 0 or f < best_f:  # a restart keeps the point's best try
+            best_u, best_f = u, f
+        q = to_joints(best_u, lo, hi)
+        state, feats, _ = sim.step(states[i], q)
+        own_sq = float(np.sum((feats - g) ** 2))
+        point_times[i] += time.perf_counter() - t0
+        if own_sq >= tolerance**2 and restart < restarts:
+            restart += 1
+            continue
+        if own_sq >= tolerance**2 and i > 0 and used < backtracks:
+            depth = depth + 1 if stuck == i else 1
+            used, stuck, restart = used + 1, i, 0
+            i = max(i - depth, 0)
+            continue
+        states[i + 1], prefix[i + 1] = state, prefix_sq + own_sq
+        joints[i], point_fitness[i] = q, best_f
+        i, restart = i + 1, 0
+    return sim.outcome(joints, goal, {
         "evaluations": evals, "point_times_s": point_times,
-        "point_fitness": np.array(point_fitness)})
+        "point_fitness": point_fitness, "tries": tries, "backtracks_used": used})

@@ -123,6 +123,35 @@ def test_pycma_peers_use_our_gene_map_and_solve_a_tiny_goal():
     assert iet["success"] and len(iet["point_times_s"]) == 2
 
 
+
+def test_pycma_iet_restarts_and_backtracks_as_ours():
+    """The peer's IET restarts a missed point, then backtracks (the k-th backtrack in
+    a row from one point goes k points back), then commits its best, as our IET:
+    the same tries of the point out of reach and backtracks as ours."""
+    from cgda_jax.sim import MarkerScene, Robot, Simulator, model_path
+    from cgda_jax.strategies import run_iet
+
+    robot = Robot.from_mjcf(
+        model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"], "marker"
+    )
+    sim = Simulator(robot, MarkerScene(), substeps=2)
+    c_sim = peers.MujocoMarker.from_simulator(sim)
+    goal = np.concatenate([c_sim.execute(np.array([[0.3, 0.4, -0.5]])),
+                           [[3.0, 3.0, 3.0]]])  # point 1: 3 m beyond any reach
+    kw = dict(tolerance=0.05, stagnation=10, restarts=1, backtracks=2)
+    peer = peer_strategies.pycma_iet(c_sim, goal, popsize=8, max_gens=40, **kw)
+    ours = run_iet(sim, goal.astype(np.float32), population_size=8,
+                   max_generations=40, restart_samples=0, **kw)
+    # point 1: 2 tries, back to 0 (depth 1), 2 tries, back to 0 (depth 2), 2 tries;
+    # point 0: entered 3 times, a visit restarted (once) where it missed
+    for tries, used in ((peer["tries"], peer["backtracks_used"]),
+                        (ours.info["point_tries"], ours.info["backtracks_used"])):
+        assert tries[1] == 6 and used == 2 and 3 <= tries[0] <= 6
+    assert not peer["success"] and not ours.success
+    plain = peer_strategies.pycma_iet(c_sim, goal, popsize=8, max_gens=40,
+                                      tolerance=0.05, stagnation=10)
+    assert plain["tries"] == [1, 1] and plain["backtracks_used"] == 0
+
 # --- the peer's feasibility checks (benchmarks/peer_feasibility.py) ----------------
 # Tolerances: MuJoCo's mj_geomDistance and our float32 distances agree to ~1.5e-7 m
 # on separated primitive pairs (RESULTS.md: 2.4e-7 m; cylinder pairs within our
