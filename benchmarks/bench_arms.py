@@ -79,7 +79,8 @@ def main() -> None:
                 "total_s": total,
             })
             print(rows[-1], flush=True)
-        if "ie" in args.strategies and not args.no_polish:  # the polish: its cost and what it gives
+        # the polish: its cost and what it gives
+        if "ie" in args.strategies and not args.no_polish:
             res = run_trials("ie", sim, goal, args.seeds, tolerance=args.tolerance,
                              refine="adam", **SETTINGS["ie"])
             rows.append({

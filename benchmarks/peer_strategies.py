@@ -4,7 +4,8 @@ The same searches as cgda_jax.strategies with bench_strategies' ``SAME_SEARCH``
 settings (no restarts, no backtracks; CMA-ES in the same normalized gene space, same
 start mean 0 and step size, same population size, fitness and stopping rules),
 written the way a user of pycma would: ask/tell, each candidate executed on its own
-(`peers.MujocoMarker`).
+(`peers.MujocoMarker`).  `pycma_iet` can also restart and backtrack as our IET does
+(``restarts``, ``backtracks``: bench_strategies' ``--to-success``, time to success).
 
 With feasibility (``c_sim`` a `peer_feasibility.FeasibleMarker`) they do what ours do
 with a `Feasibility` on the simulator:
