@@ -95,6 +95,13 @@ _LEVEL = 0.05
 #: ... and fixed in the fit for the features whose net change is at least this
 #: share of their range over the action (the others go and come back: fitted).
 _MONOTONE = 0.8
+#: `refine_boundaries`: a feature an action moves by less than this many units of
+#: the library's noise (the range of its knots) is held still in that action's fit.
+_MOVES = 10.0
+#: `refine_boundaries`: each sample interval is split in this many candidate times
+#: in the last pass (the model is continuous in time; at 8 fps a sample is 3-5 % of
+#: a short action).
+_SUBSAMPLE = 4
 
 
 class Segment(NamedTuple):
@@ -451,7 +458,28 @@ def _fit_gap(t, y, end, start, box_end, box_start):
                          c0[np.abs(c0 - arg[1]) <= half] if start else c0)
     if arg is None:  # the window missed the allowed range
         return (end[0] if end else None), (start[0] if start else None)
-    return (float(arg[0]) if end else None), (float(arg[1]) if start else None)
+    # between the samples: the profiles' ends are continuous times
+    step = float(np.median(np.diff(tt))) if tt.size > 1 else 0.0
+    off = step * np.linspace(-1.0, 1.0, 2 * _SUBSAMPLE + 1)
+    arg = _best_pair(tt, yy, end, start,
+                     np.clip(arg[0] + off, *box_end) if end else c1,
+                     np.clip(arg[1] + off, *box_start) if start else c0) or arg
+    # reported as samples: the first at rest after the motion, the last before it
+    # (back to back, where these cross: the samples either side of the junction)
+    t1 = _sample_at(t, arg[0], after=True) if end else None
+    t0 = _sample_at(t, arg[1], after=False) if start else None
+    if end and start and t1 > t0:
+        t1, t0 = t0, t1
+    return t1, t0
+
+
+def _sample_at(t, time, *, after: bool) -> float:
+    """The first sample time at or after ``time`` (``after``), else the last at or
+    before it (the recording's ends where none is)."""
+    tol = 1e-9 * max(abs(float(time)), 1.0)
+    if after:
+        return float(t[min(np.searchsorted(t, time - tol, side="left"), t.size - 1)])
+    return float(t[max(np.searchsorted(t, time + tol, side="right") - 1, 0)])
 
 
 def _best_pair(tt, yy, end, start, c1, c0):
@@ -515,6 +543,36 @@ def _amplitude(t, y, start, end, duration):
     return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
+def _moved_features(library: ActionLibrary | None, segments: Sequence[Segment],
+                    n_features: int) -> list[np.ndarray]:
+    """(F,) booleans per segment: the features its action moves, by the library
+    (the range of the action's knots at least ``_MOVES`` times the library's noise
+    of the feature); every feature without a library."""
+    if library is None:
+        return [np.ones(n_features, bool)] * len(segments)
+    floor = _MOVES * _library_noise(library)
+    moved = {name: np.ptp(np.asarray(a.knots, np.float64), axis=0) >= floor
+             for name, a in library.items()}
+    return [moved[s.action] for s in segments]
+
+
+def _drift(t, y, segments, moves) -> np.ndarray:
+    """(F,) each feature's drift (units per second) where no action moves it: the
+    least-squares slope within the segments whose action holds it still, pooled
+    (each segment its own level); 0 where every segment moves it."""
+    num = np.zeros(y.shape[1])
+    den = np.zeros(y.shape[1])
+    for s, m in zip(segments, moves):
+        inside = (t >= s.start) & (t <= s.end)
+        if inside.sum() < 2:
+            continue
+        dt = t[inside] - t[inside].mean()
+        dy = y[inside] - y[inside].mean(axis=0)
+        num += np.where(m, 0.0, dt @ dy)
+        den += np.where(m, 0.0, dt @ dt)
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+
+
 def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
                       library: ActionLibrary | None = None) -> list[Segment]:
     """The segments' starts and ends refined on the recording's samples.
@@ -554,9 +612,13 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
             s.end + _REACH * d) for s, d in zip(segments, dur)]
     starts = [s.start for s in segments]
     ends = [s.end for s in segments]
+    moves = _moved_features(library, segments, y.shape[1])
+    # a feature drifting where no action moves it (light that dims): detrended
+    y = y - np.outer(t - t[0], _drift(t, y, segments, moves))
     for _ in range(_ROUNDS):
         dur = [b - a for a, b in zip(starts, ends)]  # the profiles' durations
-        amp = [_amplitude(t, y, a, b, d) for a, b, d in zip(starts, ends, dur)]
+        amp = [np.where(m, _amplitude(t, y, a, b, d), 0.0)
+               for m, a, b, d in zip(moves, starts, ends, dur)]
         new_starts, new_ends = list(starts), list(ends)
         for g in range(n + 1):
             before = (ends[g - 1], dur[g - 1], -amp[g - 1]) if g > 0 else None
