@@ -461,16 +461,13 @@ def _fit_gap(t, y, end, start, box_end, box_start):
     # between the samples: the profiles' ends are continuous times
     step = float(np.median(np.diff(tt))) if tt.size > 1 else 0.0
     off = step * np.linspace(-1.0, 1.0, 2 * _SUBSAMPLE + 1)
-    arg = _best_pair(tt, yy, end, start,
-                     np.clip(arg[0] + off, *box_end) if end else c1,
-                     np.clip(arg[1] + off, *box_start) if start else c0) or arg
-    # reported as samples: the first at rest after the motion, the last before it
-    # (back to back, where these cross: the samples either side of the junction)
-    t1 = _sample_at(t, arg[0], after=True) if end else None
-    t0 = _sample_at(t, arg[1], after=False) if start else None
-    if end and start and t1 > t0:
-        t1, t0 = t0, t1
-    return t1, t0
+
+    def near(v, box):
+        return np.clip(np.clip(v + off, *box), tt[0], tt[-1])
+
+    arg = _best_pair(tt, yy, end, start, near(arg[0], box_end) if end else c1,
+                     near(arg[1], box_start) if start else c0) or arg
+    return (float(arg[0]) if end else None), (float(arg[1]) if start else None)
 
 
 def _sample_at(t, time, *, after: bool) -> float:
@@ -633,6 +630,13 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
         if new_starts == starts and new_ends == ends:
             break
         starts, ends = new_starts, new_ends
+    # reported as samples: the last at rest before each motion, the first after
+    # it; back to back, where these cross, the samples either side of the junction
+    starts = [_sample_at(t, v, after=False) for v in starts]
+    ends = [_sample_at(t, v, after=True) for v in ends]
+    for g in range(1, n):
+        if ends[g - 1] > starts[g]:
+            ends[g - 1], starts[g] = starts[g], ends[g - 1]
     return [s._replace(start=float(a), end=float(b))
             for s, a, b in zip(segments, starts, ends)]
 
