@@ -36,7 +36,11 @@ in which several library actions follow each other (with or without pauses) into
    is the profile's amplitude: fixed, the profile's curvature places the onset (a
    free amplitude lets a steep end pass for a longer, larger profile and the
    boundary slide into the pause after it); a feature that goes and comes back
-   (CLEAN's circle) has its amplitude fitted (linear least squares).
+   (CLEAN's circle) has its amplitude fitted (linear least squares); a feature
+   the library's action does not move is held still, and a feature's drift where
+   no action moves it (light that dims) is removed first. The ends are continuous
+   times (fitted between the samples) reported as the samples at rest either side
+   of each motion.
 
 Rests are dropped from the result; each action segment says its start and end in
 the recording's time unit (seconds) and its cost.
@@ -582,22 +586,31 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
     actions' durations inside them; a feature's amplitude is the action's net
     change (medians of the samples within 5 % of its duration of the given start
     and end) where that is at least 80 % of the feature's range over the action,
-    fitted otherwise. The end and start times (samples of the recording, the end
-    not after the start) within ``0.25`` of each action's duration of the given
-    boundaries are chosen jointly by least residual, the window recentred and
-    refitted, with each action's duration and net change measured anew, until it
-    settles (at most 10 rounds).
+    fitted otherwise. With a library, a feature the action does not move (its
+    knots' range under 10 times the library's noise of it) is held still in that
+    action's fit, and each feature's drift where no action moves it (the pooled
+    slope inside those segments: light that dims) is taken out of the recording
+    first. The end and start times (the end not after the start) within ``0.25``
+    of each action's duration of the given boundaries (the end's and the next
+    start's ranges joined: one gap) are chosen jointly by least residual, on the
+    samples and then between them (a quarter sample apart), the window recentred
+    and refitted, with each action's duration and net change measured anew, until
+    it settles (at most 10 rounds). Each start is then reported as the last
+    sample at or before the fitted time, each end as the first at or after it
+    (the samples at rest either side of the motion); back to back, where the two
+    cross, as the samples either side of the junction.
 
     Args:
         recording: the recording the segments were found in.
         segments: its action segments in time order (as `segment` with
             ``refine=False`` returns them).
         library: the library they were found with (`segment` passes it): its
-            noise is each feature's least unit. None: the recording's noise only.
+            noise is each feature's least unit, its actions say which features
+            each moves. None: the recording's noise only, every feature moved.
 
     Returns:
-        The same segments with refined ``start`` and ``end`` (seconds); actions and
-        costs unchanged.
+        The same segments with refined ``start`` and ``end`` (seconds, times of
+        the recording's samples); actions and costs unchanged.
     """
     if not segments:
         return []
@@ -605,8 +618,14 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
     y = recording.features / _scale(recording, library)
     n = len(segments)
     dur = [s.end - s.start for s in segments]
-    box = [(s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
-            s.end + _REACH * d) for s, d in zip(segments, dur)]
+    box = [[s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
+            s.end + _REACH * d] for s, d in zip(segments, dur)]
+    # the end and the start around one gap share their ranges: where the search
+    # misplaced the gap, the junction may lie in either one's (a short search
+    # segment's own range is short)
+    for g in range(1, n):
+        lo, hi = min(box[g - 1][2], box[g][0]), max(box[g - 1][3], box[g][1])
+        box[g - 1][2:], box[g][:2] = [lo, hi], [lo, hi]
     starts = [s.start for s in segments]
     ends = [s.end for s in segments]
     moves = _moved_features(library, segments, y.shape[1])
