@@ -409,7 +409,10 @@ def segment(
         >>> x = np.r_[np.minimum(t[:41], 2), 2 + np.minimum(t[1:41], 2)]  # up, up
         >>> segs = segment(Demonstration(t, x, ("x",)), lib, step_s=0.1)
         >>> [(s.action, round(s.start, 1), round(s.end, 1)) for s in segs]
-        [('up', 0.0, 2.1), ('up', 2.1, 4.0)]
+        [('up', 0.0, 1.8), ('up', 1.8, 4.0)]
+
+        (At one constant speed nothing marks the junction at 2 s; a human's
+        motion slows down between two actions, which `refine_boundaries` fits.)
     """
     grid_t, lengths, costs = segment_costs(
         recording, library, metric=metric, n_samples=n_samples, step_s=step_s,
@@ -548,12 +551,18 @@ def _moved_features(library: ActionLibrary | None, segments: Sequence[Segment],
                     n_features: int) -> list[np.ndarray]:
     """(F,) booleans per segment: the features its action moves, by the library
     (the range of the action's knots at least ``_MOVES`` times the library's noise
-    of the feature); every feature without a library."""
+    of the feature, and the feature of the largest such ratio in any case: with
+    few knots the noise estimate holds the motion's own curvature); every feature
+    without a library."""
     if library is None:
         return [np.ones(n_features, bool)] * len(segments)
-    floor = _MOVES * _library_noise(library)
-    moved = {name: np.ptp(np.asarray(a.knots, np.float64), axis=0) >= floor
-             for name, a in library.items()}
+    noise = _library_noise(library)
+    moved = {}
+    for name, a in library.items():
+        span = np.ptp(np.asarray(a.knots, np.float64), axis=0)
+        ratio = np.where(noise > 0, span / np.where(noise > 0, noise, 1.0),
+                         np.where(span > 0, np.inf, 0.0))
+        moved[name] = (ratio >= _MOVES) | (ratio == ratio.max())
     return [moved[s.action] for s in segments]
 
 
@@ -587,7 +596,8 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
     change (medians of the samples within 5 % of its duration of the given start
     and end) where that is at least 80 % of the feature's range over the action,
     fitted otherwise. With a library, a feature the action does not move (its
-    knots' range under 10 times the library's noise of it) is held still in that
+    knots' range under 10 times the library's noise of it, and not the action's
+    most moved feature) is held still in that
     action's fit, and each feature's drift where no action moves it (the pooled
     slope inside those segments: light that dims) is taken out of the recording
     first. The end and start times (the end not after the start) within ``0.25``

@@ -253,6 +253,27 @@ def test_refinement_ignores_drift_where_no_action_moves_a_feature():
         assert abs(s.end - t1) <= 0.03 * (t1 - t0), (s, t1)
 
 
+def test_refinement_with_a_coarse_library_still_moves_its_action_s_feature():
+    # a library of few knots: the second differences of its knots (its noise
+    # estimate) are the motion's own curvature, 1/5 of the range; the action's most
+    # moved feature is moved all the same (held still, nothing would place the ends)
+    rate = 30.0
+    t = np.arange(int(10 * rate)) / rate
+    x = (100 * _min_jerk_ramp(t, 1.0, 3.0) + 100 * _min_jerk_ramp(t, 5.0, 4.0))[:, None]
+    rec = Demonstration(t, x + 1e-3 * np.random.default_rng(3).standard_normal(x.shape),
+                        ("a",), "ramps")
+    tt = np.linspace(0.0, 4.0, 41)
+    lib = ActionLibrary.from_demonstrations(
+        {"up": [Demonstration(tt, 100 * _min_jerk_ramp(tt, 0.0, 3.0)[:, None], ("a",),
+                              "d")]})
+    assert len(lib["up"].knots) <= 5
+    rough = [Segment("up", 1.3, 3.6, 0.0), Segment("up", 4.6, 8.6, 0.0)]
+    refined = refine_boundaries(rec, rough, lib)
+    assert refined == refine_boundaries(rec, rough)
+    for s, (t0, t1) in zip(refined, [(1.0, 4.0), (5.0, 9.0)]):
+        assert abs(s.start - t0) <= 1 / rate + 1e-9 and abs(s.end - t1) <= 1 / rate + 1e-9
+
+
 def test_synthetic_sequence_generator():
     seq = synthetic_sequence(["MOVE", "CLEAN", "PAINT"], seed=3, pause_s=(1.0, 1.0))
     rec, truth = seq
