@@ -362,7 +362,8 @@ class IEPlan(PlanBase):
         states, errors = self.contexts(s.best_u)
         asked = None
         if self.judges_in_step:  # the bests' moves judged with the candidates
-            errors, violation, asked = self.judged_generation(s.evo, s.best_u, states)
+            errors, violation, asked = self.judged_generation(
+                s.evo, s.best_u, states, s.judged_u, s.judged_violation)
             s = s.replace(judged_u=s.best_u, judged_violation=violation)
         if self.sequential:  # re-score the bests where the others now leave them
             s, evo = self.rescore(s, errors)
@@ -490,12 +491,27 @@ class IEPlan(PlanBase):
         errors = self.penalize(distances(feats, self.goal), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
-    def judged_generation(self, evo, best_u: jax.Array, states):
+    def frozen(self, evo, best_u, judged_u, judged_violation) -> jax.Array:
+        """(N,) the points whose generation changes nothing (ranked judging):
+        its evolution done and its best and every earlier point's the ones
+        the last generation judged (``judged_u``): the same move from the same
+        state, so its violation is the stored one (``judged_violation``), its
+        re-score the same and its evolution stays done (its candidates'
+        fitness is told to a frozen evolution, unused): nothing is judged."""
+        if judged_u is None:
+            return jnp.zeros(best_u.shape[:1], bool)
+        same = jnp.cumprod(jnp.all(best_u == judged_u, axis=-1)).astype(bool)
+        return evo.done & same & jnp.isfinite(judged_violation)
+
+    def judged_generation(self, evo, best_u: jax.Array, states, judged_u=None,
+                          judged_violation=None):
         """One batched evaluation of every point's candidates (asked of ``evo``, N
         evolutions) with, first in each row, its best ``best_u`` (N, D) from its
         context ``states``.  Returns the bests' errors (N; inf where not finite),
         their moves' violations (N) and ``(populations (N, P, D), algorithm states,
-        fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`."""
+        fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`.
+        With the last generation's ``judged_u`` and ``judged_violation`` (N),
+        the `frozen` points are not judged again."""
         pops, algo_states = jax.vmap(
             lambda e: evolution_ask(self.algo, self.params, e))(evo)
         if self.judge_ranks is None:
@@ -506,9 +522,12 @@ class IEPlan(PlanBase):
             fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
                                                      violation[:, 1:], self.goal)
         else:  # the bests judged with the candidates whose rank matters
+            frozen = self.frozen(evo, best_u, judged_u, judged_violation)
             fitness, _, (feats, violation) = jax.vmap(
-                lambda st, pop, g, b: self.ranked_outcome_with(st, pop, g, b))(
-                states, pops, self.goal, best_u)
+                lambda st, pop, g, b, z: self.ranked_outcome_with(st, pop, g, b,
+                                                                  frozen=z))(
+                states, pops, self.goal, best_u, frozen)
+            violation = jnp.where(frozen, judged_violation, violation)
             feats, violation = feats[:, None], violation[:, None]
         errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
