@@ -212,6 +212,7 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
         judged candidates' violations, NaN where not judged.
     """
     n, lead = fitness.shape[0], int(lead)
+    frozen = jnp.asarray(frozen, bool)
     size = min(int(size), n - lead)
     rounds = -(-(n - lead) // size)
     first = jnp.arange(n) < lead  # judged in the first round, counted for no rank
