@@ -54,14 +54,15 @@ def test_an_unjudged_step_moves_the_same_and_carries_the_violations(sim):
 
 
 def _move_traces(monkeypatch):
+    """Calls of the check: `Feasibility.move` (one move) and `Feasibility.moves`
+    (the moves of a ranked round together)."""
     calls = []
-    move = Feasibility.move
+    for name in ("move", "moves"):
+        def counted(self, *args, _f=getattr(Feasibility, name), **kwargs):
+            calls.append(1)
+            return _f(self, *args, **kwargs)
 
-    def counted(self, *args, **kwargs):
-        calls.append(1)
-        return move(self, *args, **kwargs)
-
-    monkeypatch.setattr(Feasibility, "move", counted)
+        monkeypatch.setattr(Feasibility, name, counted)
     return calls
 
 

@@ -527,7 +527,8 @@ class IEPlan(PlanBase):
                 lambda st, pop, g, b, z: self.ranked_outcome_with(st, pop, g, b,
                                                                   frozen=z))(
                 states, pops, self.goal, best_u, frozen)
-            violation = jnp.where(frozen, judged_violation, violation)
+            if judged_violation is not None:  # frozen: the stored one
+                violation = jnp.where(frozen, judged_violation, violation)
             feats, violation = feats[:, None], violation[:, None]
         errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
