@@ -80,7 +80,8 @@ from jax import Array
 
 __all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
            "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "EXECUTED_MARGIN",
-           "GEOMETRIES", "PROVEN", "Feasibility", "relevant_pairs", "scene_obstacles"]
+           "GEOMETRIES", "PACKED_MIN", "PROVEN", "Feasibility", "relevant_pairs",
+           "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -107,6 +108,10 @@ GEOMETRIES = ("round", "exact")
 #: `Feasibility.moves`: metres by which a move's coarse bound must clear the
 #: allowed depth to need no more samples (float32 distances err by ~1e-6 m).
 PROVEN = 1e-4
+#: `Feasibility.moves`: a batch of at most this many sampled postures is judged
+#: at once, without the coarse-to-fine loop (paint IET's round of 20 moves: the
+#: loop's iterations cost more than the postures they leave out).
+PACKED_MIN = 512
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -338,8 +343,9 @@ class Feasibility:
         distances in the program).  Batched (``vmap``, any depth) the moves
         of every batch entry are packed together
         (`jax.custom_batching.custom_vmap`), so that the moves a batch entry
-        does not need cost nothing.  With ``certify``, without a check or with
-        fewer than 4 samples: ``vmap(move)``."""
+        does not need cost nothing.  With ``certify``, without a check, with
+        fewer than 4 samples or at most `PACKED_MIN` postures in all:
+        ``vmap(move)``'s distances."""
         limit = jax.vmap(self.limit_violation)(dq, duration)
         flail = jnp.maximum(jnp.max(jnp.abs(dq), axis=-1) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
@@ -374,6 +380,10 @@ class Feasibility:
     def _over_flat(self, q0: Array, dq: Array, need: Array) -> Array:
         """`_over_moves` of one flat batch of moves (see `moves`)."""
         m, s = q0.shape[0], self.samples
+        if m * (s + 1) <= PACKED_MIN:  # a loop would cost more than it saves
+            over = jax.vmap(lambda a, b: jnp.maximum(self.worst(a, b) - self.allowed,
+                                                     0.0) / self.penetration)(q0, dq)
+            return jnp.where(need, over, 0.0)
         alphas = jnp.arange(s + 1, dtype=jnp.float32) / s  # as `worst`'s
         coarse = np.asarray([0, s // 2, s], np.int32)  # first: ends and middle
         rest = np.setdiff1d(np.arange(s + 1), coarse).astype(np.int32)
