@@ -57,6 +57,7 @@ import re
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
@@ -391,13 +392,42 @@ def files_digest(paths: Iterable[str | os.PathLike], max_bytes: int = 256 << 20,
             files = [root]
         h.update(f"{root}:{len(files)}\n".encode())
         for f in files:
-            total += f.stat().st_size
+            st = f.stat()
+            total += st.st_size
             if total > max_bytes:
                 return None
             h.update(f"{f.relative_to(root) if root.is_dir() else f.name}\n".encode())
-            with open(f, "rb") as fh:
-                h.update(hashlib.file_digest(fh, "sha256").digest())
+            h.update(_file_digest(f, st))
     return h.hexdigest()
+
+
+#: A file's content digest by its path and what ``stat`` says of it (inode, size,
+#: modification time in ns): a run's keys (its checks', its search's) read each of
+#: its files once.
+_FILE_DIGESTS: dict[tuple, bytes] = {}
+#: A file modified less than this long ago (ns) is read every time: the clock that
+#: stamps files ticks coarsely, so two writes of one size in a tick look the same.
+_SETTLED_NS = 2_000_000_000
+
+
+def _file_digest(path: pathlib.Path, st: os.stat_result) -> bytes:
+    """SHA-256 of ``path``'s content (``st`` its stat), read again only when the
+    file changed (another inode, size or modification time) or changed lately
+    (`_SETTLED_NS`)."""
+    seen = (str(path), st.st_ino, st.st_size, st.st_mtime_ns)
+    with _LOCK:
+        found = _FILE_DIGESTS.get(seen)
+    if found is not None:
+        return found
+    with open(path, "rb") as fh:
+        digest = hashlib.file_digest(fh, "sha256").digest()
+    if time.time_ns() - st.st_mtime_ns < _SETTLED_NS:
+        return digest
+    with _LOCK:
+        if len(_FILE_DIGESTS) > 100_000:  # bounded: a process reading many trees
+            _FILE_DIGESTS.clear()
+        _FILE_DIGESTS[seen] = digest
+    return digest
 
 
 @functools.cache
@@ -406,6 +436,7 @@ def _source_digest() -> str:
     return files_digest(sorted(package.rglob("*.py"))) or ""
 
 
+@functools.cache
 def _version(dist: str) -> str:
     from importlib import metadata
 
