@@ -272,3 +272,35 @@ def test_cgda_keeps_programs_by_default_and_0_turns_the_store_off(tmp_path, monk
         for k, v in saved.items():
             jax.config.update(k, v)
         set_program_store(before)
+
+
+def test_a_program_compiled_ahead_is_the_one_asked_for():
+    """`compile_ahead` compiles in another thread the program the next
+    `compile_jit` of the same place and types asks for, under the same key."""
+    import threading
+
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_ahead, compile_jit, program_scope
+
+    traced_in = []
+
+    def f(x):
+        traced_in.append(threading.current_thread().name)
+        return jnp.cumsum(x) * 2.0
+
+    x = jax.ShapeDtypeStruct((5,), jnp.float32)
+    before = cache_stats()
+    with program_scope("a test of compile_ahead"):
+        compile_ahead("test.ahead", f, x)
+        first = compile_jit("test.ahead", f, x)  # waits for the thread's
+        second = compile_jit("test.ahead", f, x)  # the next one: not the same
+    assert traced_in[0] == "cgda-compile-test.ahead"  # (JAX traces f once)
+    assert cache_stats()["traced"] - before["traced"] == 2
+    np.testing.assert_array_equal(first(jnp.arange(5.0)), [0, 2, 6, 12, 20])
+    again = cache_stats()
+    with program_scope("a test of compile_ahead"):  # as keyed without ahead
+        assert compile_jit("test.ahead", f, x) is first
+        assert compile_jit("test.ahead", f, x) is second
+    assert cache_stats()["keyed_hits"] - again["keyed_hits"] == 2
