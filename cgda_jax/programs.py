@@ -260,8 +260,10 @@ def compile_ahead(name: str, fn: Callable, *args: Any, **jit_kw: Any) -> None:
     holds in its own thread only), the caller compiles it instead.
 
     Args:
-        as `compile_jit`'s; ``args`` as ``jax.ShapeDtypeStruct`` (the call must
-        pass the same types).
+        name: as `compile_jit`'s.
+        fn: as `compile_jit`'s.
+        args: ``jax.ShapeDtypeStruct`` or arrays: the same types the call passes.
+        jit_kw: as `compile_jit`'s.
     """
     scope = _SCOPE.get()
     if scope is None:
