@@ -36,7 +36,11 @@ in which several library actions follow each other (with or without pauses) into
    is the profile's amplitude: fixed, the profile's curvature places the onset (a
    free amplitude lets a steep end pass for a longer, larger profile and the
    boundary slide into the pause after it); a feature that goes and comes back
-   (CLEAN's circle) has its amplitude fitted (linear least squares).
+   (CLEAN's circle) has its amplitude fitted (linear least squares); a feature
+   the library's action does not move is held still, and a feature's drift where
+   no action moves it (light that dims) is removed first. The ends are continuous
+   times (fitted between the samples) reported as the samples at rest either side
+   of each motion.
 
 Rests are dropped from the result; each action segment says its start and end in
 the recording's time unit (seconds) and its cost.
@@ -95,6 +99,13 @@ _LEVEL = 0.05
 #: ... and fixed in the fit for the features whose net change is at least this
 #: share of their range over the action (the others go and come back: fitted).
 _MONOTONE = 0.8
+#: `refine_boundaries`: a feature an action moves by less than this many units of
+#: the library's noise (the range of its knots) is held still in that action's fit.
+_MOVES = 10.0
+#: `refine_boundaries`: each sample interval is split in this many candidate times
+#: in the last pass (the model is continuous in time; at 8 fps a sample is 3-5 % of
+#: a short action).
+_SUBSAMPLE = 4
 
 
 class Segment(NamedTuple):
@@ -398,7 +409,10 @@ def segment(
         >>> x = np.r_[np.minimum(t[:41], 2), 2 + np.minimum(t[1:41], 2)]  # up, up
         >>> segs = segment(Demonstration(t, x, ("x",)), lib, step_s=0.1)
         >>> [(s.action, round(s.start, 1), round(s.end, 1)) for s in segs]
-        [('up', 0.0, 2.1), ('up', 2.1, 4.0)]
+        [('up', 0.0, 1.8), ('up', 1.8, 4.0)]
+
+        (At one constant speed nothing marks the junction at 2 s; a human's
+        motion slows down between two actions, which `refine_boundaries` fits.)
     """
     grid_t, lengths, costs = segment_costs(
         recording, library, metric=metric, n_samples=n_samples, step_s=step_s,
@@ -451,7 +465,25 @@ def _fit_gap(t, y, end, start, box_end, box_start):
                          c0[np.abs(c0 - arg[1]) <= half] if start else c0)
     if arg is None:  # the window missed the allowed range
         return (end[0] if end else None), (start[0] if start else None)
+    # between the samples: the profiles' ends are continuous times
+    step = float(np.median(np.diff(tt))) if tt.size > 1 else 0.0
+    off = step * np.linspace(-1.0, 1.0, 2 * _SUBSAMPLE + 1)
+
+    def near(v, box):
+        return np.clip(np.clip(v + off, *box), tt[0], tt[-1])
+
+    arg = _best_pair(tt, yy, end, start, near(arg[0], box_end) if end else c1,
+                     near(arg[1], box_start) if start else c0) or arg
     return (float(arg[0]) if end else None), (float(arg[1]) if start else None)
+
+
+def _sample_at(t, time, *, after: bool) -> float:
+    """The first sample time at or after ``time`` (``after``), else the last at or
+    before it (the recording's ends where none is)."""
+    tol = 1e-9 * max(abs(float(time)), 1.0)
+    if after:
+        return float(t[min(np.searchsorted(t, time - tol, side="left"), t.size - 1)])
+    return float(t[max(np.searchsorted(t, time + tol, side="right") - 1, 0)])
 
 
 def _best_pair(tt, yy, end, start, c1, c0):
@@ -515,6 +547,42 @@ def _amplitude(t, y, start, end, duration):
     return np.where(np.abs(delta) >= _MONOTONE * span, delta, np.nan)
 
 
+def _moved_features(library: ActionLibrary | None, segments: Sequence[Segment],
+                    n_features: int) -> list[np.ndarray]:
+    """(F,) booleans per segment: the features its action moves, by the library
+    (the range of the action's knots at least ``_MOVES`` times the library's noise
+    of the feature, and the feature of the largest such ratio in any case: with
+    few knots the noise estimate holds the motion's own curvature); every feature
+    without a library."""
+    if library is None:
+        return [np.ones(n_features, bool)] * len(segments)
+    noise = _library_noise(library)
+    moved = {}
+    for name, a in library.items():
+        span = np.ptp(np.asarray(a.knots, np.float64), axis=0)
+        ratio = np.where(noise > 0, span / np.where(noise > 0, noise, 1.0),
+                         np.where(span > 0, np.inf, 0.0))
+        moved[name] = (ratio >= _MOVES) | (ratio == ratio.max())
+    return [moved[s.action] for s in segments]
+
+
+def _drift(t, y, segments, moves) -> np.ndarray:
+    """(F,) each feature's drift (units per second) where no action moves it: the
+    least-squares slope within the segments whose action holds it still, pooled
+    (each segment its own level); 0 where every segment moves it."""
+    num = np.zeros(y.shape[1])
+    den = np.zeros(y.shape[1])
+    for s, m in zip(segments, moves):
+        inside = (t >= s.start) & (t <= s.end)
+        if inside.sum() < 2:
+            continue
+        dt = t[inside] - t[inside].mean()
+        dy = y[inside] - y[inside].mean(axis=0)
+        num += np.where(m, 0.0, dt @ dy)
+        den += np.where(m, 0.0, dt @ dt)
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+
+
 def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
                       library: ActionLibrary | None = None) -> list[Segment]:
     """The segments' starts and ends refined on the recording's samples.
@@ -527,22 +595,32 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
     actions' durations inside them; a feature's amplitude is the action's net
     change (medians of the samples within 5 % of its duration of the given start
     and end) where that is at least 80 % of the feature's range over the action,
-    fitted otherwise. The end and start times (samples of the recording, the end
-    not after the start) within ``0.25`` of each action's duration of the given
-    boundaries are chosen jointly by least residual, the window recentred and
-    refitted, with each action's duration and net change measured anew, until it
-    settles (at most 10 rounds).
+    fitted otherwise. With a library, a feature the action does not move (its
+    knots' range under 10 times the library's noise of it, and not the action's
+    most moved feature) is held still in that
+    action's fit, and each feature's drift where no action moves it (the pooled
+    slope inside those segments: light that dims) is taken out of the recording
+    first. The end and start times (the end not after the start) within ``0.25``
+    of each action's duration of the given boundaries (the end's and the next
+    start's ranges joined: one gap) are chosen jointly by least residual, on the
+    samples and then between them (a quarter sample apart), the window recentred
+    and refitted, with each action's duration and net change measured anew, until
+    it settles (at most 10 rounds). Each start is then reported as the last
+    sample at or before the fitted time, each end as the first at or after it
+    (the samples at rest either side of the motion); back to back, where the two
+    cross, as the samples either side of the junction.
 
     Args:
         recording: the recording the segments were found in.
         segments: its action segments in time order (as `segment` with
             ``refine=False`` returns them).
         library: the library they were found with (`segment` passes it): its
-            noise is each feature's least unit. None: the recording's noise only.
+            noise is each feature's least unit, its actions say which features
+            each moves. None: the recording's noise only, every feature moved.
 
     Returns:
-        The same segments with refined ``start`` and ``end`` (seconds); actions and
-        costs unchanged.
+        The same segments with refined ``start`` and ``end`` (seconds, times of
+        the recording's samples); actions and costs unchanged.
     """
     if not segments:
         return []
@@ -550,13 +628,23 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
     y = recording.features / _scale(recording, library)
     n = len(segments)
     dur = [s.end - s.start for s in segments]
-    box = [(s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
-            s.end + _REACH * d) for s, d in zip(segments, dur)]
+    box = [[s.start - _REACH * d, s.start + _REACH * d, s.end - _REACH * d,
+            s.end + _REACH * d] for s, d in zip(segments, dur)]
+    # the end and the start around one gap share their ranges: where the search
+    # misplaced the gap, the junction may lie in either one's (a short search
+    # segment's own range is short)
+    for g in range(1, n):
+        lo, hi = min(box[g - 1][2], box[g][0]), max(box[g - 1][3], box[g][1])
+        box[g - 1][2:], box[g][:2] = [lo, hi], [lo, hi]
     starts = [s.start for s in segments]
     ends = [s.end for s in segments]
+    moves = _moved_features(library, segments, y.shape[1])
+    # a feature drifting where no action moves it (light that dims): detrended
+    y = y - np.outer(t - t[0], _drift(t, y, segments, moves))
     for _ in range(_ROUNDS):
         dur = [b - a for a, b in zip(starts, ends)]  # the profiles' durations
-        amp = [_amplitude(t, y, a, b, d) for a, b, d in zip(starts, ends, dur)]
+        amp = [np.where(m, _amplitude(t, y, a, b, d), 0.0)
+               for m, a, b, d in zip(moves, starts, ends, dur)]
         new_starts, new_ends = list(starts), list(ends)
         for g in range(n + 1):
             before = (ends[g - 1], dur[g - 1], -amp[g - 1]) if g > 0 else None
@@ -571,6 +659,13 @@ def refine_boundaries(recording: Demonstration, segments: Sequence[Segment],
         if new_starts == starts and new_ends == ends:
             break
         starts, ends = new_starts, new_ends
+    # reported as samples: the last at rest before each motion, the first after
+    # it; back to back, where these cross, the samples either side of the junction
+    starts = [_sample_at(t, v, after=False) for v in starts]
+    ends = [_sample_at(t, v, after=True) for v in ends]
+    for g in range(1, n):
+        if ends[g - 1] > starts[g]:
+            ends[g - 1], starts[g] = starts[g], ends[g - 1]
     return [s._replace(start=float(a), end=float(b))
             for s, a, b in zip(segments, starts, ends)]
 
