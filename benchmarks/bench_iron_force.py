@@ -12,9 +12,11 @@ Target (issue 41): success (20 mm and 6 N, the config's tolerance 0.02 with the
 1/300 weight) on at least 8 of 10 seeds, each surviving both replays and feasible.
 ``--group K`` runs the seeds K at a time (each group one batched call on the same
 simulator, its rows printed as it ends: a run cut short still reports the seeds it
-finished); the time per seed is its group's wall time / K.
+finished; the JSON, with each seed's joints, is rewritten after every group, so that
+the replays can be measured again from it); the time per seed is its group's wall
+time / K.  ``--first F`` starts at seed F (seeds F..F+seeds-1).
 
-    python benchmarks/bench_iron_force.py [--seeds 10] [--group 10] [--set KEY=VALUE ...]
+    python benchmarks/bench_iron_force.py [--seeds 10] [--first 0] [--group 10] [--set KEY=VALUE ...]
 """
 
 from __future__ import annotations
@@ -55,12 +57,14 @@ def checked(sim, goal, res, group_s: float, group: int) -> dict:
         "export_max_diff": export.get("max_feature_difference", float("nan")),
         "feasible": motion["feasible"], "generations": res.generations,
         "evaluations": res.evaluations, "s_per_seed": group_s / group,
+        "kept_chain": res.info.get("kept_chain"),
     }
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--first", type=int, default=0, help="first seed")
     parser.add_argument("--group", type=int, default=0,
                         help="seeds per batched call (default: all in one)")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -71,9 +75,10 @@ def main() -> None:
           flush=True)
     setup = experiment_setup(NAME, args.set)
     sim, goal = setup[1], setup[2]
-    rows, walls, total = [], [], 0.0
-    for first in range(0, args.seeds, group):
-        n = min(group, args.seeds - first)
+    rows, walls, joints, total = [], [], {}, 0.0
+    end = args.first + args.seeds
+    for first in range(args.first, end, group):
+        n = min(group, end - first)
         *_, results, wall = experiment_trials(NAME, n, seed=first, setup=setup)
         total += wall
         walls.append({"seeds": f"{first}-{first + n - 1}", "wall_s": wall,
@@ -81,8 +86,12 @@ def main() -> None:
                       "compile_s": results[0].compile_time_s})
         new = [checked(sim, goal, res, wall, n) for res in results]
         rows += new
+        joints.update({str(r.info["seed"]): np.asarray(r.joints).tolist()
+                       for r in results})
         print_table(new, list(new[0]))
         print(flush=True)
+        write_json("bench_iron_force", {"rows": rows, "groups": walls,
+                                        "joints": joints, "overrides": args.set})
     ok = [r for r in rows if r["success"] and r["replay_success"]
           and r["export_success"] and r["feasible"]]
     summary = {"seeds": args.seeds, "successes": sum(r["success"] for r in rows),
@@ -98,7 +107,7 @@ def main() -> None:
     report_target(f"{NAME} succeeds (and survives the checks) on >= {need} of "
                   f"{args.seeds} seeds", float(len(ok)), len(ok) >= need)
     write_json("bench_iron_force", {"rows": rows, "groups": walls,
-                                    "summary": summary})
+                                    "summary": summary, "joints": joints})
 
 
 if __name__ == "__main__":

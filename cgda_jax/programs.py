@@ -14,9 +14,10 @@ JAX's numerics flags: `environment_digest`, `files_digest`, and
 scope's key, the name of the place that builds it, its arguments' types and
 shardings, its ``jax.jit`` options and how many programs of that place and types the
 scope asked for before it (a run is deterministic: the same inputs ask for the
-same programs in the same order).  Found in memory or in the store on disk
-(`set_program_store`; ``cgda`` keeps it in its compilation cache folder when
-``$CGDA_JAX_PROGRAM_STORE=1``), it is
+same programs in the same order; `compile_ahead` starts one in a thread, to
+be taken by the call that asks for it).  Found in memory or in the store on disk
+(`set_program_store`; ``cgda`` keeps it in its compilation cache folder unless
+``$CGDA_JAX_PROGRAM_STORE=0``), it is
 used without tracing; any change of config, data, model or code gives another
 key, hence a miss (traced, compiled, kept).  A stored program is the executable
 XLA compiled in the process (one JAX's persistent cache served is not stored: on
@@ -45,6 +46,7 @@ program calls) is not seen by the key either: run such code outside a scope.
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import contextlib
 import contextvars
 import functools
@@ -57,13 +59,14 @@ import re
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 import jax
 
 __all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "STORE_VERSION", "cache_stats",
-           "clear_programs", "compile_jit", "compile_lowered", "environment_digest",
+           "clear_programs", "compile_ahead", "compile_jit", "compile_lowered", "environment_digest",
            "files_digest", "jit_call", "program_scope", "program_store",
            "set_program_store"]
 
@@ -167,6 +170,10 @@ class _Scope:
     def __init__(self, key: str):
         self.key = key
         self.asked: collections.Counter[str] = collections.Counter()
+        # `compile_ahead`: the programs compiling in a thread (by key) and how
+        # many of each kind were asked ahead and not taken yet
+        self.ahead: dict[str, concurrent.futures.Future] = {}
+        self.reserved: collections.Counter[str] = collections.Counter()
 
 
 _SCOPE: contextvars.ContextVar[_Scope | None] = contextvars.ContextVar(
@@ -197,21 +204,24 @@ def _leaf_type(x: Any) -> tuple:
             repr(sharding) if sharding is not None else None)
 
 
-def _program_key(scope: _Scope, name: str, args: tuple, jit_kw: dict) -> str:
+def _what(name: str, args: tuple, jit_kw: dict) -> str:
+    """What a program of the place ``name`` is asked for: its arguments' tree and
+    types, its ``jax.jit`` options."""
     leaves, tree = jax.tree.flatten(args)
-    what = repr((name, str(tree), [_leaf_type(x) for x in leaves],
+    return repr((name, str(tree), [_leaf_type(x) for x in leaves],
                  sorted((k, repr(v)) for k, v in jit_kw.items())))
-    with _LOCK:
-        n = scope.asked[what]
-        scope.asked[what] += 1
+
+
+def _program_key(scope: _Scope, what: str, n: int) -> str:
     return hashlib.sha256(f"{scope.key}\n{what}\n{n}".encode()).hexdigest()
 
 
 def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
                 ) -> jax.stages.Compiled:
     """``jax.jit(fn, **jit_kw).lower(*args).compile()``: inside a `program_scope`
-    found by key without tracing when compiled before (in memory or in the store),
-    else traced and compiled through `compile_lowered` and kept under its key.
+    found by key without tracing when compiled before (in memory or in the store)
+    or asked for ahead (`compile_ahead`), else traced and compiled through
+    `compile_lowered` and kept under its key.
 
     Args:
         name: the place that builds ``fn`` (one name per place: a module and what
@@ -221,7 +231,69 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
         jit_kw: ``jax.jit`` options (shardings).
     """
     scope = _SCOPE.get()
-    key = None if scope is None else _program_key(scope, name, args, jit_kw)
+    if scope is None:
+        return _find_or_compile(None, fn, args, jit_kw)
+    what = _what(name, args, jit_kw)
+    with _LOCK:
+        key = _program_key(scope, what, scope.asked[what])
+        scope.asked[what] += 1
+        pending = scope.ahead.pop(key, None)
+        if pending is not None:
+            scope.reserved[what] -= 1
+    if pending is not None:
+        try:
+            return pending.result()
+        except Exception as err:  # noqa: BLE001 - compiled here instead, raising here
+            log.debug("program %s compiled ahead failed (%s); compiling it here",
+                      name, err)
+    return _find_or_compile(key, fn, args, jit_kw)
+
+
+def compile_ahead(name: str, fn: Callable, *args: Any, **jit_kw: Any) -> None:
+    """Start finding or compiling, in a thread, the program that the next
+    `compile_jit` of ``name`` with these argument types in this `program_scope`
+    asks for (it then waits for it): a program the run needs later compiles
+    while the run computes (XLA compiles without Python's lock, on another
+    core). Outside a scope, nothing. A program asked ahead and never asked for is
+    compiled for nothing: ask only for what the run will use. Where JAX's
+    settings differ in the thread (a ``with jax.default_matmul_precision(...)``
+    holds in its own thread only), the caller compiles it instead.
+
+    Args:
+        name: as `compile_jit`'s.
+        fn: as `compile_jit`'s.
+        args: ``jax.ShapeDtypeStruct`` or arrays: the same types the call passes.
+        jit_kw: as `compile_jit`'s.
+    """
+    scope = _SCOPE.get()
+    if scope is None:
+        return
+    what = _what(name, args, jit_kw)
+    with _LOCK:
+        key = _program_key(scope, what, scope.asked[what] + scope.reserved[what])
+        scope.reserved[what] += 1
+        future: concurrent.futures.Future = concurrent.futures.Future()
+        scope.ahead[key] = future
+
+    numerics = _numerics()
+
+    def work() -> None:
+        try:
+            if _numerics() != numerics:  # a thread-local setting: not here
+                raise RuntimeError("JAX's settings differ in the compiling thread")
+            future.set_result(_find_or_compile(key, fn, args, jit_kw))
+        except BaseException as err:  # noqa: BLE001 - raised to the caller
+            future.set_exception(err)
+
+    context = contextvars.copy_context()
+    threading.Thread(target=context.run, args=(work,), daemon=True,
+                     name=f"cgda-compile-{name}").start()
+
+
+def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict
+                     ) -> jax.stages.Compiled:
+    """The program of ``key`` from memory or the store, else traced, compiled and
+    kept (None: `compile_lowered` only)."""
     if key is not None:
         with _LOCK:
             found = _KEYED.get(key)
@@ -391,13 +463,42 @@ def files_digest(paths: Iterable[str | os.PathLike], max_bytes: int = 256 << 20,
             files = [root]
         h.update(f"{root}:{len(files)}\n".encode())
         for f in files:
-            total += f.stat().st_size
+            st = f.stat()
+            total += st.st_size
             if total > max_bytes:
                 return None
             h.update(f"{f.relative_to(root) if root.is_dir() else f.name}\n".encode())
-            with open(f, "rb") as fh:
-                h.update(hashlib.file_digest(fh, "sha256").digest())
+            h.update(_file_digest(f, st))
     return h.hexdigest()
+
+
+#: A file's content digest by its path and what ``stat`` says of it (inode, size,
+#: modification time in ns): a run's keys (its checks', its search's) read each of
+#: its files once.
+_FILE_DIGESTS: dict[tuple, bytes] = {}
+#: A file modified less than this long ago (ns) is read every time: the clock that
+#: stamps files ticks coarsely, so two writes of one size in a tick look the same.
+_SETTLED_NS = 2_000_000_000
+
+
+def _file_digest(path: pathlib.Path, st: os.stat_result) -> bytes:
+    """SHA-256 of ``path``'s content (``st`` its stat), read again only when the
+    file changed (another inode, size or modification time) or changed lately
+    (`_SETTLED_NS`)."""
+    seen = (str(path), st.st_ino, st.st_size, st.st_mtime_ns)
+    with _LOCK:
+        found = _FILE_DIGESTS.get(seen)
+    if found is not None:
+        return found
+    with open(path, "rb") as fh:
+        digest = hashlib.file_digest(fh, "sha256").digest()
+    if time.time_ns() - st.st_mtime_ns < _SETTLED_NS:
+        return digest
+    with _LOCK:
+        if len(_FILE_DIGESTS) > 100_000:  # bounded: a process reading many trees
+            _FILE_DIGESTS.clear()
+        _FILE_DIGESTS[seen] = digest
+    return digest
 
 
 @functools.cache
@@ -406,6 +507,7 @@ def _source_digest() -> str:
     return files_digest(sorted(package.rglob("*.py"))) or ""
 
 
+@functools.cache
 def _version(dist: str) -> str:
     from importlib import metadata
 
@@ -433,15 +535,25 @@ def _host() -> str:
     return repr((platform.machine(), platform.processor(), lines))
 
 
+#: JAX's settings that change what a program computes.
+_NUMERICS_FLAGS = ("jax_enable_x64", "jax_default_matmul_precision",
+                   "jax_numpy_rank_promotion", "jax_default_prng_impl",
+                   "jax_threefry_partitionable", "jax_disable_jit")
+
+
+def _numerics() -> dict[str, Any]:
+    """`_NUMERICS_FLAGS` as this thread sees them (a ``with`` of JAX's holds in
+    its own thread only)."""
+    return {k: getattr(jax.config, k, None) for k in _NUMERICS_FLAGS}
+
+
 def environment_digest() -> str:
     """SHA-256 of what a program depends on besides its experiment: the package's
     source (every ``cgda_jax/**/*.py``), the versions of Python, jax, jaxlib,
     MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices, the
     host's CPU (model, instruction sets), JAX's numerics flags and
     ``$XLA_FLAGS``."""
-    flags = {k: getattr(jax.config, k, None) for k in (
-        "jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_rank_promotion",
-        "jax_default_prng_impl", "jax_threefry_partitionable", "jax_disable_jit")}
+    flags = _numerics()
     what = repr((_source_digest(), _host(), sys.version,
                  [_version(d) for d in ("jax", "jaxlib", "mujoco", "mujoco-mjx",
                                         "evosax", "optax", "numpy")],

@@ -144,6 +144,24 @@ def test_min_jerk_sends_the_simulator_s_own_reference():
         time_parameterize(START, WAYPOINTS[:1], [move], [hold], profile="linear")
 
 
+def test_quintic_between_samples_is_the_simulator_s_reference():
+    """``position_at(..., quintic=True)`` (the dynamic replay's controller) gives the
+    minimum-jerk ramp between the 100 Hz samples exactly; linear interpolation
+    misses it by up to dq x 5.8 / (8 T^2 rate^2)."""
+    move, hold = 0.9, 0.6  # whole periods: each move one quintic
+    tr = time_parameterize(START, WAYPOINTS[:2], [move] * 2, [hold] * 2, rate=100.0)
+    t = np.linspace(0.0, move, 2001)
+    tau = t / move
+    want = START + (10 * tau**3 - 15 * tau**4 + 6 * tau**5)[:, None] * (
+        WAYPOINTS[0] - START)
+    np.testing.assert_allclose(tr.position_at(t, quintic=True), want, rtol=0,
+                               atol=1e-12)
+    assert np.abs(tr.position_at(t) - want).max() > 1e-6
+    np.testing.assert_array_equal(tr.position_at(tr.t, quintic=True), tr.q)
+    after = tr.position_at(np.array([tr.duration + 1.0]), quintic=True)
+    np.testing.assert_allclose(after[0], tr.q[-1], atol=1e-12)  # held after the end
+
+
 @pytest.mark.parametrize("fmt", ["json", "csv", "npz"])
 def test_files_round_trip(limited, tmp_path, fmt):
     path = save_trajectory(limited, tmp_path / f"t.{fmt}")

@@ -31,7 +31,7 @@ def test_judge_best_keeps_the_best_ranks_exact(n, ranks):
     no better than any judged feasible one; it judges fewer than all when the
     best are feasible."""
     rng = np.random.default_rng(n)
-    ranked = jax.jit(lambda f, v: judge_best(f, lambda idx: v[idx], 1e3, ranks,
+    ranked = jax.jit(lambda f, v: judge_best(f, lambda idx, need: v[idx], 1e3, ranks,
                                              judged_round(ranks)))
     saved = 0
     for _ in range(60):
@@ -59,7 +59,7 @@ def test_judge_best_judges_a_round_when_the_best_are_feasible():
     f = jnp.arange(32, dtype=jnp.float32)
     calls = []
 
-    def judge(idx):
+    def judge(idx, need):
         calls.append(idx.shape)
         return jnp.zeros(idx.shape, jnp.float32)
 
@@ -79,7 +79,7 @@ def test_judge_best_with_a_lead_judges_it_first_and_the_rest_as_without(n, ranks
     size = judged_round(ranks)
 
     runs = {lead: jax.jit(lambda f, v, lead=lead: judge_best(
-        f, lambda idx: v[idx], 1e3, ranks, size, lead=lead)) for lead in (0, 1)}
+        f, lambda idx, need: v[idx], 1e3, ranks, size, lead=lead)) for lead in (0, 1)}
 
     def run(f, v, lead):
         return [np.asarray(x) for x in runs[lead](f, v)]

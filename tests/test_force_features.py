@@ -149,7 +149,7 @@ def test_scale_weights_a_feature(pressing):
     m, fs, datas = pressing
     scaled = FeatureSet(m, [{"site": "ft", "quantity": "fz", "scale": 1 / 300},
                             {"site": "ft", "quantity": "x", "scale": 2.5}])
-    assert scaled.feature_names == ("ft.fz/300 [N]", "ft.x*2.5 [m]")
+    assert scaled.feature_names == ("ft.fz [300 N]", "ft.x [0.4 m]")
     got = np.asarray(scaled.from_sensordata(datas[1].sensordata))
     ref = _reference(m, datas[1])
     np.testing.assert_allclose(got, [ref[2] / 300, 2.5 * ref[8]], rtol=1e-6)

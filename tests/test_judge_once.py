@@ -54,14 +54,15 @@ def test_an_unjudged_step_moves_the_same_and_carries_the_violations(sim):
 
 
 def _move_traces(monkeypatch):
+    """Calls of the check: `Feasibility.move` (one move) and `Feasibility.moves`
+    (the moves of a ranked round together)."""
     calls = []
-    move = Feasibility.move
+    for name in ("move", "moves"):
+        def counted(self, *args, _f=getattr(Feasibility, name), **kwargs):
+            calls.append(1)
+            return _f(self, *args, **kwargs)
 
-    def counted(self, *args, **kwargs):
-        calls.append(1)
-        return move(self, *args, **kwargs)
-
-    monkeypatch.setattr(Feasibility, "move", counted)
+        monkeypatch.setattr(Feasibility, name, counted)
     return calls
 
 
@@ -244,3 +245,33 @@ def test_iet_kept_violations_equal_the_judged_moves():
         state, _ = slow.step(state, jnp.asarray(w))
         ref.append(float(state.move_violation))
     np.testing.assert_allclose(np.asarray(s.violations), ref, rtol=1e-5, atol=1e-6)
+
+
+def test_moves_judged_together_equal_one_by_one(sim):
+    """`Feasibility.moves` (coarse to fine, batch entries packed together) gives
+    `Feasibility.move`'s violations bit for bit, flat and under nested vmaps;
+    ``need`` False leaves only the penetration out.  Short moves (the coarse
+    bound proves most clear) and long ones (through the wall, too fast)."""
+    feas = sim.feasibility
+    rng = np.random.default_rng(0)
+    lo, hi = np.asarray(sim.lower), np.asarray(sim.upper)
+    for scale in (0.05, 1.0):
+        q0 = rng.uniform(lo, hi, (128, 3)).astype(np.float32)
+        dq = (np.clip(q0 + scale * rng.standard_normal(q0.shape), lo, hi)
+              - q0).astype(np.float32)
+        dur = np.full(128, 0.5, np.float32)
+        ap = rng.random(128) < 0.2
+        need = rng.random(128) < 0.7
+        ref = np.asarray(jax.jit(jax.vmap(feas.move))(q0, dq, dur, ap))
+        flat = np.asarray(jax.jit(feas.moves)(q0, dq, dur, ap))
+        nested = np.asarray(jax.jit(jax.vmap(jax.vmap(feas.moves)))(
+            *(x.reshape(4, 4, 8, *x.shape[1:]) for x in (q0, dq, dur, ap))))
+        np.testing.assert_array_equal(flat, ref)
+        np.testing.assert_array_equal(nested.reshape(-1), ref)
+        some = np.asarray(jax.jit(feas.moves)(q0, dq, dur, ap, need))
+        np.testing.assert_array_equal(some[need], ref[need])
+        assert (ref > 0).any() or scale < 1.0
+    no_walls = np.asarray(jax.jit(jax.vmap(
+        lambda a, b, c, d: jnp.maximum(feas.limit_violation(b, c), 0.0)))(
+            q0, dq, dur, ap))
+    assert np.all(some[~need] <= np.maximum(no_walls[~need], ref[~need]))

@@ -139,6 +139,32 @@ def test_a_data_file_changed_is_another_key(tmp_path):
     assert files_digest([data], max_bytes=3) is None  # too large to read: no key
 
 
+def test_a_settled_file_is_read_once_for_the_keys(tmp_path, monkeypatch):
+    """A run's two keys (its checks', its search's) read each file once; a file
+    changed since, or changed lately (two writes in one tick of the file clock),
+    is read again."""
+    import hashlib
+
+    reads = []
+    digest = hashlib.file_digest
+    monkeypatch.setattr(hashlib, "file_digest",
+                        lambda f, *a: reads.append(f.name) or digest(f, *a))
+    old = tmp_path / "old.xml"
+    old.write_text("<a/>")
+    past = old.stat().st_mtime_ns - 10**10
+    os.utime(old, ns=(past, past))
+    first = files_digest([tmp_path])
+    assert files_digest([tmp_path]) == first and reads == [str(old)]
+    old.write_text("<b/>")  # the same size, a later time
+    os.utime(old, ns=(past + 10**9, past + 10**9))
+    assert files_digest([tmp_path]) != first and len(reads) == 2
+    new = tmp_path / "new.xml"  # just written: read every time
+    new.write_text("1")
+    files_digest([new])
+    files_digest([new])
+    assert reads[2:] == [str(new)] * 2
+
+
 def test_a_damaged_store_file_is_compiled_again_with_a_warning(store, caplog):
     root, model, first = store
     files = sorted(first[3], key=lambda f: f.stat().st_size)[:3]  # quick ones
@@ -222,3 +248,59 @@ def test_a_program_from_the_persistent_cache_is_not_stored(tmp_path):
     assert served[1:] == ["1", "0"] and not list((tmp_path / "served").glob("*.prog"))
     back = run(tmp_path / "fresh")  # read back from the store, run in a new process
     assert back == [fresh[0], "0", "1"]
+
+
+def test_cgda_keeps_programs_by_default_and_0_turns_the_store_off(tmp_path, monkeypatch):
+    """``cgda`` stores a run's programs in ``$CGDA_JAX_CACHE/programs`` unless
+    ``$CGDA_JAX_PROGRAM_STORE=0``."""
+    import jax
+
+    from cgda_jax.cli.output import PROGRAM_STORE_ENV, enable_compilation_cache
+
+    flags = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+             "jax_persistent_cache_min_entry_size_bytes")
+    saved = {k: getattr(jax.config, k) for k in flags}
+    before = program_store()
+    try:
+        monkeypatch.delenv(PROGRAM_STORE_ENV, raising=False)
+        path = enable_compilation_cache(tmp_path / "cache")
+        assert program_store() == path / "programs"
+        monkeypatch.setenv(PROGRAM_STORE_ENV, "0")
+        enable_compilation_cache(tmp_path / "cache")
+        assert program_store() is None
+    finally:  # the rest of this process as it was
+        for k, v in saved.items():
+            jax.config.update(k, v)
+        set_program_store(before)
+
+
+def test_a_program_compiled_ahead_is_the_one_asked_for():
+    """`compile_ahead` compiles in another thread the program the next
+    `compile_jit` of the same place and types asks for, under the same key."""
+    import threading
+
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_ahead, compile_jit, program_scope
+
+    traced_in = []
+
+    def f(x):
+        traced_in.append(threading.current_thread().name)
+        return jnp.cumsum(x) * 2.0
+
+    x = jax.ShapeDtypeStruct((5,), jnp.float32)
+    before = cache_stats()
+    with program_scope("a test of compile_ahead"):
+        compile_ahead("test.ahead", f, x)
+        first = compile_jit("test.ahead", f, x)  # waits for the thread's
+        second = compile_jit("test.ahead", f, x)  # the next one: not the same
+    assert traced_in[0] == "cgda-compile-test.ahead"  # (JAX traces f once)
+    assert cache_stats()["traced"] - before["traced"] == 2
+    np.testing.assert_array_equal(first(jnp.arange(5.0)), [0, 2, 6, 12, 20])
+    again = cache_stats()
+    with program_scope("a test of compile_ahead"):  # as keyed without ahead
+        assert compile_jit("test.ahead", f, x) is first
+        assert compile_jit("test.ahead", f, x) is second
+    assert cache_stats()["keyed_hits"] - again["keyed_hits"] == 2

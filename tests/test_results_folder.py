@@ -418,6 +418,22 @@ def test_demo_follows_the_same_folder_rules(monkeypatch, capsys, tmp_path):
     assert folders == ["demo", "demo-2"]  # no temporary folder, no lock left
 
 
+@pytest.mark.parametrize("bad", ["a", "b"])
+def test_demo_checks_side_by_side_and_names_the_bad_config(monkeypatch, capsys,
+                                                           tmp_path, bad):
+    """The demo's configs are checked two at a time: a bad one is still the error,
+    by its name, before anything is written."""
+    import cgda_jax.experiment as ex
+
+    configs = [load_config(CLEAN, TINY + [f"name={n}"] + (
+        [f"robot.model={tmp_path / 'missing.xml'}"] if n == bad else []))
+        for n in ("a", "b")]
+    monkeypatch.setattr(ex, "demo_configs", lambda small=False: configs)
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--quiet"]) == 2
+    assert "missing.xml" in one_error_line(capsys.readouterr().err)
+    assert not (tmp_path / "demo").exists()
+
+
 def _record_drawing(monkeypatch, fail=None):
     """Record which thread finishes each demo experiment (and when its compute
     starts); ``fail``: the experiment whose drawing raises."""

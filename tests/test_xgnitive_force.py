@@ -105,4 +105,4 @@ def test_iron_force_config_goal_and_scene(xgnitive_dir, monkeypatch):
     np.testing.assert_allclose(goal[:, 3] * 300, want[:, 3], atol=1e-4, rtol=0)
     assert len(demos) == 4 and demos[0].feature_names == ("X", "Y", "Z", "Fz")
     assert scene_feature_names(cfg) == ["iron/tcp.x [m]", "iron/tcp.y [m]",
-                                        "iron/tcp.z [m]", "iron/ft.fz/300 [N]"]
+                                        "iron/tcp.z [m]", "iron/ft.fz [300 N]"]

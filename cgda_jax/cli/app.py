@@ -95,7 +95,9 @@ def _parser() -> argparse.ArgumentParser:
                        help="no progress on stderr (warnings and errors still shown)")
         s.add_argument("--no-cache", action="store_true",
                        help="do not use the persistent JAX compilation cache "
-                       "($CGDA_JAX_CACHE, default ~/.cache/cgda_jax/jax)")
+                       "($CGDA_JAX_CACHE, default ~/.cache/cgda_jax/jax) nor the "
+                       "compiled programs kept in it ($CGDA_JAX_PROGRAM_STORE=0: "
+                       "keep the cache, not the programs)")
     return p
 
 

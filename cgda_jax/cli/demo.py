@@ -89,7 +89,14 @@ def cmd_demo(args, session: Session) -> int:
     from cgda_jax.experiment import RunFolder, check_and_build, demo_configs
 
     configs = demo_configs(small=args.small)
-    built = [check_and_build(cfg)[1] for cfg in configs]  # each run uses its own
+    # each run uses its own; checked two at a time (the pair cullings' programs
+    # compile side by side), the first bad config's error raised as in turn
+    pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="cgda-check")
+    try:
+        checks = [pool.submit(check_and_build, cfg) for cfg in configs]
+        built = [check.result()[1] for check in checks]
+    finally:  # an error: the checks not started are dropped
+        pool.shutdown(wait=True, cancel_futures=True)
     t0 = time.perf_counter()
     results = {}
     target = pathlib.Path(args.out or "results/demo").expanduser()

@@ -32,7 +32,8 @@ EXIT_MET, EXIT_NOT_MET, EXIT_USAGE, EXIT_FAILURE = 0, 1, 2, 3
 EXIT_DIVERGED = EXIT_FAILURE
 #: Interrupted by a signal: 128 + its number.
 EXIT_SIGNAL = {signal.SIGINT: 130, signal.SIGTERM: 143}
-#: ``1`` turns on the store of a run's compiled programs in the cache folder.
+#: ``0`` turns off the store of a run's compiled programs in the cache folder (on
+#: by default).
 PROGRAM_STORE_ENV = "CGDA_JAX_PROGRAM_STORE"
 
 
@@ -324,10 +325,10 @@ def _cache_dir() -> pathlib.Path:
 
 
 def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
-    """Turn on JAX's persistent compilation cache, small programs included; with
-    ``$CGDA_JAX_PROGRAM_STORE=1`` also keep the programs of a run, found without
-    tracing, in its ``programs/`` (`cgda_jax.programs.set_program_store`; off by
-    default, see the comment below).
+    """Turn on JAX's persistent compilation cache, small programs included, and
+    keep the programs of a run, found without tracing, in its ``programs/``
+    (`cgda_jax.programs.set_program_store`; ``$CGDA_JAX_PROGRAM_STORE=0`` keeps
+    them in memory only).
 
     Raises:
         FolderError: the folder cannot be created or written (names it and
@@ -351,14 +352,11 @@ def enable_compilation_cache(path: pathlib.Path | None = None) -> pathlib.Path:
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    # The store of serialized executables is opt-in: on the CPU (jax 0.10.2) an
-    # executable that XLA's compile took from JAX's persistent cache serializes
-    # into a program that fails when run in a new process ("Function
-    # concatenate_bitcast_fusion not found"; a freshly compiled one reads back and
-    # runs), which CI met in processes sharing one cache folder.  The store now
-    # keeps only programs XLA compiled in the process (`cgda_jax.programs`); it
-    # stays opt-in until the whole suite has run with it on.
-    if os.environ.get(PROGRAM_STORE_ENV) == "1":
+    # The store keeps only programs XLA compiled in this process: on the CPU (jax
+    # 0.10.2) an executable that XLA's compile took from JAX's persistent cache
+    # serializes into one that fails in a new process ("Function ... not found";
+    # `cgda_jax.programs`, tests/test_program_store.py).
+    if os.environ.get(PROGRAM_STORE_ENV, "1") != "0":
         set_program_store(path / "programs")  # found there without tracing
     else:
         set_program_store(None)

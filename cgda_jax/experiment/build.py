@@ -248,7 +248,7 @@ def scene_feature_names(cfg: ExperimentConfig) -> list[str]:
     names = []
     for entry in cfg.scene.features:
         spec = FeatureSpec.from_dict(entry)
-        names += [f"{c} [{spec.unit}]" for c in spec.columns()]
+        names += spec.labels()
     return names
 
 

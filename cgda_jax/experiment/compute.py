@@ -282,6 +282,10 @@ def compute_execution(
     goal, demos, gen, sim = built.goal, built.demos, built.generalization, built.sim
     waypoint_s = built.waypoint_s
     s = cfg.strategy
+    if s.name in ("ie", "iet"):  # a waypoint per goal point: the motion check's
+        from cgda_jax.sim.motion_check import compile_collisions_ahead
+
+        compile_collisions_ahead(sim, len(goal))  # program compiles meanwhile
     res = strategy_function(s.name)(
         sim, goal, algorithm=s.algorithm, population_size=s.population_size,
         tolerance=s.tolerance, max_generations=s.max_generations, seed=s.seed,

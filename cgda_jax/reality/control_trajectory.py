@@ -131,12 +131,33 @@ class ExportedTrajectory:
         """(N,) when each waypoint's features are read (the end of its hold) [s]."""
         return self.t[self.feature_index]
 
-    def position_at(self, times) -> np.ndarray:
-        """(K, DoF) positions at ``times`` (K,) [s], linear between samples (what a
-        controller interpolating its setpoints commands); held after the end."""
+    def position_at(self, times, quintic: bool = False) -> np.ndarray:
+        """(K, DoF) positions at ``times`` (K,) [s], held after the end: linear
+        between samples (a controller interpolating its position setpoints), or,
+        ``quintic``, the quintic that matches each pair of neighbouring samples'
+        positions, velocities and accelerations (a controller given all three): a
+        minimum-jerk move is a quintic in time, so this reproduces the run's own
+        reference between the samples exactly."""
         times = np.asarray(times, np.float64)
-        return np.stack([np.interp(times, self.t, self.q[:, j])
-                         for j in range(self.n_dof)], axis=-1)
+        if not quintic or self.n_samples < 2:
+            return np.stack([np.interp(times, self.t, self.q[:, j])
+                             for j in range(self.n_dof)], axis=-1)
+        tc = np.clip(times, self.t[0], self.t[-1])
+        k = np.clip(np.searchsorted(self.t, tc, side="right") - 1, 0,
+                    self.n_samples - 2)
+        h = (self.t[k + 1] - self.t[k])[:, None]
+        u = ((tc - self.t[k]) / h[:, 0])[:, None]
+        p0, v0, a0 = self.q[k], self.qd[k] * h, self.qdd[k] * h**2
+        p1, v1, a1 = self.q[k + 1], self.qd[k + 1] * h, self.qdd[k + 1] * h**2
+        u2, u3 = u * u, u * u * u
+        # quintic Hermite basis on [0, 1] (position, slope and curvature at the ends)
+        h0 = 1 - 10 * u3 + 15 * u3 * u - 6 * u3 * u2
+        h1 = u - 6 * u3 + 8 * u3 * u - 3 * u3 * u2
+        h2 = 0.5 * (u2 - 3 * u3 + 3 * u3 * u - u3 * u2)
+        h3 = 0.5 * (u3 - 2 * u3 * u + u3 * u2)
+        h4 = -4 * u3 + 7 * u3 * u - 3 * u3 * u2
+        h5 = 10 * u3 - 15 * u3 * u + 6 * u3 * u2
+        return h0 * p0 + h1 * v0 + h2 * a0 + h3 * a1 + h4 * v1 + h5 * p1
 
 
 def time_parameterize(

@@ -80,7 +80,8 @@ from jax import Array
 
 __all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
            "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "EXECUTED_MARGIN",
-           "GEOMETRIES", "Feasibility", "relevant_pairs", "scene_obstacles"]
+           "GEOMETRIES", "PACKED_MIN", "PROVEN", "Feasibility", "relevant_pairs",
+           "scene_obstacles"]
 
 #: Grid postures `relevant_pairs` looks at (about; per joint: its root).
 GRID_POSTURES = 4096
@@ -104,6 +105,13 @@ DEFAULT_SATURATION = 0.75
 EXECUTED_MARGIN = 0.05
 #: What the check's distances measure (`Feasibility`'s ``geometry``).
 GEOMETRIES = ("round", "exact")
+#: `Feasibility.moves`: metres by which a move's coarse bound must clear the
+#: allowed depth to need no more samples (float32 distances err by ~1e-6 m).
+PROVEN = 1e-4
+#: `Feasibility.moves`: a batch of at most this many sampled postures is judged
+#: at once, without the coarse-to-fine loop (paint IET's round of 20 moves: the
+#: loop's iterations cost more than the postures they leave out).
+PACKED_MIN = 512
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -313,6 +321,130 @@ class Feasibility:
         flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
         return jnp.maximum(jnp.maximum(self.limit_violation(dq, duration), over), flail)
+
+    def moves(self, q0: Array, dq: Array, duration: Array, approach: Array,
+              need: Array | None = None) -> Array:
+        """`move` of M moves at once: violations (M,) of the moves from ``q0``
+        by ``dq`` (M, DoF) in ``duration`` seconds (M,), ``approach`` (M,) as
+        there; the same values, bit for bit, with fewer distances taken.  With
+        ``need`` (M,) bool, the moves where it is False are not checked for
+        collisions (their violation leaves the penetration out): for a caller
+        that discards them.
+
+        Coarse to fine (`_over_moves`): every needed move's distances first at
+        three of its sampled postures (its ends and middle); between two of
+        them ``h`` apart (a share of the move) a pair's distance is at least
+        ``(d_k + d_k+1 - L h) / 2`` (``L = pair_reach @ |dq|``, as ``certify``
+        bounds it), and a move whose bound over its pairs and segments stays
+        `PROVEN` above the allowed depth has no sampled posture past it: its
+        penetration term is 0, as the full samples give.  Only the other moves
+        take their remaining samples.  The postures to take are packed
+        together, half of M an iteration of one loop (one copy of the
+        distances in the program).  Batched (``vmap``, any depth) the moves
+        of every batch entry are packed together
+        (`jax.custom_batching.custom_vmap`), so that the moves a batch entry
+        does not need cost nothing.  With ``certify``, without a check, with
+        fewer than 4 samples or at most `PACKED_MIN` postures in all:
+        ``vmap(move)``'s distances."""
+        limit = jax.vmap(self.limit_violation)(dq, duration)
+        flail = jnp.maximum(jnp.max(jnp.abs(dq), axis=-1) / self.max_step - 1.0, 0.0)
+        flail = jnp.where(approach, 0.0, flail)
+        need = jnp.ones(dq.shape[:1], bool) if need is None else need
+        if self.check is None or self.certify or self.samples < 4:
+            over = jax.vmap(lambda a, b: jnp.maximum(self.worst(a, b) - self.allowed,
+                                                     0.0) / self.penetration)(q0, dq)
+            over = jnp.where(need, over, 0.0)
+        else:
+            over = self._over_moves(q0, dq, need)
+        return jnp.maximum(jnp.maximum(limit, over), flail)
+
+    @functools.cached_property
+    def _over_moves(self):
+        """The penetration term (M,) of `moves` (q0, dq (M, DoF), need (M,)),
+        batched by flattening every batch axis into the moves (`moves`)."""
+
+        @jax.custom_batching.custom_vmap
+        def over(q0, dq, need):
+            return self._over_flat(q0, dq, need)
+
+        @over.def_vmap
+        def _batched(axis_size, in_batched, q0, dq, need):
+            q0, dq, need = (x if b else jnp.broadcast_to(x, (axis_size, *x.shape))
+                            for x, b in zip((q0, dq, need), in_batched, strict=True))
+            d = q0.shape[-1]
+            flat = over(q0.reshape(-1, d), dq.reshape(-1, d), need.reshape(-1))
+            return flat.reshape(need.shape), True
+
+        return over
+
+    def _over_flat(self, q0: Array, dq: Array, need: Array) -> Array:
+        """`_over_moves` of one flat batch of moves (see `moves`)."""
+        m, s = q0.shape[0], self.samples
+        if m * (s + 1) <= PACKED_MIN:  # a loop would cost more than it saves
+            over = jax.vmap(lambda a, b: jnp.maximum(self.worst(a, b) - self.allowed,
+                                                     0.0) / self.penetration)(q0, dq)
+            return jnp.where(need, over, 0.0)
+        alphas = jnp.arange(s + 1, dtype=jnp.float32) / s  # as `worst`'s
+        coarse = np.asarray([0, s // 2, s], np.int32)  # first: ends and middle
+        rest = np.setdiff1d(np.arange(s + 1), coarse).astype(np.int32)
+        nc, nr, n_pairs = len(coarse), len(rest), self.check.n_pairs
+        chunk = -(-m // 2)  # postures an iteration
+        rate = jnp.abs(dq) @ jnp.asarray(self._reach).T  # (M, pairs)
+        h = jnp.asarray(np.diff(coarse) / s, jnp.float32)  # (nc - 1,)
+        # the needed moves first; the coarse entry e: move first[e // nc]'s
+        # sample coarse[e % nc], postures chunk * i .. of iteration i
+        first = jnp.argsort(~need, stable=True)
+        n_coarse = -(-(jnp.sum(need) * nc) // chunk)  # iterations
+        n_c, n_r = -(-nc * m // chunk), -(-nr * m // chunk)
+
+        def coarse_of(cbuf):  # (nc, M, pairs) in the moves' order
+            per = cbuf.reshape(n_c * chunk, n_pairs)[:nc * m].reshape(m, nc, n_pairs)
+            return jnp.full((m, nc, n_pairs), jnp.inf).at[first].set(per).transpose(
+                1, 0, 2)
+
+        def unproven(cbuf):  # the moves the coarse bound leaves open, first
+            dc = coarse_of(cbuf)
+            low = 0.5 * (dc[:-1] + dc[1:] - rate[None] * h[:, None, None])
+            bound = jnp.min(jnp.minimum(low, dc[1:]), axis=(0, 2))  # (M,)
+            open_ = need & ~(bound >= PROVEN - self.allowed)
+            return dc, open_, jnp.argsort(~open_, stable=True), jnp.sum(open_)
+
+        def body(c):
+            it, cbuf, fbuf = c
+            in_coarse = it < n_coarse
+            _, _, order, _ = unproven(cbuf)
+            i = jnp.where(in_coarse, it, it - n_coarse)
+            e = i * chunk + jnp.arange(chunk)
+            move = jnp.where(in_coarse, first[jnp.minimum(e // nc, m - 1)],
+                             order[jnp.minimum(e // nr, m - 1)])
+            k = jnp.where(in_coarse, jnp.asarray(coarse)[e % nc],
+                          jnp.asarray(rest)[e % nr])
+            q = q0[move] + alphas[k][:, None] * dq[move]
+            d = jax.vmap(lambda x: self.check.distances(x, exact=False))(q)
+            cbuf = jnp.where(in_coarse, jax.lax.dynamic_update_index_in_dim(
+                cbuf, d, jnp.minimum(i, n_c - 1), 0), cbuf)
+            fbuf = jnp.where(in_coarse, fbuf, jax.lax.dynamic_update_index_in_dim(
+                fbuf, d, jnp.minimum(i, n_r - 1), 0))
+            return it + 1, cbuf, fbuf
+
+        def more(c):
+            it, cbuf, _ = c
+            n_open = unproven(cbuf)[3]
+            return (it < n_coarse) | ((it - n_coarse) * chunk < n_open * nr)
+
+        inf = jnp.float32(jnp.inf)
+        _, cbuf, fbuf = jax.lax.while_loop(
+            more, body, (jnp.zeros((), jnp.int32),
+                         jnp.full((n_c, chunk, n_pairs), inf),
+                         jnp.full((n_r, chunk, n_pairs), inf)))
+        dc, open_, order, _ = unproven(cbuf)
+        # fine entry e: move order[e // nr]'s sample rest[e % nr]
+        fine = jnp.min(fbuf.reshape(n_r * chunk, n_pairs)[:nr * m].reshape(
+            m, nr, n_pairs), axis=(1, 2))
+        fine = jnp.full((m,), inf).at[order].set(fine)
+        worst = -jnp.minimum(jnp.min(dc, axis=(0, 2)), fine)
+        over = jnp.maximum(worst - self.allowed, 0.0) / self.penetration
+        return jnp.where(open_, over, 0.0)
 
     # -- the executed motion (dynamic mode: what the physics did) ----------------
     def _executed_limits(self, robot, tracking_deg: float, saturation: float):

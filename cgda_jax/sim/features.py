@@ -139,8 +139,9 @@ class FeatureSpec:
         scale: the feature's values are multiplied by it (default 1): a weight
             between features of different units in the strategies' point
             distances, e.g. 1/300 for a force beside positions in metres (the
-            CGDA authors' iron fitness counts 300 N like 1 m).  The column's name
-            says so (``"ft.fz/300 [N]"``: the force in N, divided by 300).
+            CGDA authors' iron fitness counts 300 N like 1 m).  The column's unit
+            says so (``"ft.fz [300 N]"``: the force in units of 300 N, so that
+            -0.1 is -30 N; `scaled_unit`).
 
     Raises:
         ValueError: an unknown kind, a quantity that the kind does not have, or a
@@ -215,15 +216,22 @@ class FeatureSpec:
                    entry.get("frame", "sensor"), entry.get("scale", 1.0))
 
     def columns(self) -> tuple[str, ...]:
-        """Column names without units, e.g. ``("box.x", "box.y")``; a scaled
-        feature's names end in ``/300`` (scale 1/300) or ``*2`` (scale 2)."""
-        cols = self._raw_columns()
+        """Column names without units, e.g. ``("box.x", "box.y")``."""
+        return self._raw_columns()
+
+    def labels(self) -> tuple[str, ...]:
+        """Column names with the values' unit, e.g. ``("box.x [m]",)``,
+        ``("ft.fz [300 N]",)`` (`scaled_unit`)."""
+        return tuple(f"{c} [{self.scaled_unit}]" for c in self.columns())
+
+    @property
+    def scaled_unit(self) -> str:
+        """The unit of the values (`unit` times 1 / `scale`): ``"N"``, or ``"300 N"``
+        for a force with scale 1/300 (a value -0.1 is -30 N), ``"0.4 m"`` for a
+        position with scale 2.5."""
         if self.scale == 1:
-            return cols
-        inv = 1.0 / self.scale
-        tail = f"/{round(inv)}" if abs(inv - round(inv)) < 1e-9 * inv \
-            else f"*{self.scale:g}"
-        return tuple(c + tail for c in cols)
+            return self.unit
+        return f"{1.0 / self.scale:.6g} {self.unit}"
 
     def _raw_columns(self) -> tuple[str, ...]:
         if self.kind == "joint":
@@ -389,8 +397,8 @@ class FeatureSet:
         sensor_ok = True
         for spec in self.specs:
             i = _resolve(mj_model, spec)
-            names += [f"{c} [{spec.unit}]" for c in spec.columns()]
-            units += [spec.unit] * len(spec.columns())
+            names += spec.labels()
+            units += [spec.scaled_unit] * len(spec.columns())
             adrs = []
             for s_name, _, _ in _sensor_plans(spec, sensor_prefix):
                 s_id = mujoco.mj_name2id(mj_model, mujoco.mjtObj.mjOBJ_SENSOR, s_name)

@@ -28,8 +28,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["TRACKING_WARNING_DEG", "MotionProfile", "motion_profile", "motion_report",
-           "tracking_note"]
+__all__ = ["TRACKING_WARNING_DEG", "MotionProfile", "compile_collisions_ahead",
+           "motion_profile", "motion_report", "tracking_note"]
 
 #: A joint ending a waypoint farther than this from its target [deg] (a slide: mm)
 #: cannot reach its commanded postures: the report says so, once.
@@ -110,13 +110,35 @@ def _check_collider(sim):
     return collider
 
 
-def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
-    """Worst signed distance along the joint path at ``substeps * factor`` postures
-    per move, its pair and move (None without a collider)."""
+def _collision_program(collider, sim, n_moves: int, factor: int) -> tuple:
+    """`cgda_jax.programs.compile_jit`'s arguments for the distances of
+    ``collider`` at ``substeps * factor`` postures of each of ``n_moves`` moves:
+    (N, K, DoF) -> (N, K, pairs)."""
     import jax
     import jax.numpy as jnp
 
-    from cgda_jax.programs import jit_call
+    k = max(2, int(sim.substeps) * int(factor))
+    return ("motion_check.collisions", jax.vmap(jax.vmap(collider.distances)),
+            jax.ShapeDtypeStruct((int(n_moves), k, sim.n_dof), jnp.float32))
+
+
+def compile_collisions_ahead(sim, n_moves: int, factor: int = 4) -> None:
+    """Start compiling, in a thread, the collision program of `motion_report` for
+    ``n_moves`` reported waypoints (`cgda_jax.programs.compile_ahead`): while the
+    search runs, on the other core. Nothing without the feasibility's collider."""
+    from cgda_jax.programs import compile_ahead
+
+    collider = getattr(getattr(sim, "feasibility", None), "collider", None)
+    if collider is not None:
+        compile_ahead(*_collision_program(collider, sim, n_moves, factor))
+
+
+def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
+    """Worst signed distance along the joint path at ``substeps * factor`` postures
+    per move, its pair and move (None without a collider)."""
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_jit
 
     feas = getattr(sim, "feasibility", None)
     collider = _check_collider(sim)
@@ -124,12 +146,13 @@ def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:
         return None
     q_all = np.concatenate([np.asarray(sim.robot.start_genes, np.float64)[None],
                             np.asarray(joints, np.float64)])
-    k = max(2, int(sim.substeps) * int(factor))
+    name, fn, spec = _collision_program(collider, sim, len(joints), factor)
+    k = spec.shape[1]
     alphas = np.arange(1, k + 1) / k
     path = q_all[:-1, None] + alphas[None, :, None] * np.diff(q_all, axis=0)[:, None]
     # (N, K, pairs): one program, compiled once a process for a collider and shape
-    d = np.asarray(jit_call(jax.vmap(jax.vmap(collider.distances)),
-                            jnp.asarray(path, jnp.float32)), np.float64)
+    d = np.asarray(compile_jit(name, fn, spec)(jnp.asarray(path, jnp.float32)),
+                   np.float64)
     move, step, pair = np.unravel_index(int(np.argmin(d)), d.shape)
     worst = float(d[move, step, pair])
     per_move = d.min(axis=(1, 2))

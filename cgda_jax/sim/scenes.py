@@ -394,7 +394,7 @@ class ObjectScene:
 
     @property
     def feature_names(self) -> tuple[str, ...]:
-        return tuple(f"{c} [{f.unit}]" for f in self.specs for c in f.columns())
+        return tuple(name for f in self.specs for name in f.labels())
 
     @property
     def n_features(self) -> int:

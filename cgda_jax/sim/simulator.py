@@ -312,6 +312,28 @@ class Simulator(Executions):
                              "with judge=True instead")
         return self._judge(state, new)
 
+    def judge_moves(self, state: SimState, news: SimState,
+                    need: Array | None = None) -> Array:
+        """The move violations (M,) of `judge` for M states ``news`` (stacked)
+        stepped to from ``state`` with ``judge=False``: the same values, judged
+        together (`cgda_jax.sim.feasibility.Feasibility.moves`: the collisions
+        coarse to fine, batched calls packed into one); ``need`` (M,) bool:
+        only those moves' collisions checked, for a caller that discards the
+        others.  Kinematic mode with feasibility only (`judge`).
+
+        Raises:
+            ValueError: in dynamic mode or without feasibility."""
+        if self.mode == "dynamic" or self.feasibility is None:
+            raise ValueError("Simulator.judge_moves is for kinematic mode with "
+                             "feasibility")
+        dq = news.genes - state.genes
+        duration = jnp.where(state.first, self.approach_s, self.move_s)
+        m = dq.shape[0]
+        return self.feasibility.moves(
+            jnp.broadcast_to(state.genes, dq.shape), dq,
+            jnp.broadcast_to(duration, (m,)), jnp.broadcast_to(state.first, (m,)),
+            need)
+
     def step(self, state: SimState, waypoint: Array, *,
              judge: bool = True) -> tuple[SimState, Array]:
         """Move to one waypoint.

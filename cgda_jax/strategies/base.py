@@ -285,19 +285,23 @@ class PlanBase:
         (`judge_ranks` of them at least; `cgda_jax.strategies.fitness.judge_best`
         says why the best ranks are exact), and the moves' violations (P,; NaN
         where not judged).  Every candidate is stepped once, unjudged; the
-        judged ones' moves are judged from those steps (`Simulator.judge`)."""
+        judged ones' moves are judged from those steps together
+        (`Simulator.judge_moves`)."""
         fitness, violation, _ = self.ranked_outcome_with(state, pop_u, goal_point,
                                                          None, prefix_sq)
         return fitness, violation
 
     def ranked_outcome_with(self, state: Any, pop_u: jax.Array, goal_point: jax.Array,
                             first_u: jax.Array | None,
-                            prefix_sq: jax.Array | None = None
+                            prefix_sq: jax.Array | None = None,
+                            frozen: Any = False
                             ) -> tuple[jax.Array, jax.Array, Any]:
         """`ranked_outcome`, and with ``first_u`` (DoF,) also the move to that
         posture judged, in the same call of the check (``judge_best``'s
         ``lead``: the compiled program carries one copy of it): ``(fitness (P,),
-        violations (P,), (its features (F,), its violation))`` (None without)."""
+        violations (P,), (its features (F,), its violation))`` (None without).
+        ``frozen`` (scalar bool): nothing judged, for a caller that discards
+        the fitness and knows the violation (`judge_best`)."""
         lead = 0 if first_u is None else 1
         u = pop_u if first_u is None else jnp.concatenate([first_u[None], pop_u])
         news, feats = self.map_population(lambda w: self.advance(state, w),
@@ -305,15 +309,14 @@ class PlanBase:
         fitness = self.outcome_fitness(state, pop_u, feats[lead:], None, goal_point,
                                        prefix_sq)
 
-        def judge(idx):
+        def judge(idx, need):
             picked = jax.tree.map(lambda x: x[idx], news)
-            return jax.vmap(lambda new: self.sim.judge(state, new).move_violation)(
-                picked)
+            return self.sim.judge_moves(state, picked, need)
 
         fitness, violation = judge_best(
             jnp.concatenate([jnp.zeros((lead,), fitness.dtype), fitness]), judge,
             self.feasibility.penalty, self.judge_ranks, judged_round(self.judge_ranks),
-            lead=lead)
+            lead=lead, frozen=frozen)
         first = None if first_u is None else (feats[0], violation[0])
         return fitness[lead:], violation[lead:], first
 

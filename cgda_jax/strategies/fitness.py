@@ -166,13 +166,17 @@ def judged_round(ranks: int) -> int:
 
 
 def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
-               size: int, lead: int = 0) -> tuple[Array, Array]:
+               size: int, lead: int = 0, frozen: Any = False) -> tuple[Array, Array]:
     """The `penalized` fitness of a population where only the candidates whose
     rank matters are judged (traced; fixed shapes).
 
     ``fitness`` (P,) is the candidates' fitness without the penalty (non-finite:
-    invalid, whatever the move); ``judge(idx)`` gives the violations (size,) of
-    the candidates ``idx`` (size,) (int32; may repeat one). Candidates are judged
+    invalid, whatever the move); ``judge(idx, need)`` gives the violations
+    (size,) of the candidates ``idx`` (size,) (int32; may repeat one) where
+    ``need`` (size,) bool holds; the others' values are not used (under a
+    ``vmap`` a round runs for every batch entry while any needs it: ``need`` is
+    False where this entry's rounds are over, so a judge that packs the batch's
+    moves together, `cgda_jax.sim.simulator.Simulator.judge_moves`, skips them). Candidates are judged
     in rounds of ``size``, best ``fitness`` first, until ``ranks`` of the judged
     have a penalized fitness no worse than the best unjudged ``fitness``, or every
     finite candidate is judged (at most ``ceil(P / size)`` rounds, a
@@ -200,11 +204,15 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
     set of the other candidates as without them, so that one call of ``judge``
     judges both and the compiled program carries one copy of the check.
 
+    With ``frozen`` (a scalar bool) True nothing is judged (a caller that
+    discards the values: IE's frozen points, `cgda_jax.strategies.ie.IEPlan`).
+
     Returns:
         ``(fitness (P,), violation (P,))``: penalized fitness as above; the
         judged candidates' violations, NaN where not judged.
     """
     n, lead = fitness.shape[0], int(lead)
+    frozen = jnp.asarray(frozen, bool)
     size = min(int(size), n - lead)
     rounds = -(-(n - lead) // size)
     first = jnp.arange(n) < lead  # judged in the first round, counted for no rank
@@ -232,13 +240,16 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
         ok = judged & ~first & (told(violation, judged) <= m)
         return (jnp.sum(ok) >= need) | jnp.all(left)
 
+    def going(carry):
+        return (carry[0] < rounds) & ~enough(carry) & ~frozen
+
     def body(carry):
         r, violation, judged = carry
         idx = order[at[r]].astype(jnp.int32)
-        v = jnp.asarray(judge(idx), jnp.float32)
+        need = jnp.broadcast_to(going(carry), idx.shape)
+        v = jnp.asarray(judge(idx, need), jnp.float32)
         return r + 1, violation.at[idx].set(v), judged.at[idx].set(True)
 
     carry = (jnp.int32(0), jnp.full((n,), jnp.nan, jnp.float32), jnp.zeros((n,), bool))
-    _, violation, judged = jax.lax.while_loop(
-        lambda c: (c[0] < rounds) & ~enough(c), body, carry)
+    _, violation, judged = jax.lax.while_loop(going, body, carry)
     return told(violation, judged), violation

@@ -96,6 +96,10 @@ class IEState:
         judged_u, judged_violation: with feasibility (sequential context): the
             bests the last generation judged in context and their moves'
             violations (`IEPlan.judged_generation`); None otherwise.
+        chain_u, chain_error, chain_violation: with the sequential context, the
+            bests of the generation whose in-order execution had the lowest
+            largest point error, its errors (N) and (with feasibility) its moves'
+            violations (N) (`IEPlan.keep_chain`); None otherwise.
     """
 
     evo: Evolution
@@ -110,6 +114,9 @@ class IEState:
     invalid: jax.Array
     judged_u: jax.Array | None = None
     judged_violation: jax.Array | None = None
+    chain_u: jax.Array | None = None
+    chain_error: jax.Array | None = None
+    chain_violation: jax.Array | None = None
 
     def fresh(self) -> jax.Array:
         """Whether the last judged bests (``judged_u``) are the current ones: their
@@ -336,7 +343,11 @@ class IEPlan(PlanBase):
             generations=zero, evaluations=zero, invalid=zero,
             **({} if not self.judges_in_step else {
                 "judged_u": jnp.full_like(best_u, jnp.nan),
-                "judged_violation": jnp.full((self.n_points,), jnp.nan)}))
+                "judged_violation": jnp.full((self.n_points,), jnp.nan)}),
+            **({} if not self.keeps_chain else {
+                "chain_u": jnp.full_like(best_u, jnp.nan),
+                "chain_error": jnp.full((self.n_points,), jnp.inf),
+                "chain_violation": jnp.zeros((self.n_points,))}))
 
     @property
     def judges_in_step(self) -> bool:
@@ -351,6 +362,12 @@ class IEPlan(PlanBase):
         postures in the finish."""
         return self.judges_in_step and self.refine == "none"
 
+    @property
+    def keeps_chain(self) -> bool:
+        """The sequential context without a polish: the best in-order execution
+        seen is kept (`keep_chain`) and replaces a failing result (`kept_chain`)."""
+        return self.sequential and self.refine == "none"
+
     def done(self, s: IEState) -> jax.Array:
         """Every point finished (and, `finish_takes_judged`, its move judged as
         executed: `IEState.fresh`)."""
@@ -360,10 +377,13 @@ class IEPlan(PlanBase):
 
     def step(self, s: IEState):
         states, errors = self.contexts(s.best_u)
-        asked = None
+        asked, violation = None, None
         if self.judges_in_step:  # the bests' moves judged with the candidates
-            errors, violation, asked = self.judged_generation(s.evo, s.best_u, states)
+            errors, violation, asked = self.judged_generation(
+                s.evo, s.best_u, states, s.judged_u, s.judged_violation)
             s = s.replace(judged_u=s.best_u, judged_violation=violation)
+        if self.keeps_chain:
+            s = self.keep_chain(s, errors, violation)
         if self.sequential:  # re-score the bests where the others now leave them
             s, evo = self.rescore(s, errors)
         else:
@@ -430,6 +450,8 @@ class IEPlan(PlanBase):
             executed = self.judged_execution(s, joints)
         else:
             executed = self.execution(joints)
+        if self.keeps_chain:
+            executed = self.kept_chain(s, executed)
         if self.refine != "none":
             u, _ = polish(self.sim, s.best_u, self.goal, method=self.refine,
                           steps=self.refine_steps)
@@ -465,6 +487,7 @@ class IEPlan(PlanBase):
             invalid_evaluations=final["invalid"].sum(),
             point_invalid=final["invalid"].tolist(),
             points_without_valid=np.flatnonzero(~final["found"]).tolist(),
+            **({"kept_chain": bool(final["chain"])} if "chain" in final else {}),
         )
 
     # ---- the sequential context (see the module docstring)
@@ -490,12 +513,27 @@ class IEPlan(PlanBase):
         errors = self.penalize(distances(feats, self.goal), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
-    def judged_generation(self, evo, best_u: jax.Array, states):
+    def frozen(self, evo, best_u, judged_u, judged_violation) -> jax.Array:
+        """(N,) the points whose generation changes nothing (ranked judging):
+        its evolution done and its best and every earlier point's the ones
+        the last generation judged (``judged_u``): the same move from the same
+        state, so its violation is the stored one (``judged_violation``), its
+        re-score the same and its evolution stays done (its candidates'
+        fitness is told to a frozen evolution, unused): nothing is judged."""
+        if judged_u is None:
+            return jnp.zeros(best_u.shape[:1], bool)
+        same = jnp.cumprod(jnp.all(best_u == judged_u, axis=-1)).astype(bool)
+        return evo.done & same & jnp.isfinite(judged_violation)
+
+    def judged_generation(self, evo, best_u: jax.Array, states, judged_u=None,
+                          judged_violation=None):
         """One batched evaluation of every point's candidates (asked of ``evo``, N
         evolutions) with, first in each row, its best ``best_u`` (N, D) from its
         context ``states``.  Returns the bests' errors (N; inf where not finite),
         their moves' violations (N) and ``(populations (N, P, D), algorithm states,
-        fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`."""
+        fitness (N, P))`` for `cgda_jax.strategies.evolution.evolution_tell`.
+        With the last generation's ``judged_u`` and ``judged_violation`` (N),
+        the `frozen` points are not judged again."""
         pops, algo_states = jax.vmap(
             lambda e: evolution_ask(self.algo, self.params, e))(evo)
         if self.judge_ranks is None:
@@ -506,9 +544,13 @@ class IEPlan(PlanBase):
             fitness = jax.vmap(self.outcome_fitness)(states, pops, feats[:, 1:],
                                                      violation[:, 1:], self.goal)
         else:  # the bests judged with the candidates whose rank matters
+            frozen = self.frozen(evo, best_u, judged_u, judged_violation)
             fitness, _, (feats, violation) = jax.vmap(
-                lambda st, pop, g, b: self.ranked_outcome_with(st, pop, g, b))(
-                states, pops, self.goal, best_u)
+                lambda st, pop, g, b, z: self.ranked_outcome_with(st, pop, g, b,
+                                                                  frozen=z))(
+                states, pops, self.goal, best_u, frozen)
+            if judged_violation is not None:  # frozen: the stored one
+                violation = jnp.where(frozen, judged_violation, violation)
             feats, violation = feats[:, None], violation[:, None]
         errors = self.penalize(distances(feats[:, 0], self.goal),
                                violation[:, 0])
@@ -526,6 +568,46 @@ class IEPlan(PlanBase):
         return {"joints": joints, "features": self.executed_features(joints),
                 "violation": jnp.where(found, jnp.sum(s.judged_violation), jnp.nan),
                 "judged": s.fresh()}
+
+    def keep_chain(self, s: IEState, errors: jax.Array,
+                   violation: jax.Array | None) -> IEState:
+        """``s`` with its bests kept as the chain (`IEState.chain_u`) where their
+        in-order execution's ``errors`` (N, penalized; the moves' ``violation``
+        (N) with feasibility) have a lower largest error than the kept chain's.
+
+        A point evolves from where its predecessors' bests of the time leave the
+        arm; a later try of a predecessor may change that state after the point
+        was met (or ran out of tries), so the last generation's bests can execute
+        worse than an earlier generation's did (`kept_chain`)."""
+        better = jnp.max(errors) < jnp.max(s.chain_error)
+        kept_v = s.chain_violation if violation is None else violation
+        return s.replace(
+            chain_u=jnp.where(better, s.best_u, s.chain_u),
+            chain_error=jnp.where(better, errors, s.chain_error),
+            chain_violation=jnp.where(better, kept_v, s.chain_violation))
+
+    def kept_chain(self, s: IEState, executed: dict) -> dict:
+        """The result's execution: ``executed`` (the last bests in order), or the
+        kept chain's (`keep_chain`) where ``executed`` fails the tolerance and the
+        chain's largest error is lower (its features from an unjudged rollout,
+        its violation the one judged when it was kept).  ``chain``: whether the
+        chain was taken.  A run that succeeds is never changed."""
+        last = jnp.max(distances(executed["features"], self.goal))
+        if "violation" in executed:
+            last = self.penalize(last, executed["violation"])
+        last = jnp.where(jnp.isnan(last), jnp.inf, last)
+        chain_max = jnp.max(s.chain_error)
+        use = (last >= self.tolerance) & (chain_max < last)
+        joints = jnp.where(use, self.joints(s.chain_u), executed["joints"])
+        chain = {"joints": joints,
+                 "features": jnp.where(use, self.executed_features(joints),
+                                       executed["features"])}
+        if "violation" in executed:
+            chain["violation"] = jnp.where(use, jnp.sum(s.chain_violation),
+                                           executed["violation"])
+        if "judged" in executed:
+            chain["judged"] = use | executed["judged"]
+        return {**executed, **chain, "chain": use}
 
     def rescore(self, s: IEState, errors: jax.Array):
         """The IE state ``s`` and its evolutions with each point's best re-scored to
