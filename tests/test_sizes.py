@@ -308,7 +308,13 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
     the motion check's pairs held about 146 floats a pair and posture, the estimate
     counted 1. The estimate (`sim_estimate`, the one rule of the API and of
     --dry-run) must cover XLA's own count of the compiled programs (temporaries and
-    outputs of init, chunk and finish) with feasibility on, and not by more than 3x."""
+    outputs of init, chunk and finish) with feasibility on, and not by more than 3x.
+
+    The ranked moves are judged in one flat batch up to `PACKED_MIN` postures and in a
+    coarse-to-fine loop above it, which holds fewer (here 1-2 trials are flat, 8-16
+    looped): the estimate must cover each regime's growth per trial, and be within 3x
+    of the larger (a difference across the two regimes is meaningless: 4 trials hold
+    less than 2)."""
     from cgda_jax.strategies import IEPlan, IESettings
     from cgda_jax.strategies.runner import compile_plan, seed_keys
 
@@ -318,10 +324,12 @@ def test_the_estimate_holds_what_xla_allocates_with_the_motion_check(goal):
     plan = IEPlan(sim, jnp.asarray(goal, jnp.float32),
                   IESettings(population_size=8, max_generations=20, restarts=0))
     held = {}
-    for trials in (2, 4):
+    for trials in (1, 2, 8, 16):
         progs = compile_plan(plan, seed_keys(list(range(trials))))
         held[trials] = sum(p.memory_analysis().temp_size_in_bytes
                            + p.memory_analysis().output_size_in_bytes for p in progs)
-    per_trial = (held[4] - held[2]) / 2
+    flat = held[2] - held[1]
+    looped = (held[16] - held[8]) / 8
+    assert 0 < looped < flat, held  # the loop holds less a trial than the flat batch
     est = plan.estimate(1).nbytes
-    assert per_trial <= est <= 3 * per_trial, (per_trial, est)
+    assert max(flat, looped) <= est <= 3 * max(flat, looped), (flat, looped, est)
