@@ -66,8 +66,8 @@ from typing import Any
 import jax
 
 __all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "STORE_VERSION", "cache_stats",
-           "clear_programs", "compile_ahead", "compile_jit", "compile_lowered", "environment_digest",
-           "files_digest", "jit_call", "program_scope", "program_store",
+           "clear_programs", "compile_ahead", "compile_jit", "compile_lowered",
+           "environment_digest", "files_digest", "jit_call", "program_scope", "program_store",
            "set_program_store"]
 
 log = logging.getLogger("cgda_jax")

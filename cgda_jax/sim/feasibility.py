@@ -316,8 +316,18 @@ class Feasibility:
         """Violation (scalar, 0 = feasible) of one move from ``q0`` by ``dq``
         (DoF,) each in ``duration`` seconds (``approach``: the move from the start
         posture, which `max_step` does not cap)."""
-        over = (jnp.maximum(self.worst(q0, dq) - self.allowed, 0.0)
-                / self.penetration)
+        return self._violation(dq, duration, approach, self._penetration(q0, dq))
+
+    def _penetration(self, q0: Array, dq: Array) -> Array:
+        """The penetration term of `move` (scalar): the sampled depth past
+        `allowed`, in units of ``penetration``."""
+        return jnp.maximum(self.worst(q0, dq) - self.allowed, 0.0) / self.penetration
+
+    def _violation(self, dq: Array, duration: Array, approach: Array | bool,
+                   over: Array) -> Array:
+        """`move`'s violation of one move from its penetration term ``over``: the
+        largest of it, the speed/effort limits' and the flail (a step over
+        `max_step`, the approach aside)."""
         flail = jnp.maximum(jnp.max(jnp.abs(dq)) / self.max_step - 1.0, 0.0)
         flail = jnp.where(approach, 0.0, flail)
         return jnp.maximum(jnp.maximum(self.limit_violation(dq, duration), over), flail)
@@ -346,17 +356,12 @@ class Feasibility:
         does not need cost nothing.  With ``certify``, without a check, with
         fewer than 4 samples or at most `PACKED_MIN` postures in all:
         ``vmap(move)``'s distances."""
-        limit = jax.vmap(self.limit_violation)(dq, duration)
-        flail = jnp.maximum(jnp.max(jnp.abs(dq), axis=-1) / self.max_step - 1.0, 0.0)
-        flail = jnp.where(approach, 0.0, flail)
         need = jnp.ones(dq.shape[:1], bool) if need is None else need
         if self.check is None or self.certify or self.samples < 4:
-            over = jax.vmap(lambda a, b: jnp.maximum(self.worst(a, b) - self.allowed,
-                                                     0.0) / self.penetration)(q0, dq)
-            over = jnp.where(need, over, 0.0)
+            over = jnp.where(need, jax.vmap(self._penetration)(q0, dq), 0.0)
         else:
             over = self._over_moves(q0, dq, need)
-        return jnp.maximum(jnp.maximum(limit, over), flail)
+        return jax.vmap(self._violation)(dq, duration, approach, over)
 
     @functools.cached_property
     def _over_moves(self):
@@ -381,9 +386,7 @@ class Feasibility:
         """`_over_moves` of one flat batch of moves (see `moves`)."""
         m, s = q0.shape[0], self.samples
         if m * (s + 1) <= PACKED_MIN:  # a loop would cost more than it saves
-            over = jax.vmap(lambda a, b: jnp.maximum(self.worst(a, b) - self.allowed,
-                                                     0.0) / self.penetration)(q0, dq)
-            return jnp.where(need, over, 0.0)
+            return jnp.where(need, jax.vmap(self._penetration)(q0, dq), 0.0)
         alphas = jnp.arange(s + 1, dtype=jnp.float32) / s  # as `worst`'s
         coarse = np.asarray([0, s // 2, s], np.int32)  # first: ends and middle
         rest = np.setdiff1d(np.arange(s + 1), coarse).astype(np.int32)
