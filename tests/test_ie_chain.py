@@ -71,3 +71,48 @@ def test_a_successful_last_execution_is_kept(case):
     assert not bool(out["chain"])
     np.testing.assert_allclose(np.asarray(out["joints"]),
                                np.asarray(plan.joints(near)), atol=1e-6)
+
+
+def test_check_finer_judges_the_bests_at_the_finer_step(case):
+    """``check_finer``: the bests' in-order execution at timestep / 4 (MuJoCo C) is
+    each point's error too; the coarse chain meets every point exactly, the finer
+    one misses point 0 by 10 mm (the 0.1 s waypoints do not settle), so at a 5 mm
+    tolerance point 0 is no longer met (and 1, 2 still are)."""
+    sim, goal, _, good, _ = case
+    fine = np.linalg.norm(np.asarray(sim.finer(4).execute(POSTURES)) - goal, axis=-1)
+    assert fine[0] > 0.008 and fine[1:].max() < 0.004  # what the case is about
+    plans = {k: IEPlan(sim, jnp.asarray(goal), population_size=4, tolerance=0.005,
+                       restarts=0, check_finer=k) for k in (0, 4)}
+    assert plans[4].info["check_finer"] == 4 and plans[4].finer.physics.timestep \
+        == pytest.approx(0.001)
+    np.testing.assert_allclose(
+        np.asarray(plans[4].finer_errors(jnp.asarray(POSTURES))), fine, rtol=1e-5,
+        atol=1e-7)
+    done = {}
+    for k, plan in plans.items():
+        s = plan.init(jax.random.key(0))
+        s = s.replace(best_u=good, best_fitness=jnp.zeros(3))
+        s, _ = jax.jit(plan.step)(s)
+        done[k] = np.asarray(s.done)
+        if k:  # re-scored to the finer error where the best stayed
+            kept = np.all(np.asarray(s.best_u) == np.asarray(good), axis=-1)
+            assert kept[0]
+            np.testing.assert_allclose(np.asarray(s.best_fitness)[kept], fine[kept],
+                                       rtol=1e-5)
+            assert float(jnp.max(s.chain_error)) == pytest.approx(fine.max(),
+                                                                  rel=1e-5)
+    assert done[0].all()
+    assert done[4].tolist() == [False, True, True]
+
+
+def test_check_finer_needs_dynamic_mode():
+    tiny = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                           "marker")
+    sim = Simulator(tiny, MarkerScene())
+    goal = jnp.zeros((2, 3))
+    with pytest.raises(ValueError, match="check_finer needs dynamic mode"):
+        IEPlan(sim, goal, population_size=4, check_finer=4)
+    dyn = Simulator(tiny, MarkerScene(), mode="dynamic", physics="mujoco",
+                    waypoint_s=0.1, timestep=0.004)
+    with pytest.raises(ValueError, match="check_finer must be 0"):
+        IEPlan(dyn, goal, population_size=4, check_finer=1)

@@ -189,6 +189,13 @@ class IESettings(Settings):
             brings within `tolerance` are not evolved (no budget spent) and listed
             in ``info["unreachable_points"]`` with their nearest approach.
             `refine` and `reach_check` need kinematic mode and a stateless scene.
+        check_finer: dynamic mode with the sequential context: each generation
+            the current bests are also executed in order at ``timestep /
+            check_finer`` (`Simulator.finer`, MuJoCo C, the replay check's
+            physics), and each point's error is the larger of the two (its
+            re-score, the stop test, the kept chain, the result's choice): a best
+            whose features depend on the physics step (a contact the coarse step
+            resolves differently) is not met, and its evolution goes on.  0: off.
         keys: optional explicit per-point keys (N,) replacing the seed's (to re-run
             one point of a batched run alone; Python callers only).
     """
@@ -200,6 +207,7 @@ class IESettings(Settings):
     refine: str = option("none", "choice", REFINE)
     refine_steps: int = option(100, "int", 1)
     reach_check: bool = option(False, "bool")
+    check_finer: int = option(0, "int", 0)
     keys: jax.Array | None = option(None, "api", none=True)
 
 
@@ -243,6 +251,17 @@ class IEPlan(PlanBase):
         # context (independent features; with feasibility the move to them is still
         # judged in context) and at least one restart to use them
         self.restart_samples = self.sampled_postures(st, sim)[0]
+        self.finer = None  # the finer simulator the bests are judged on too
+        if st.check_finer:
+            if getattr(sim, "mode", "kinematic") != "dynamic" or not self.sequential:
+                raise ValueError(
+                    "check_finer needs dynamic mode (a physics step to refine); this "
+                    f"simulator is {getattr(sim, 'mode', '?')}")
+            if st.check_finer < 2:
+                raise ValueError(f"check_finer must be 0 (off) or >= 2 (the step "
+                                 f"divided by it), got {st.check_finer}")
+            self.finer = sim.finer(int(st.check_finer))
+            self.info["check_finer"] = int(st.check_finer)
         self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
         self.max_generations_total = self.max_generations * (1 + self.restarts)
         self.unreachable = np.zeros(self.n_points, bool)
@@ -382,6 +401,8 @@ class IEPlan(PlanBase):
             errors, violation, asked = self.judged_generation(
                 s.evo, s.best_u, states, s.judged_u, s.judged_violation)
             s = s.replace(judged_u=s.best_u, judged_violation=violation)
+        if self.finer is not None:  # a best the finer step disagrees with: not met
+            errors = jnp.maximum(errors, self.finer_errors(self.joints(s.best_u)))
         if self.keeps_chain:
             s = self.keep_chain(s, errors, violation)
         if self.sequential:  # re-score the bests where the others now leave them
@@ -513,6 +534,17 @@ class IEPlan(PlanBase):
         errors = self.penalize(distances(feats, self.goal), violation)
         return states, jnp.where(jnp.isfinite(errors), errors, jnp.inf)
 
+    def finer_errors(self, joints: jax.Array) -> jax.Array:
+        """(N,) each point's error when ``joints`` (N, DoF) are executed in
+        order on the finer simulator (`IESettings.check_finer`; moves not judged:
+        the coarse execution judges them); inf where not finite."""
+        def step(state, w):
+            return self.finer.step(state, w, judge=False)
+
+        feats = jax.lax.scan(step, self.finer.init_state(), joints)[1]
+        errors = distances(feats, self.goal)
+        return jnp.where(jnp.isfinite(errors), errors, jnp.inf)
+
     def frozen(self, evo, best_u, judged_u, judged_violation) -> jax.Array:
         """(N,) the points whose generation changes nothing (ranked judging):
         its evolution done and its best and every earlier point's the ones
@@ -595,6 +627,11 @@ class IEPlan(PlanBase):
         last = jnp.max(distances(executed["features"], self.goal))
         if "violation" in executed:
             last = self.penalize(last, executed["violation"])
+        if self.finer is not None:  # judged as the chain was (`step`)
+            found = jnp.all(jnp.isfinite(executed["joints"]))
+            safe = jnp.where(found, executed["joints"], 0.0)
+            last = jnp.maximum(last, jnp.where(
+                found, jnp.max(self.finer_errors(safe)), jnp.inf))
         last = jnp.where(jnp.isnan(last), jnp.inf, last)
         chain_max = jnp.max(s.chain_error)
         use = (last >= self.tolerance) & (chain_max < last)
