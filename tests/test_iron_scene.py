@@ -107,3 +107,55 @@ def test_kinematic_mode_refuses_a_force():
                              ["yaw", "shoulder", "elbow"], "marker", {})
     with pytest.raises(ValueError, match="only the physics gives one"):
         Simulator(robot, ObjectScene(FEATURES))
+
+
+def test_sample_positions_places_restart_postures_by_kinematics(sim):
+    """IE's ``sample_positions`` (dynamic mode): the restart samples are the drawn
+    postures whose tool point (MuJoCo C kinematics, the force column ignored) is
+    nearest each goal point's position; restart 1 starts there."""
+    import jax
+
+    from cgda_jax.strategies.base import to_joints
+    from cgda_jax.strategies.ie import IEPlan, position_kinematics
+
+    cols, positions = position_kinematics(sim)
+    assert cols.tolist() == [0, 1, 2]
+    goal = np.array([[0.30, 0.02, -0.05, 0.02], [0.25, -0.05, 0.0, -0.1]],
+                    np.float32)
+    plan = IEPlan(sim, jnp.asarray(goal), population_size=4, restarts=2,
+                  restart_samples=64, sample_positions=True)
+    assert plan.restart_samples == 64 and plan.n_nearest == 1
+    key = jax.random.key(3)
+    s = plan.init(key)
+    # the reference: the same draws, placed by MuJoCo C, the nearest by xyz
+    u = np.asarray(jax.random.uniform(jax.random.fold_in(key, 2**31 - 1), (64, 3),
+                                      minval=-1.0, maxval=1.0))
+    q = np.asarray(to_joints(jnp.asarray(u), plan.lower, plan.upper), np.float64)
+    m = sim.robot.mj_model
+    d = mujoco.MjData(m)
+    tcp = np.empty((64, 3))
+    for k, genes in enumerate(q):
+        d.qpos[:] = np.asarray(sim.robot.qpos0)
+        d.qpos[np.asarray(sim.robot.qpos_adr)] = genes
+        mujoco.mj_kinematics(m, d)
+        tcp[k] = d.site("iron/tcp").xpos
+    np.testing.assert_allclose(np.asarray(positions(jnp.asarray(q[:5]))), tcp[:5],
+                               atol=1e-5)
+    nearest = np.argmin(np.linalg.norm(tcp[None] - goal[:, None, :3], axis=-1), 1)
+    np.testing.assert_allclose(np.asarray(s.samples[:, 0]), u[nearest], atol=1e-6)
+    # restart 1 of point 0 searches around its sample
+    evo = plan._try(s.keys[0], plan.goal[0], jax.tree.map(lambda x: x[0],
+                    plan.contexts(s.best_u)[0]), 1, None, s.samples[0])
+    np.testing.assert_allclose(np.asarray(evo.algo.mean), u[nearest[0]], atol=1e-6)
+
+
+def test_sample_positions_needs_object_features_in_dynamic_mode():
+    from cgda_jax.sim.scenes import MarkerScene
+    from cgda_jax.strategies.ie import IEPlan
+
+    robot = Robot.from_mjcf(model_path("tiny_arm.xml"), ["yaw", "shoulder", "elbow"],
+                            "marker")
+    dyn = Simulator(robot, MarkerScene(), mode="dynamic", physics="mujoco",
+                    waypoint_s=0.1, timestep=0.004)
+    with pytest.raises(ValueError, match="sample_positions needs dynamic mode"):
+        IEPlan(dyn, jnp.zeros((2, 3)), population_size=4, sample_positions=True)

@@ -62,7 +62,8 @@ from cgda_jax.strategies.fitness import distances
 from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.settings import Settings, option
 
-__all__ = ["LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "STAGNATION", "IEPlan",
+__all__ = ["LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "SAMPLE_WIDTH", "STAGNATION",
+           "IEPlan",
            "IEPool", "IESettings", "IEState", "better_neighbour", "point_keys"]
 
 #: Default restarts of a point and generations without improvement that stop a try.
@@ -73,6 +74,9 @@ STAGNATION = 40
 LOCAL_STD = 0.15
 #: Postures sampled (one batched kinematics call per run) to seed the restarts.
 RESTART_SAMPLES = 4096
+#: `IESettings.sample_positions` with `warm_start`: the samples' spread around the
+#: start posture (share of each joint's half range).
+SAMPLE_WIDTH = 0.3
 
 
 def point_keys(key: jax.Array, n_points: int) -> jax.Array:
@@ -189,6 +193,16 @@ class IESettings(Settings):
             brings within `tolerance` are not evolved (no budget spent) and listed
             in ``info["unreachable_points"]`` with their nearest approach.
             `refine` and `reach_check` need kinematic mode and a stateless scene.
+        sample_positions: dynamic mode with the sequential context and an object
+            scene's sensor features (e.g. a tool point and a wrist force): the
+            restart samples (`restart_samples` postures; around the start
+            posture, +- `SAMPLE_WIDTH` of each joint's half range, with
+            `warm_start`) are placed by kinematics alone and the nearest to each
+            goal point by the position-like columns only (sites', bodies' and
+            joints' positions; not forces, which need the physics): the tool put
+            where the goal point puts it, a local restart there finds the force.
+            Only for features of the robot and what it carries (an object it
+            pushes is not where kinematics puts it).
         check_finer: dynamic mode with the sequential context: each generation
             the current bests are also executed in order at ``timestep /
             check_finer`` (`Simulator.finer`, MuJoCo C, the replay check's
@@ -207,8 +221,46 @@ class IESettings(Settings):
     refine: str = option("none", "choice", REFINE)
     refine_steps: int = option(100, "int", 1)
     reach_check: bool = option(False, "bool")
+    sample_positions: bool = option(False, "bool")
     check_finer: int = option(0, "int", 0)
     keys: jax.Array | None = option(None, "api", none=True)
+
+
+def position_kinematics(sim) -> tuple[np.ndarray, Any]:
+    """`IESettings.sample_positions`: the columns of ``sim``'s features that
+    kinematics gives (its sensor features' positions: not forces or torques) and a
+    function of joints (S, DoF) -> those columns (S, C) by ``mjx.kinematics`` of
+    the robot's world model.
+
+    Raises:
+        ValueError: not dynamic mode with object-scene sensor features, or none of
+            them is a position.
+    """
+    from cgda_jax.sim.features import FeatureSet
+
+    fset = getattr(getattr(sim, "physics", None), "features", None)
+    if getattr(sim, "mode", "kinematic") != "dynamic" or fset is None:
+        raise ValueError("sample_positions needs dynamic mode and an object scene's "
+                         "features (e.g. a tool site's xyz beside a wrist force)")
+    cols, start, kept = [], 0, []
+    for spec in fset.specs:
+        n = len(spec.columns())
+        if not spec.is_wrench:
+            cols += range(start, start + n)
+            kept.append(spec)
+        start += n
+    if not kept:
+        raise ValueError("sample_positions: no feature is a position (all forces "
+                         "or torques)")
+    robot = sim.robot
+    kin = FeatureSet(robot.mj_model, kept)
+    robot.make_data()  # the device model and template, outside any trace
+
+    def positions(joints):
+        return jax.vmap(lambda q: kin.from_data(robot.kinematics_data(
+            robot.qpos(q))))(joints)
+
+    return np.asarray(cols, np.int32), positions
 
 
 class IEPlan(PlanBase):
@@ -251,6 +303,10 @@ class IEPlan(PlanBase):
         # context (independent features; with feasibility the move to them is still
         # judged in context) and at least one restart to use them
         self.restart_samples = self.sampled_postures(st, sim)[0]
+        #: sample_positions: the goal's position-like columns and their kinematics
+        self.position_columns, self._positions = None, None
+        if st.sample_positions:
+            self.position_columns, self._positions = position_kinematics(sim)
         self.finer = None  # the finer simulator the bests are judged on too
         if st.check_finer:
             if getattr(sim, "mode", "kinematic") != "dynamic" or not self.sequential:
@@ -281,7 +337,8 @@ class IEPlan(PlanBase):
     def sampled_postures(cls, settings: IESettings, sim) -> tuple[int, str]:
         """``restart_samples`` with independent points and a restart to use them,
         else none (see `PlanBase.sampled_postures`)."""
-        use = points_independent(sim) and int(settings.restarts) > 0
+        use = ((points_independent(sim) or settings.sample_positions)
+               and int(settings.restarts) > 0)
         return int(settings.restart_samples) if use else 0, "restart_samples"
 
     def point_stop(self, evo: Evolution) -> jax.Array:
@@ -341,7 +398,17 @@ class IEPlan(PlanBase):
         keys = point_keys(key, self.n_points) if self.keys is None else self.keys
         states, _ = self.contexts(jnp.zeros((self.n_points, self.n_dof)))
         zero = jnp.zeros((self.n_points,), jnp.int32)
-        if self.restart_samples:  # one batched kinematics call (points independent)
+        if self.restart_samples and self.position_columns is not None:
+            around = None
+            if self.warm_start:
+                around = from_joints(self.sim.init_state().genes, self.lower,
+                                     self.upper)
+            samples, _ = nearest_samples(
+                lambda u: self._positions(self.joints(u)),
+                self.goal[:, self.position_columns],
+                jax.random.fold_in(key, 2**31 - 1), self.n_dof, self.restart_samples,
+                self.n_nearest, around=around, width=SAMPLE_WIDTH)
+        elif self.restart_samples:  # one batched kinematics call (points independent)
             start = self.sim.init_state()
             samples, _ = nearest_samples(
                 lambda u: self.point_features(start, u), self.goal,

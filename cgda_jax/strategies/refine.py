@@ -143,11 +143,13 @@ def nearest_samples(
     n_genes: int,
     n_samples: int,
     k: int,
+    around: jax.Array | None = None,
+    width: float = 1.0,
 ) -> tuple[jax.Array, jax.Array]:
     """The `k` sampled postures nearest each goal point (traced; jittable, vmappable).
 
-    Draws `n_samples` normalized genes uniformly in ``[-1, 1]^D`` (the joint limits),
-    maps them to features in ONE batched call ``features_u(u (S, D)) -> (S, F)``
+    Draws `n_samples` normalized genes uniformly in ``[-1, 1]^D`` (the joint limits;
+    with ``around`` (D,): in ``around +- width``, clipped to the limits), maps them to features in ONE batched call ``features_u(u (S, D)) -> (S, F)``
     (the features of each posture stepped to from the start state) and keeps, for
     each goal point (N, F), the `k` nearest.
 
@@ -157,6 +159,8 @@ def nearest_samples(
     """
     u = jax.random.uniform(key, (int(n_samples), int(n_genes)), minval=-1.0,
                            maxval=1.0)
+    if around is not None:
+        u = jnp.clip(around + width * u, -1.0, 1.0)
     dist = distances(goal[:, None, :], features_u(u)[None])  # (N, S)
     dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
     neg, idx = jax.lax.top_k(-dist, int(k))  # (N, k)
