@@ -14,9 +14,12 @@ Target (issue 41): success (20 mm and 6 N, the config's tolerance 0.02 with the
 simulator, its rows printed as it ends: a run cut short still reports the seeds it
 finished; the JSON, with each seed's joints, is rewritten after every group, so that
 the replays can be measured again from it); the time per seed is its group's wall
-time / K.  ``--first F`` starts at seed F (seeds F..F+seeds-1).
+time / K.  ``--first F`` starts at seed F (seeds F..F+seeds-1).  The config's own
+budget is the table's (`cgda run experiments/iron_force_xgnitive.toml` runs seed 0
+of it); ``--set`` changes it.
 
     python benchmarks/bench_iron_force.py [--seeds 10] [--first 0] [--group 10] [--set KEY=VALUE ...]
+    python benchmarks/bench_iron_force.py --seeds 10 --group 2     # the RESULTS table
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ def checked(sim, goal, res, group_s: float, group: int) -> dict:
         "feasible": motion["feasible"], "generations": res.generations,
         "evaluations": res.evaluations, "s_per_seed": group_s / group,
         "kept_chain": res.info.get("kept_chain"),
+        "point_tries": " ".join(map(str, res.info.get("point_tries", []))),
     }
 
 
