@@ -63,8 +63,8 @@ from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachabi
 from cgda_jax.strategies.settings import Settings, option
 
 __all__ = ["LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "SAMPLE_WIDTH", "STAGNATION",
-           "IEPlan",
-           "IEPool", "IESettings", "IEState", "better_neighbour", "point_keys"]
+           "IEPlan", "IEPool", "IESettings", "IEState", "better_neighbour",
+           "point_keys", "position_kinematics"]
 
 #: Default restarts of a point and generations without improvement that stop a try.
 RESTARTS = 9
