@@ -149,8 +149,9 @@ def nearest_samples(
     """The `k` sampled postures nearest each goal point (traced; jittable, vmappable).
 
     Draws `n_samples` normalized genes uniformly in ``[-1, 1]^D`` (the joint limits;
-    with ``around`` (D,): in ``around +- width``, clipped to the limits), maps them to features in ONE batched call ``features_u(u (S, D)) -> (S, F)``
-    (the features of each posture stepped to from the start state) and keeps, for
+    with ``around`` (D,): in ``around +- width``, clipped to the limits), maps them
+    to features in ONE batched call ``features_u(u (S, D)) -> (S, F)`` (the
+    features of each posture stepped to from the start state) and keeps, for
     each goal point (N, F), the `k` nearest.
 
     Returns:
