@@ -336,10 +336,12 @@ class IEPlan(PlanBase):
 
     @classmethod
     def sampled_postures(cls, settings: IESettings, sim) -> tuple[int, str]:
-        """``restart_samples`` with independent points and a restart to use them,
-        else none (see `PlanBase.sampled_postures`)."""
-        use = ((points_independent(sim) or settings.sample_positions)
-               and int(settings.restarts) > 0)
+        """``restart_samples`` with independent points (or IE's `sample_positions`;
+        IET's settings have none) and a restart to use them, else none (see
+        `PlanBase.sampled_postures`)."""
+        placed = points_independent(sim) or getattr(settings, "sample_positions",
+                                                     False)
+        use = placed and int(settings.restarts) > 0
         return int(settings.restart_samples) if use else 0, "restart_samples"
 
     def point_stop(self, evo: Evolution) -> jax.Array:
