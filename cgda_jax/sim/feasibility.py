@@ -354,8 +354,8 @@ class Feasibility:
         penetration term is 0, as the full samples give.  Only the other moves
         take their remaining samples.  The postures to take are packed
         together, half of M (at least `CHUNK_MIN`) an iteration of one loop
-        (one copy of the distances in the program).  Batched (``vmap``, any depth) the moves
-        of every batch entry are packed together
+        (one copy of the distances in the program).  Batched (``vmap``, any
+        depth) the moves of every batch entry are packed together
         (`jax.custom_batching.custom_vmap`), so that the moves a batch entry
         does not need cost nothing.  With ``certify``, without a check, with
         fewer than 4 samples or at most `PACKED_MIN` postures in all:
@@ -408,7 +408,7 @@ class Feasibility:
 
         def coarse_of(cbuf):  # (nc, M, pairs) in the moves' order
             per = cbuf.reshape(n_c * chunk, n_pairs)[:nc * m].reshape(m, nc, n_pairs)
-            return per[at_first].transpose(1, 0, 2)  # (unneeded: inf)
+            return per[at_first].transpose(1, 0, 2)
 
         def unproven(cbuf):  # the moves the coarse bound leaves open, first
             dc = coarse_of(cbuf)
