@@ -65,13 +65,19 @@ from typing import Any
 
 import jax
 
-__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "STORE_VERSION", "cache_stats",
+__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS", "STORE_VERSION",
+           "cache_stats",
            "clear_programs", "compile_ahead", "compile_jit", "compile_lowered",
            "environment_digest", "files_digest", "jit_call", "program_scope", "program_store",
            "set_program_store"]
 
 log = logging.getLogger("cgda_jax")
 
+#: ``jax.jit``'s ``compiler_options`` for a program that runs once and whose
+#: values are only compared with a threshold (`cgda_jax.sim.feasibility.relevant_pairs`'
+#: start distances): LLVM unoptimized, about 40 % less XLA compile time; the values
+#: may differ from the optimized program's in the last bits (float32 round-off).
+RUN_ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 #: Compiled programs kept in memory at most (each way of finding them).
 MAX_PROGRAMS = 64
 #: Bytes the program store on disk holds at most (oldest files dropped past it).
@@ -392,12 +398,12 @@ def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict,
     return compiled
 
 
-def jit_call(fn: Callable, *args: Any, name: str | None = None) -> Any:
-    """``jax.jit(fn)(*args)`` through `compile_jit` (named after ``fn`` unless
-    ``name``): for a function built anew on each call (a closure over a new
+def jit_call(fn: Callable, *args: Any, name: str | None = None, **jit_kw: Any) -> Any:
+    """``jax.jit(fn, **jit_kw)(*args)`` through `compile_jit` (named after ``fn``
+    unless ``name``): for a function built anew on each call (a closure over a new
     simulator) whose program is often the same."""
     name = name or f"{getattr(fn, '__module__', '')}.{getattr(fn, '__qualname__', fn)}"
-    return compile_jit(name, fn, *args)(*args)
+    return compile_jit(name, fn, *args, **jit_kw)(*args)
 
 
 # -------------------------------------------------------------------------- store
