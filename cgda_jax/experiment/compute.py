@@ -282,7 +282,9 @@ def compute_execution(
     goal, demos, gen, sim = built.goal, built.demos, built.generalization, built.sim
     waypoint_s = built.waypoint_s
     s = cfg.strategy
-    if s.name in ("ie", "iet"):  # a waypoint per goal point: the motion check's
+    from cgda_jax.strategies import strategy_of
+
+    if strategy_of(s.name).plan.per_point:  # a waypoint per goal point: the check's
         from cgda_jax.sim.motion_check import compile_collisions_ahead
 
         compile_collisions_ahead(sim, len(goal))  # program compiles meanwhile

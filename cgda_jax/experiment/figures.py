@@ -144,7 +144,9 @@ def _execution_figures(run: Run, out: pathlib.Path) -> list[pathlib.Path]:
         a["point_errors"], r["tolerance"], unit=unit,
         title=f"{what}: error per point vs tolerance", path=path("point_errors.png"),
     )
-    per_point = r["strategy"] in ("ie", "iet")  # OET's rows are its steps
+    from cgda_jax.strategies import strategy_of
+
+    per_point = strategy_of(r["strategy"]).plan.per_point
     points = np.ndim(a["fitness_history"]) == 2
     plotting.plot_fitness(
         a["fitness_history"], unit=unit, parallel=r["strategy"] == "ie",

@@ -87,6 +87,9 @@ class PlanBase:
     """
 
     name = "base"
+    #: each goal point evolved on its own (IE, IET): a waypoint, a fitness row and
+    #: an error per point; FTE evolves one whole trajectory, OET's rows are its steps
+    per_point = False
 
     def __init__(
         self,

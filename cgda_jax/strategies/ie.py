@@ -211,6 +211,7 @@ class IEPlan(PlanBase):
     """
 
     name = "ie"
+    per_point = True
 
     def __init__(self, sim, goal, settings: IESettings | None = None, *,
                  info=None, sharding=None, **changes):

@@ -173,6 +173,7 @@ class IETPlan(PlanBase):
     """
 
     name = "iet"
+    per_point = True
 
     def __init__(self, sim, goal, settings: IETSettings | None = None, *,
                  info=None, sharding=None, **changes):
