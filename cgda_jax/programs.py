@@ -250,6 +250,10 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
         pending = scope.ahead.pop(key, None)
         if pending is not None:
             scope.reserved[what] -= 1
+    if pending is not None and _TracingTurns.held_here():
+        # asked inside a trace in its turn: the thread asked ahead would wait for
+        # this trace to end; compiled here instead (its thread compiles it too)
+        pending = None
     if pending is not None:
         try:
             return pending.result()
@@ -333,8 +337,14 @@ class _TracingTurns:
 
     _cond = threading.Condition()
     _waiting: list[tuple[int, int]] = []
-    _busy = [False]
+    _busy: list[int | None] = [None]  # the tracing thread's ident
     _count = [0]
+
+    @classmethod
+    def held_here(cls) -> bool:
+        """Whether this thread is tracing in its turn (a program it asks for
+        inside its trace must not wait for a turn behind its own)."""
+        return cls._busy[0] == threading.get_ident()
 
     @classmethod
     def ticket(cls, rank: int) -> tuple[int, int]:
@@ -350,14 +360,15 @@ class _TracingTurns:
     def turn(cls, t: tuple[int, int]) -> Iterator[None]:
         """Wait until ``t`` is the first waiting and nobody traces; trace inside."""
         with cls._cond:
-            cls._cond.wait_for(lambda: not cls._busy[0] and min(cls._waiting) == t)
+            cls._cond.wait_for(lambda: cls._busy[0] is None
+                               and min(cls._waiting) == t)
             cls._waiting.remove(t)
-            cls._busy[0] = True
+            cls._busy[0] = threading.get_ident()
         try:
             yield
         finally:
             with cls._cond:
-                cls._busy[0] = False
+                cls._busy[0] = None
                 cls._cond.notify_all()
 
     @classmethod

@@ -352,3 +352,35 @@ def test_programs_asked_ahead_are_traced_one_at_a_time_by_rank():
         prog = compile_jit("test.never", never, x)
     assert order == [("never", threading.current_thread().name)]
     np.testing.assert_array_equal(prog(jnp.ones(3)), [5.0] * 3)
+
+
+def test_a_program_asked_inside_a_trace_in_its_turn_does_not_wait():
+    """A function traced in its turn that asks for a program asked ahead behind it
+    gets it compiled in its own thread instead of waiting for a turn that comes
+    only after its own trace ends."""
+    import concurrent.futures
+
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_ahead, compile_jit, program_scope
+
+    x = jax.ShapeDtypeStruct((3,), jnp.float32)
+
+    def inner(y):
+        return y + 1.0
+
+    def outer(y):
+        prog = compile_jit("test.inner", inner, x)  # asked ahead, behind this trace
+        assert prog is not None
+        return y * 2.0
+
+    def run():
+        with program_scope("a test of a program asked inside a trace"):
+            compile_ahead("test.inner", inner, x, rank=2, defer=True)
+            compile_ahead("test.outer", outer, x, rank=0)  # asks inner behind it
+            return compile_jit("test.outer", outer, x)
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        prog = pool.submit(run).result(timeout=120)  # a deadlock fails here
+    np.testing.assert_array_equal(prog(jnp.ones(3)), [2.0] * 3)
