@@ -121,6 +121,23 @@ def test_another_setting_or_model_is_a_miss(store):
     assert run_programs_key(cfg, "check") != key
 
 
+def test_the_output_settings_are_not_in_the_key(store):
+    """Figures, video and folder change no program: a run with its figures on finds
+    every program of the same run with them off (the store's first run)."""
+    root, model, first = store
+    cfg = _config(model)
+    for change in ("output.plots=true", "output.render=true", "output.dir=elsewhere",
+                   'output.camera={"distance" = 2.0}'):
+        assert run_programs_key(_config(model, change), "compute") == \
+            run_programs_key(cfg, "compute"), change
+    assert run_programs_key(_config(model, "strategy.seed=1"), "compute") != \
+        run_programs_key(cfg, "compute")
+    drawn = _run(_config(model, "output.plots=true"), root / "drawn")
+    assert drawn[2]["traced"] == 0
+    assert (root / "drawn" / "plots").is_dir()
+    _same(first, (drawn[0] | {"plots": first[0]["plots"]}, drawn[1]))
+
+
 def test_a_data_file_changed_is_another_key(tmp_path):
     data = tmp_path / "data"
     (data / "sub").mkdir(parents=True)
