@@ -556,19 +556,22 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     count is not (2**30 postures would not fit in memory).
 
     The start posture's distances are one program (`cgda_jax.programs.jit_call`:
-    compiled once per process for the same robot); the grid's bounds are NumPy
-    for pairs of moving geoms and one batched call a geom kind for the others.
+    compiled once per process for the same robot; on the run's critical path and
+    run once, so compiled unoptimized: `cgda_jax.programs.RUN_ONCE_OPTIONS`; only
+    their signs are used); the grid's bounds are NumPy for pairs of moving geoms
+    and one batched call a geom kind for the others.
 
     Returns:
         (kept pair names, overlapping pair names).
     """
-    from cgda_jax.programs import jit_call
+    from cgda_jax.programs import RUN_ONCE_OPTIONS, jit_call
     from cgda_jax.sim.geoms import geom_bound, geom_ids, geom_shape
 
     if collider.n_pairs == 0:
         return [], []
     m = robot.mj_model
-    d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes)))
+    d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes),
+                             compiler_options=RUN_ONCE_OPTIONS))
     overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
     gid = geom_ids(m)
     obs = {o.name: o for o in obstacles}
