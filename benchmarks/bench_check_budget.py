@@ -31,6 +31,12 @@ time before (``exact``) and after (``round``), and each result's error.
 
     python benchmarks/bench_check_budget.py [--only clean_ie ...] [--repeats 3]
     python benchmarks/bench_check_budget.py --search --only clean_ie paint_iet
+
+With ``--generation`` it times one generation of the experiment's search,
+unconstrained and feasible (seed 0's generations stepped again one at a time
+from their kept states, compiled, median of ``--repeats``), and their ratio:
+
+    python benchmarks/bench_check_budget.py --generation --only clean_ie
 """
 
 from __future__ import annotations
@@ -148,14 +154,56 @@ def search_times(name: str, repeats: int) -> dict:
     return out
 
 
+def generation_times(name: str, repeats: int) -> dict:
+    """Milliseconds a generation, unconstrained and feasible: seed 0's run
+    stepped one generation at a time (the plan's ``step``, compiled), its
+    states kept, then every step taken again from them (median of
+    ``repeats``); the same generations each repeat, compile apart."""
+    from cgda_jax.strategies import strategy_of
+    from cgda_jax.strategies.runner import seed_keys
+
+    out = {"experiment": name}
+    for label, feasible in (("off", "false"), ("on", "true")):
+        cfg, goal, sim = _build(name, [f"strategy.feasibility={feasible}"])
+        s = cfg.strategy
+        entry = strategy_of(s.name)
+        plan = entry.plan(sim, goal, entry.settings.of(
+            None, algorithm=s.algorithm, population_size=s.population_size,
+            tolerance=s.tolerance, max_generations=s.max_generations,
+            chunk_size=s.chunk_size, **s.options))
+        step, done = jax.jit(lambda c, p=plan: p.step(c)[0]), jax.jit(plan.done)
+        carries = [jax.jit(plan.init)(seed_keys([s.seed])[0])]
+        while not bool(done(carries[-1])) and len(carries) <= s.max_generations:
+            carries.append(step(carries[-1]))
+        carries = carries[:-1]
+
+        def replay(carries=carries, step=step):
+            for c in carries:
+                y = step(c)
+            return y
+
+        t = median_time(replay, repeats=max(5, repeats))
+        out[f"{label}_generations"] = len(carries)
+        out[f"{label}_ms_per_generation"] = 1e3 * t / len(carries)
+    out["ratio"] = out["on_ms_per_generation"] / out["off_ms_per_generation"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", nargs="*", default=None)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--search", action="store_true",
                     help="time the feasible search with each geometry instead")
+    ap.add_argument("--generation", action="store_true",
+                    help="time one generation, unconstrained and feasible, instead")
     args = ap.parse_args()
     os.environ.setdefault("CGDA_XGNITIVE_DIR", "../shared/data/xgnitive")
+    if args.generation:
+        rows = [generation_times(n, args.repeats) for n in args.only or EXPERIMENTS]
+        print_table(rows, list(rows[0]))
+        write_json("bench_check_budget_generation", {"rows": rows})
+        return
     if args.search:
         rows = [search_times(n, args.repeats) for n in args.only or EXPERIMENTS]
         print_table(rows, list(rows[0]))

@@ -11,6 +11,15 @@ the number of XLA fusions (roughly, kernels LLVM compiles) in each program.
 
     python benchmarks/bench_compile_parts.py [--repeats 3] [--experiment clean_ie]
         [--set strategy.feasibility=false]
+
+``--runs NAME ...`` (issue 39): each built-in experiment run once in this process
+(`run_experiment`, plots and renders off) with ``strategy.feasibility`` off then
+on, every program it compiles taken one at a time (`compile_ahead` off), each
+program's trace-and-lower and XLA compile seconds, StableHLO lines and XLA fusions:
+where a feasible run's extra compile goes.  ``--culling NAME ...``: the pair
+culling's start distances (`relevant_pairs`) compiled optimized and with
+`cgda_jax.programs.RUN_ONCE_OPTIONS`, alternately ``--repeats`` times, with
+whether their signs (the overlapping pairs) agree.
 """
 
 from __future__ import annotations
@@ -89,6 +98,110 @@ def programs(sim, goal, s) -> dict:
     return out
 
 
+def run_programs(names: list[str]) -> list[dict]:
+    """``--runs``: every program of a run, compiled one at a time (module doc)."""
+    import os
+    import pathlib
+    import tempfile
+
+    import cgda_jax.experiment.run as run_mod
+    import cgda_jax.programs as programs_mod
+    import cgda_jax.strategies.runner as runner_mod
+
+    def one_at_a_time(*_, **__):  # compile_ahead off: each program timed alone
+        return None
+
+    programs_mod.compile_ahead = runner_mod.compile_ahead = one_at_a_time
+    found, now = programs_mod._find_or_compile, {}
+    xla = programs_mod._xla_compile
+    rows: list[dict] = []
+
+    def timed_find(key, fn, args, jit_kw, *rest):
+        t0 = time.perf_counter()
+        now.clear()
+        out = found(key, fn, args, jit_kw, *rest)
+        total = time.perf_counter() - t0
+        rows.append({**now["row"], "program": getattr(fn, "__qualname__", "?")[-44:],
+                     "trace_s": total - now.get("xla_s", 0.0)}
+                    if "row" in now else {**ROW, "program": getattr(
+                        fn, "__qualname__", "?")[-44:], "trace_s": total})
+        return out
+
+    def timed_xla(lowered):
+        t0 = time.perf_counter()
+        out = xla(lowered)
+        now["xla_s"] = time.perf_counter() - t0
+        now["row"] = {**ROW, "xla_s": now["xla_s"],
+                      "lines": lowered.as_text().count("\n"),
+                      "fusions": len(re.findall(r"= \S+ fusion\(", out[0].as_text()))}
+        return out
+
+    programs_mod._find_or_compile, programs_mod._xla_compile = timed_find, timed_xla
+    out = []
+    for name in names:
+        for feasible in ("false", "true"):
+            rows.clear()
+            cfg = load_config(resolve_config(name), [
+                "output.plots=false", "output.render=false",
+                f"strategy.feasibility={feasible}"])
+            with tempfile.TemporaryDirectory() as tmp:
+                load = os.getloadavg()[0]
+                res = run_mod.run_experiment(cfg, pathlib.Path(tmp) / "r")
+            for r in rows:
+                r.update(experiment=name, feasibility=feasible == "true",
+                         load=round(load, 1))
+            print(f"{name}, feasibility {feasible}: compile_time_s "
+                  f"{res['compile_time_s']:.2f}, search {res['wall_time_s']:.3f} s")
+            print_table(rows, ["program", "trace_s", "xla_s", "lines", "fusions"])
+            out += rows
+    return out
+
+
+#: A `run_programs` row's defaults (a program found compiled: nothing compiled).
+ROW = {"xla_s": 0.0, "lines": 0, "fusions": 0}
+
+
+def culling(names: list[str], repeats: int) -> list[dict]:
+    """``--culling``: the start distances' compile, optimized or not (module doc)."""
+    import numpy as np
+
+    import cgda_jax.sim.feasibility as feas
+    from cgda_jax.programs import RUN_ONCE_OPTIONS
+
+    seen, cull = [], feas.relevant_pairs
+
+    def capture(collider, robot, obstacles=()):
+        seen.append((collider, robot))
+        return cull(collider, robot, obstacles)
+
+    feas.relevant_pairs = capture
+    rows = []
+    for name in names:
+        seen.clear()
+        cfg = load_config(resolve_config(name), [])
+        goal, demos, _ = build_goal(cfg)
+        build_simulator(cfg, default_waypoint_s(demos, len(goal)), goal)
+        collider, robot = seen[0]
+        x = jnp.asarray(robot.start_genes)
+        times: dict[str, list[float]] = {"optimized": [], "RUN_ONCE_OPTIONS": []}
+        signs = {}
+        for _ in range(repeats):
+            for label, opts in (("optimized", {}),
+                                ("RUN_ONCE_OPTIONS", {"compiler_options": RUN_ONCE_OPTIONS})):
+                jax.clear_caches()
+                t0 = time.perf_counter()
+                compiled = jax.jit(collider.distances, **opts).lower(x).compile()
+                times[label].append(time.perf_counter() - t0)
+                signs[label] = np.asarray(compiled(x)) < 0
+        same = bool(np.array_equal(signs["optimized"], signs["RUN_ONCE_OPTIONS"]))
+        for label, ts in times.items():
+            rows.append({"experiment": name, "pairs": collider.n_pairs,
+                         "program": label, "compile_s": statistics.median(ts),
+                         "same signs": same})
+    print_table(rows, ["experiment", "pairs", "program", "compile_s", "same signs"])
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=3)
@@ -96,8 +209,18 @@ def main() -> None:
                         help="override a config value, as cgda run --set")
     parser.add_argument("--experiment", default="clean_ie",
                         help="a built-in IE experiment (default clean_ie)")
+    parser.add_argument("--runs", nargs="+", metavar="NAME",
+                        help="programs of whole runs, feasibility off and on")
+    parser.add_argument("--culling", nargs="+", metavar="NAME",
+                        help="the culling's start distances, optimized or not")
     args = parser.parse_args()
     jax.config.update("jax_enable_compilation_cache", False)
+    if args.runs or args.culling:
+        rows = (run_programs(args.runs) if args.runs
+                else culling(args.culling, args.repeats))
+        write_json("bench_compile_parts", {"runs": args.runs, "culling": args.culling,
+                                           "rows": rows})
+        return
     cfg = load_config(resolve_config(args.experiment), args.set)
     if cfg.strategy.name != "ie":
         parser.error(f"{args.experiment} runs {cfg.strategy.name}, not IE")

@@ -65,13 +65,19 @@ from typing import Any
 
 import jax
 
-__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "STORE_VERSION", "cache_stats",
+__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS", "STORE_VERSION",
+           "cache_stats",
            "clear_programs", "compile_ahead", "compile_jit", "compile_lowered",
            "environment_digest", "files_digest", "jit_call", "program_scope", "program_store",
            "set_program_store"]
 
 log = logging.getLogger("cgda_jax")
 
+#: ``jax.jit``'s ``compiler_options`` for a program that runs once and whose
+#: values are only compared with a threshold (`cgda_jax.sim.feasibility.relevant_pairs`'
+#: start distances): LLVM unoptimized, about 40 % less XLA compile time; the values
+#: may differ from the optimized program's in the last bits (float32 round-off).
+RUN_ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 #: Compiled programs kept in memory at most (each way of finding them).
 MAX_PROGRAMS = 64
 #: Bytes the program store on disk holds at most (oldest files dropped past it).
@@ -174,6 +180,8 @@ class _Scope:
         # many of each kind were asked ahead and not taken yet
         self.ahead: dict[str, concurrent.futures.Future] = {}
         self.reserved: collections.Counter[str] = collections.Counter()
+        # `compile_ahead(defer=True)`: (what, name, fn, args, rank, jit_kw) not asked yet
+        self.deferred: list[tuple] = []
 
 
 _SCOPE: contextvars.ContextVar[_Scope | None] = contextvars.ContextVar(
@@ -235,11 +243,17 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
         return _find_or_compile(None, fn, args, jit_kw)
     what = _what(name, args, jit_kw)
     with _LOCK:
+        # a deferred ask not made yet: this call compiles it
+        scope.deferred = [d for d in scope.deferred if d[0] != what]
         key = _program_key(scope, what, scope.asked[what])
         scope.asked[what] += 1
         pending = scope.ahead.pop(key, None)
         if pending is not None:
             scope.reserved[what] -= 1
+    if pending is not None and _TracingTurns.held_here():
+        # asked inside a trace in its turn: the thread asked ahead would wait for
+        # this trace to end; compiled here instead (its thread compiles it too)
+        pending = None
     if pending is not None:
         try:
             return pending.result()
@@ -249,7 +263,8 @@ def compile_jit(name: str, fn: Callable, *args: Any, **jit_kw: Any
     return _find_or_compile(key, fn, args, jit_kw)
 
 
-def compile_ahead(name: str, fn: Callable, *args: Any, **jit_kw: Any) -> None:
+def compile_ahead(name: str, fn: Callable, *args: Any, rank: int = 1,
+                  defer: bool = False, **jit_kw: Any) -> None:
     """Start finding or compiling, in a thread, the program that the next
     `compile_jit` of ``name`` with these argument types in this `program_scope`
     asks for (it then waits for it): a program the run needs later compiles
@@ -263,12 +278,35 @@ def compile_ahead(name: str, fn: Callable, *args: Any, **jit_kw: Any) -> None:
         name: as `compile_jit`'s.
         fn: as `compile_jit`'s.
         args: ``jax.ShapeDtypeStruct`` or arrays: the same types the call passes.
+        rank: which traces first: programs asked ahead are traced one at a time
+            (tracing holds Python's lock: side by side they would all finish
+            late), the lowest rank first, then in the order asked; each
+            compiles (XLA, without the lock) as soon as it is traced. Give the
+            program on the run's critical path (the longest to compile) rank 0.
+        defer: ask it only with the scope's next program asked ahead without
+            ``defer`` (behind it, by ``rank``): a program the run needs last
+            (the result's checks) then takes no tracing time from the programs
+            the run builds meanwhile. Never asked so, it is compiled when used.
         jit_kw: as `compile_jit`'s.
     """
     scope = _SCOPE.get()
     if scope is None:
         return
     what = _what(name, args, jit_kw)
+    if defer:
+        with _LOCK:
+            scope.deferred.append((what, name, fn, args, rank, jit_kw))
+        return
+    _ask_ahead(scope, what, name, fn, args, rank, jit_kw)
+    with _LOCK:
+        deferred, scope.deferred = scope.deferred, []
+    for d_what, d_name, d_fn, d_args, d_rank, d_kw in deferred:
+        _ask_ahead(scope, d_what, d_name, d_fn, d_args, d_rank, d_kw)
+
+
+def _ask_ahead(scope: _Scope, what: str, name: str, fn: Callable, args: tuple,
+               rank: int, jit_kw: dict) -> None:
+    """`compile_ahead` of one program, asked now."""
     with _LOCK:
         key = _program_key(scope, what, scope.asked[what] + scope.reserved[what])
         scope.reserved[what] += 1
@@ -276,24 +314,77 @@ def compile_ahead(name: str, fn: Callable, *args: Any, **jit_kw: Any) -> None:
         scope.ahead[key] = future
 
     numerics = _numerics()
+    turn = _TracingTurns.ticket(rank)
 
     def work() -> None:
         try:
             if _numerics() != numerics:  # a thread-local setting: not here
                 raise RuntimeError("JAX's settings differ in the compiling thread")
-            future.set_result(_find_or_compile(key, fn, args, jit_kw))
+            future.set_result(_find_or_compile(key, fn, args, jit_kw, turn))
         except BaseException as err:  # noqa: BLE001 - raised to the caller
             future.set_exception(err)
+        finally:
+            _TracingTurns.drop(turn)
 
     context = contextvars.copy_context()
     threading.Thread(target=context.run, args=(work,), daemon=True,
                      name=f"cgda-compile-{name}").start()
 
 
-def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict
-                     ) -> jax.stages.Compiled:
-    """The program of ``key`` from memory or the store, else traced, compiled and
-    kept (None: `compile_lowered` only)."""
+class _TracingTurns:
+    """The order in which `compile_ahead`'s threads trace: one at a time, the
+    lowest ``(rank, ticket)`` waiting first (`compile_ahead`)."""
+
+    _cond = threading.Condition()
+    _waiting: list[tuple[int, int]] = []
+    _busy: list[int | None] = [None]  # the tracing thread's ident
+    _count = [0]
+
+    @classmethod
+    def held_here(cls) -> bool:
+        """Whether this thread is tracing in its turn (a program it asks for
+        inside its trace must not wait for a turn behind its own)."""
+        return cls._busy[0] == threading.get_ident()
+
+    @classmethod
+    def ticket(cls, rank: int) -> tuple[int, int]:
+        """A place in the order, taken when the program is asked ahead."""
+        with cls._cond:
+            cls._count[0] += 1
+            t = (int(rank), cls._count[0])
+            cls._waiting.append(t)
+            return t
+
+    @classmethod
+    @contextlib.contextmanager
+    def turn(cls, t: tuple[int, int]) -> Iterator[None]:
+        """Wait until ``t`` is the first waiting and nobody traces; trace inside."""
+        with cls._cond:
+            cls._cond.wait_for(lambda: cls._busy[0] is None
+                               and min(cls._waiting) == t)
+            cls._waiting.remove(t)
+            cls._busy[0] = threading.get_ident()
+        try:
+            yield
+        finally:
+            with cls._cond:
+                cls._busy[0] = None
+                cls._cond.notify_all()
+
+    @classmethod
+    def drop(cls, t: tuple[int, int]) -> None:
+        """Give up ``t`` if still waiting (its program found compiled, or failed)."""
+        with cls._cond:
+            if t in cls._waiting:
+                cls._waiting.remove(t)
+                cls._cond.notify_all()
+
+
+def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict,
+                     turn: tuple[int, int] | None = None) -> jax.stages.Compiled:
+    """The program of ``key`` from memory or the store, else traced (in its
+    `_TracingTurns` ``turn`` when given), compiled and kept (None: `compile_lowered`
+    only)."""
     if key is not None:
         with _LOCK:
             found = _KEYED.get(key)
@@ -305,10 +396,11 @@ def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict
         if found is not None:
             _remember(_KEYED, key, found)
             return found
-    lowered = jax.jit(fn, **jit_kw).lower(*args)
+    with contextlib.nullcontext() if turn is None else _TracingTurns.turn(turn):
+        lowered = jax.jit(fn, **jit_kw).lower(*args)
+        text = lowered.as_text()
     with _LOCK:
         _STATS["traced"] += 1
-    text = lowered.as_text()
     compiled, shareable, fresh = _compile(lowered, text)
     if key is not None and shareable:
         _remember(_KEYED, key, compiled)
@@ -317,12 +409,12 @@ def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict
     return compiled
 
 
-def jit_call(fn: Callable, *args: Any, name: str | None = None) -> Any:
-    """``jax.jit(fn)(*args)`` through `compile_jit` (named after ``fn`` unless
-    ``name``): for a function built anew on each call (a closure over a new
+def jit_call(fn: Callable, *args: Any, name: str | None = None, **jit_kw: Any) -> Any:
+    """``jax.jit(fn, **jit_kw)(*args)`` through `compile_jit` (named after ``fn``
+    unless ``name``): for a function built anew on each call (a closure over a new
     simulator) whose program is often the same."""
     name = name or f"{getattr(fn, '__module__', '')}.{getattr(fn, '__qualname__', fn)}"
-    return compile_jit(name, fn, *args)(*args)
+    return compile_jit(name, fn, *args, **jit_kw)(*args)
 
 
 # -------------------------------------------------------------------------- store

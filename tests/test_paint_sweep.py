@@ -70,6 +70,34 @@ def test_sweep_paints_what_the_segment_passes():
     assert one[5] and one.sum() == 1
 
 
+def test_a_tracker_pads_its_paths_and_paints_the_same():
+    """`SceneTracker` pads a paint wall's path to a power of two rows with its last
+    position (a few programs, not one per path length): the same painted squares,
+    bit for bit, as the unpadded sweep of each piece, pieces of every length."""
+    from cgda_jax.programs import cache_stats
+    from cgda_jax.reality.replay import SceneTracker
+
+    wall = PaintWall.grid()
+    rng = np.random.default_rng(3)
+    lo, hi = wall.centres.min(axis=0), wall.centres.max(axis=0)
+    start = wall.centres[0] + [-0.05, 0.0, 0.0]
+    tracker = SceneTracker(wall, start)
+    want = wall.update(wall.init_state(), jnp.asarray(start, jnp.float32))
+    last, before, counts = start, cache_stats()["misses"], []
+    for k in range(1, 12):  # 1..11 new positions: paths of 2..12 rows
+        # near the wall's front (x within 0.15 m), some ends on a square's radius
+        pts = rng.uniform(lo - 0.1, hi + 0.1, (k, 3))
+        pts[:, 0] = wall.centres[0, 0] - rng.uniform(0.0, 0.15, k)
+        pts[-1] = wall.centres[k] + [-wall.radius, 0.0, 0.0]
+        tracker.advance(pts)
+        want = wall.sweep(want, np.concatenate([last[None], pts]))
+        last = pts[-1]
+        np.testing.assert_array_equal(np.asarray(tracker.state), np.asarray(want))
+        counts.append(int(np.asarray(want).sum()))
+    assert len(set(counts)) >= 3  # the pieces paint squares as they go
+    assert cache_stats()["misses"] - before <= 4  # rows 2, 4, 8, 16: four programs
+
+
 def test_path_substeps_bound_holds_on_teo(paint_sim):
     """Random moves: the K-sub-step polyline strays less than the wall's
     path_tolerance from the densely sampled marker path (the bound is not loose

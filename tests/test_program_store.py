@@ -121,6 +121,23 @@ def test_another_setting_or_model_is_a_miss(store):
     assert run_programs_key(cfg, "check") != key
 
 
+def test_the_output_settings_are_not_in_the_key(store):
+    """Figures, video and folder change no program: a run with its figures on finds
+    every program of the same run with them off (the store's first run)."""
+    root, model, first = store
+    cfg = _config(model)
+    for change in ("output.plots=true", "output.render=true", "output.dir=elsewhere",
+                   'output.camera={"distance" = 2.0}'):
+        assert run_programs_key(_config(model, change), "compute") == \
+            run_programs_key(cfg, "compute"), change
+    assert run_programs_key(_config(model, "strategy.seed=1"), "compute") != \
+        run_programs_key(cfg, "compute")
+    drawn = _run(_config(model, "output.plots=true"), root / "drawn")
+    assert drawn[2]["traced"] == 0
+    assert (root / "drawn" / "plots").is_dir()
+    _same(first, (drawn[0] | {"plots": first[0]["plots"]}, drawn[1]))
+
+
 def test_a_data_file_changed_is_another_key(tmp_path):
     data = tmp_path / "data"
     (data / "sub").mkdir(parents=True)
@@ -304,3 +321,83 @@ def test_a_program_compiled_ahead_is_the_one_asked_for():
         assert compile_jit("test.ahead", f, x) is first
         assert compile_jit("test.ahead", f, x) is second
     assert cache_stats()["keyed_hits"] - again["keyed_hits"] == 2
+
+
+def test_programs_asked_ahead_are_traced_one_at_a_time_by_rank():
+    """`compile_ahead`'s threads trace one at a time, the lowest rank first (the
+    critical program's trace is not slowed by the others'), a deferred program
+    only once another is asked, and one never asked so is compiled by its user."""
+    import threading
+    import time
+
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_ahead, compile_jit, program_scope
+
+    order, inside, overlaps = [], [0], []
+
+    def traced(label, scale, slow=0.0):
+        def f(x):
+            inside[0] += 1
+            overlaps.append(inside[0])
+            order.append((label, threading.current_thread().name))
+            time.sleep(slow)  # a long trace: the others are asked meanwhile
+            inside[0] -= 1
+            return x * scale
+        return f
+
+    x = jax.ShapeDtypeStruct((3,), jnp.float32)
+    first, low, last = traced("first", 2.0, 0.5), traced("low", 3.0), traced("last", 4.0)
+    with program_scope("a test of tracing turns"):
+        compile_ahead("test.last", last, x, rank=2, defer=True)
+        assert order == []  # deferred: not asked yet
+        compile_ahead("test.first", first, x, rank=0)  # asks the deferred one too
+        compile_ahead("test.low", low, x, rank=1)  # asked after it, traced before it
+        got = [compile_jit(n, f, x) for n, f in (("test.first", first),
+                                                 ("test.low", low),
+                                                 ("test.last", last))]
+    assert [label for label, _ in order] == ["first", "low", "last"]
+    assert all(t.startswith("cgda-compile-") for _, t in order)
+    assert max(overlaps) == 1  # never two traces at once
+    for prog, scale in zip(got, (2.0, 3.0, 4.0)):
+        np.testing.assert_array_equal(prog(jnp.ones(3)), [scale] * 3)
+    order.clear()
+    never = traced("never", 5.0)
+    with program_scope("a test of tracing turns, never asked"):
+        compile_ahead("test.never", never, x, rank=2, defer=True)
+        prog = compile_jit("test.never", never, x)
+    assert order == [("never", threading.current_thread().name)]
+    np.testing.assert_array_equal(prog(jnp.ones(3)), [5.0] * 3)
+
+
+def test_a_program_asked_inside_a_trace_in_its_turn_does_not_wait():
+    """A function traced in its turn that asks for a program asked ahead behind it
+    gets it compiled in its own thread instead of waiting for a turn that comes
+    only after its own trace ends."""
+    import concurrent.futures
+
+    import jax
+    import jax.numpy as jnp
+
+    from cgda_jax.programs import compile_ahead, compile_jit, program_scope
+
+    x = jax.ShapeDtypeStruct((3,), jnp.float32)
+
+    def inner(y):
+        return y + 1.0
+
+    def outer(y):
+        prog = compile_jit("test.inner", inner, x)  # asked ahead, behind this trace
+        assert prog is not None
+        return y * 2.0
+
+    def run():
+        with program_scope("a test of a program asked inside a trace"):
+            compile_ahead("test.inner", inner, x, rank=2, defer=True)
+            compile_ahead("test.outer", outer, x, rank=0)  # asks inner behind it
+            return compile_jit("test.outer", outer, x)
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        prog = pool.submit(run).result(timeout=120)  # a deadlock fails here
+    np.testing.assert_array_equal(prog(jnp.ones(3)), [2.0] * 3)

@@ -141,8 +141,8 @@ def _reference_pairs(collider, robot, obstacles):
     from cgda_jax.sim.geoms import geom_bound, geom_ids, geom_shape
 
     m = robot.mj_model
-    # the start overlaps: the collider's own distances (the program relevant_pairs
-    # compiled, taken again); the grid's bounds are what is compared
+    # the start overlaps: the collider's own distances, optimized (relevant_pairs
+    # compiles them unoptimized: the same signs); the grid's bounds are compared
     d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes)))
     over = [p for p, d in zip(collider.pair_names, d0) if d < 0]
     gid, obs = geom_ids(m), {o.name: o for o in obstacles}

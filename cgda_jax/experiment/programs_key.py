@@ -1,6 +1,6 @@
 """What determines a run's compiled programs, as one key taken before tracing
 (`run_programs_key`; `cgda_jax.programs.program_scope` uses it): the resolved
-config (its output folder aside), the content of every file the run can read (the
+config (its output section aside), the content of every file the run can read (the
 robot model's folder, the built-in models with their object pieces, the data
 folder) and the environment (`cgda_jax.programs.environment_digest`: the package's
 source, the libraries' versions, backend and devices).
@@ -46,7 +46,10 @@ def run_programs_key(cfg: ExperimentConfig, phase: str) -> str | None:
     if files is None:
         return None
     table = dataclasses.asdict(cfg)
-    table["output"].pop("dir", None)  # where results go changes no program
+    # where results go and which are drawn change no program of the run: a run
+    # with its figures or video off finds those of one with them on (the drawing
+    # runs after the run's programs and compiles its own, by their own keys)
+    table.pop("output", None)
     text = json.dumps([phase, table, files, environment_digest(),
                        os.environ.get(XGNITIVE_ENV, "")], sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()

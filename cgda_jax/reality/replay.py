@@ -80,8 +80,15 @@ class SceneTracker:
         import jax.numpy as jnp
 
         markers = np.asarray(markers, np.float64).reshape(-1, 3)
-        path = (np.concatenate([self.last[None], markers]) if self._sweep is not None
-                else markers)
+        if self._sweep is not None:
+            path = np.concatenate([self.last[None], markers])
+            # padded to a power of two rows with its last position (segments of no
+            # length at the end, where the last one already painted): a few
+            # programs for paths of any length, not one for each length
+            size = 1 << (len(path) - 1).bit_length()
+            path = np.concatenate([path, np.repeat(path[-1:], size - len(path), 0)])
+        else:
+            path = markers
         self.state = self._advance(self.state, jnp.asarray(path, jnp.float32))
         self.last = markers[-1]
         return np.asarray(self.scene.features(self.state, jnp.asarray(

@@ -140,14 +140,18 @@ def segment_box_min(size: Array, a: Array, b: Array) -> Array:
             for sj in (-1.0, 1.0):
                 ts.append(_ratio(h[j] - h[i] + si * a[i] - sj * a[j],
                                  sj * d[j] - si * d[i]))
+    # each candidate's sdf is sqrt(g) outside (g the squared distance, > 0) and
+    # max_k q_k <= 0 inside; the least of them is the least of the keys
+    # (inside m, outside g: every inside key below every outside one), its
+    # square root when outside (sqrt is monotone: one root instead of 37)
     best = None
     for t in ts:
         t = jnp.clip(t, 0.0, 1.0)
         q = [jnp.abs(a[k] + t * d[k]) - h[k] for k in range(3)]
-        out = (norm3([jnp.maximum(x, 0.0) for x in q])
-               + jnp.minimum(jnp.maximum(jnp.maximum(q[0], q[1]), q[2]), 0.0))
-        best = out if best is None else jnp.minimum(best, out)
-    return best
+        m = jnp.maximum(jnp.maximum(q[0], q[1]), q[2])
+        key = jnp.where(m > 0.0, dot3(*[[jnp.maximum(x, 0.0) for x in q]] * 2), m)
+        best = key if best is None else jnp.minimum(best, key)
+    return jnp.where(best > 0.0, jnp.sqrt(best), best)
 
 
 def box_box_sat(size_a, Ra, pa, size_b, Rb, pb) -> Array:

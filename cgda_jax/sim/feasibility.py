@@ -78,7 +78,7 @@ import mujoco
 import numpy as np
 from jax import Array
 
-__all__ = ["DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
+__all__ = ["CHUNK_MIN", "DEFAULT_MARGIN", "DEFAULT_PENALTY", "DEFAULT_PENETRATION",
            "DEFAULT_SATURATION", "DEFAULT_TRACKING_DEG", "EXECUTED_MARGIN",
            "GEOMETRIES", "PACKED_MIN", "PROVEN", "Feasibility", "relevant_pairs",
            "scene_obstacles"]
@@ -112,6 +112,10 @@ PROVEN = 1e-4
 #: at once, without the coarse-to-fine loop (paint IET's round of 20 moves: the
 #: loop's iterations cost more than the postures they leave out).
 PACKED_MIN = 512
+#: `Feasibility.moves`: the coarse-to-fine loop takes at least this many
+#: postures an iteration (all M moves' when fewer; clean IE's rounds of 189
+#: moves: one iteration of 189 postures 20 % cheaper than two of 95).
+CHUNK_MIN = 256
 #: Fitness added to an infeasible candidate, times (1 + violation): larger than any
 #: feature error of the experiments here (paint: 100 %, positions: metres).
 DEFAULT_PENALTY = 1e3
@@ -349,9 +353,9 @@ class Feasibility:
         `PROVEN` above the allowed depth has no sampled posture past it: its
         penetration term is 0, as the full samples give.  Only the other moves
         take their remaining samples.  The postures to take are packed
-        together, half of M an iteration of one loop (one copy of the
-        distances in the program).  Batched (``vmap``, any depth) the moves
-        of every batch entry are packed together
+        together, half of M (at least `CHUNK_MIN`) an iteration of one loop
+        (one copy of the distances in the program).  Batched (``vmap``, any
+        depth) the moves of every batch entry are packed together
         (`jax.custom_batching.custom_vmap`), so that the moves a batch entry
         does not need cost nothing.  With ``certify``, without a check, with
         fewer than 4 samples or at most `PACKED_MIN` postures in all:
@@ -391,31 +395,31 @@ class Feasibility:
         coarse = np.asarray([0, s // 2, s], np.int32)  # first: ends and middle
         rest = np.setdiff1d(np.arange(s + 1), coarse).astype(np.int32)
         nc, nr, n_pairs = len(coarse), len(rest), self.check.n_pairs
-        chunk = -(-m // 2)  # postures an iteration
+        # postures an iteration: half of M, at least `CHUNK_MIN` (each
+        # iteration's fixed cost against the postures a last one leaves over)
+        chunk = max(-(-m // 2), min(m, CHUNK_MIN))
         rate = jnp.abs(dq) @ jnp.asarray(self._reach).T  # (M, pairs)
         h = jnp.asarray(np.diff(coarse) / s, jnp.float32)  # (nc - 1,)
         # the needed moves first; the coarse entry e: move first[e // nc]'s
         # sample coarse[e % nc], postures chunk * i .. of iteration i
-        first = jnp.argsort(~need, stable=True)
+        first, at_first = _partition(need)
         n_coarse = -(-(jnp.sum(need) * nc) // chunk)  # iterations
         n_c, n_r = -(-nc * m // chunk), -(-nr * m // chunk)
 
         def coarse_of(cbuf):  # (nc, M, pairs) in the moves' order
             per = cbuf.reshape(n_c * chunk, n_pairs)[:nc * m].reshape(m, nc, n_pairs)
-            return jnp.full((m, nc, n_pairs), jnp.inf).at[first].set(per).transpose(
-                1, 0, 2)
+            return per[at_first].transpose(1, 0, 2)
 
         def unproven(cbuf):  # the moves the coarse bound leaves open, first
             dc = coarse_of(cbuf)
             low = 0.5 * (dc[:-1] + dc[1:] - rate[None] * h[:, None, None])
             bound = jnp.min(jnp.minimum(low, dc[1:]), axis=(0, 2))  # (M,)
             open_ = need & ~(bound >= PROVEN - self.allowed)
-            return dc, open_, jnp.argsort(~open_, stable=True), jnp.sum(open_)
+            return dc, open_, *_partition(open_), jnp.sum(open_)
 
         def body(c):
-            it, cbuf, fbuf = c
+            it, cbuf, fbuf, order, n_open = c
             in_coarse = it < n_coarse
-            _, _, order, _ = unproven(cbuf)
             i = jnp.where(in_coarse, it, it - n_coarse)
             e = i * chunk + jnp.arange(chunk)
             move = jnp.where(in_coarse, first[jnp.minimum(e // nc, m - 1)],
@@ -428,23 +432,26 @@ class Feasibility:
                 cbuf, d, jnp.minimum(i, n_c - 1), 0), cbuf)
             fbuf = jnp.where(in_coarse, fbuf, jax.lax.dynamic_update_index_in_dim(
                 fbuf, d, jnp.minimum(i, n_r - 1), 0))
-            return it + 1, cbuf, fbuf
+            # once the coarse postures are in: the open moves' order, kept
+            order, n_open = jax.lax.cond(
+                it + 1 == n_coarse, lambda: tuple(unproven(cbuf)[2::2]),
+                lambda: (order, n_open))
+            return it + 1, cbuf, fbuf, order, n_open
 
         def more(c):
-            it, cbuf, _ = c
-            n_open = unproven(cbuf)[3]
+            it, _, _, _, n_open = c
             return (it < n_coarse) | ((it - n_coarse) * chunk < n_open * nr)
 
         inf = jnp.float32(jnp.inf)
-        _, cbuf, fbuf = jax.lax.while_loop(
-            more, body, (jnp.zeros((), jnp.int32),
-                         jnp.full((n_c, chunk, n_pairs), inf),
-                         jnp.full((n_r, chunk, n_pairs), inf)))
-        dc, open_, order, _ = unproven(cbuf)
+        zero = jnp.zeros((), jnp.int32)
+        _, cbuf, fbuf, _, _ = jax.lax.while_loop(
+            more, body, (zero, jnp.full((n_c, chunk, n_pairs), inf),
+                         jnp.full((n_r, chunk, n_pairs), inf),
+                         jnp.zeros((m,), jnp.int32), zero))
+        dc, open_, _, at_open, _ = unproven(cbuf)
         # fine entry e: move order[e // nr]'s sample rest[e % nr]
         fine = jnp.min(fbuf.reshape(n_r * chunk, n_pairs)[:nr * m].reshape(
-            m, nr, n_pairs), axis=(1, 2))
-        fine = jnp.full((m,), inf).at[order].set(fine)
+            m, nr, n_pairs), axis=(1, 2))[at_open]
         worst = -jnp.minimum(jnp.min(dc, axis=(0, 2)), fine)
         over = jnp.maximum(worst - self.allowed, 0.0) / self.penetration
         return jnp.where(open_, over, 0.0)
@@ -489,6 +496,19 @@ class Feasibility:
         sat = jnp.maximum(saturation - keep * self.saturation - 1e-6, 0.0) / max(
             keep * self.saturation, 1e-3)
         return jnp.maximum(jnp.maximum(over, track), sat)
+
+
+def _partition(mask: Array) -> tuple[Array, Array]:
+    """The stable partition of ``mask`` (M,) bool, True first: the order
+    (``jnp.argsort(~mask, stable=True)``) and each entry's place in it (its
+    inverse), from running counts (XLA on the CPU sorts 189 entries in about
+    35 us, several times these counts' cost)."""
+    n = jnp.sum(mask, dtype=jnp.int32)
+    place = jnp.where(mask, jnp.cumsum(mask, dtype=jnp.int32) - 1,
+                      n + jnp.cumsum(~mask, dtype=jnp.int32) - 1)
+    order = jnp.zeros(mask.shape, jnp.int32).at[place].set(
+        jnp.arange(mask.shape[0], dtype=jnp.int32), unique_indices=True)
+    return order, place
 
 
 def _collides(m: mujoco.MjModel, a: str, b: str) -> bool:
@@ -536,19 +556,22 @@ def relevant_pairs(collider, robot, obstacles=()) -> tuple[list, list]:
     count is not (2**30 postures would not fit in memory).
 
     The start posture's distances are one program (`cgda_jax.programs.jit_call`:
-    compiled once per process for the same robot); the grid's bounds are NumPy
-    for pairs of moving geoms and one batched call a geom kind for the others.
+    compiled once per process for the same robot; on the run's critical path and
+    run once, so compiled unoptimized: `cgda_jax.programs.RUN_ONCE_OPTIONS`; only
+    their signs are used); the grid's bounds are NumPy for pairs of moving geoms
+    and one batched call a geom kind for the others.
 
     Returns:
         (kept pair names, overlapping pair names).
     """
-    from cgda_jax.programs import jit_call
+    from cgda_jax.programs import RUN_ONCE_OPTIONS, jit_call
     from cgda_jax.sim.geoms import geom_bound, geom_ids, geom_shape
 
     if collider.n_pairs == 0:
         return [], []
     m = robot.mj_model
-    d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes)))
+    d0 = np.asarray(jit_call(collider.distances, jnp.asarray(robot.start_genes),
+                             compiler_options=RUN_ONCE_OPTIONS))
     overlapping = [collider.pair_names[k] for k in np.flatnonzero(d0 < 0)]
     gid = geom_ids(m)
     obs = {o.name: o for o in obstacles}

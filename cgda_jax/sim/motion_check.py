@@ -130,7 +130,9 @@ def compile_collisions_ahead(sim, n_moves: int, factor: int = 4) -> None:
 
     collider = getattr(getattr(sim, "feasibility", None), "collider", None)
     if collider is not None:
-        compile_ahead(*_collision_program(collider, sim, n_moves, factor))
+        # traced behind the strategy's programs, asked with them (`compile_ahead`)
+        compile_ahead(*_collision_program(collider, sim, n_moves, factor), rank=2,
+                      defer=True)
 
 
 def _collisions(sim, joints: np.ndarray, factor: int) -> dict[str, Any] | None:

@@ -168,8 +168,10 @@ def compile_plan(
                  ("chunk", chunk, chunk_kw, carry_shape),
                  ("done", all_done, carry_kw, carry_shape),
                  ("finish", over_trials(plan.finish), carry_kw, carry_shape))]
-    for name, f, x, kw in (parts[1], parts[0], *parts[2:]):  # the longest first
-        compile_ahead(name, f, x, **kw)  # each in a thread, side by side (in a scope)
+    for rank, (name, f, x, kw) in enumerate((parts[1], parts[0], *parts[2:])):
+        # each in a thread (in a scope), traced one at a time, the chunk (the
+        # longest to compile) first, so that its compile starts soonest
+        compile_ahead(name, f, x, rank=min(rank, 1), **kw)
     # a program compiled before is reused (`cgda_jax.programs`)
     return tuple(compile_jit(name, f, x, **kw) for name, f, x, kw in parts)
 
