@@ -20,6 +20,9 @@ experiment.  Run it below normal priority on a shared machine:
 
     nice -n 10 python benchmarks/bench_seeds_check.py [--seeds 0 1 ... 9]
         [--only clean_ie paint_iet clean_fte iron_ie_xgnitive] [--single]
+
+``--only`` takes any kinematic experiment of ``experiments/`` by name (e.g.
+``paint_iet_xgnitive iiwa14_clean_ie panda_clean_ie``).
 """
 
 from __future__ import annotations
