@@ -16,7 +16,7 @@ disagree:
   infeasible candidate behind every feasible one;
 - `point_fitness`: a point's fitness from the three (the plans' `outcome_fitness`);
 - `polish_loss`: the loss a gradient polish descends (squared error plus the
-  move's penalty);
+  move's penalty), `polish_penalty` the penalties of many iterates at once;
 - `judge_best`: the penalty of only the candidates whose rank matters (the
   collision check is the costly part of a feasible candidate).
 
@@ -37,9 +37,9 @@ from jax import Array
 from cgda_jax.strategies.evolution import to_joints
 
 __all__ = ["distances", "feasibility_penalty", "judge_best", "judged_round",
-           "least_motion", "ordered_point_errors",
-           "penalized", "point_errors", "point_fitness", "polish_loss",
-           "squared_error", "total_error"]
+           "least_motion", "ordered_point_errors", "penalized", "point_errors",
+           "point_fitness", "polish_loss", "polish_penalty", "squared_error",
+           "total_error"]
 
 
 def distances(features: Any, goal: Any) -> Any:
@@ -144,18 +144,51 @@ def feasibility_penalty(sim: Any, violation: Any) -> Array:
     return penalized(jnp.float32(0.0), violation, feas.penalty)
 
 
-def polish_loss(sim: Any, state: Any, goal_point: Array, lower, upper):
+def polish_loss(sim: Any, state: Any, goal_point: Array, lower, upper, *,
+                judge: bool = True):
     """Squared feature error (scalar) of stepping from `state` to ``to_joints(u)``
     (plus the feasibility penalty of the move; no gradient flows through it): the
-    loss of normalized genes ``u`` (D,) a polish descends."""
+    loss of normalized genes ``u`` (D,) a polish descends.  ``judge=False``:
+    the squared error alone, the move not judged (its penalty taken apart,
+    `polish_penalty`)."""
 
     def loss(u):
-        new, feats = sim.step(state, to_joints(u, lower, upper))
+        q = to_joints(u, lower, upper)
+        if not judge and getattr(sim, "feasibility", None) is not None:
+            return squared_error(sim.step(state, q, judge=False)[1], goal_point)
+        new, feats = sim.step(state, q)
         violation = getattr(new, "move_violation", None)
         pen = jax.lax.stop_gradient(feasibility_penalty(sim, violation))
         return squared_error(feats, goal_point) + pen
 
     return loss
+
+
+def polish_penalty(sim: Any, state: Any, lower, upper):
+    """``(values (T,), iterates (T, D)) -> values (T,)``: the squared errors
+    ``values`` of `polish_loss` (``judge=False``) of the iterates ``u`` with
+    the feasibility penalty of their moves from `state` to ``to_joints(u)``
+    added where they are judged: the best first, until the smallest value is
+    sure (`judge_best` with one rank: the smallest value and the first iterate
+    that has it are those of judging every move; the others at least as
+    large); the judged moves checked together
+    (`cgda_jax.sim.simulator.Simulator.judge_moves`: one copy of the check,
+    coarse to fine).  None where that does not apply (no feasibility,
+    dynamic mode): `polish_loss` then judges each move itself."""
+    feas = getattr(sim, "feasibility", None)
+    if (feas is None or getattr(sim, "mode", "kinematic") != "kinematic"
+            or not hasattr(sim, "judge_moves")):
+        return None
+
+    def penalty(values, us):
+        def judge(idx, need):
+            q = to_joints(us[idx], lower, upper)
+            news = jax.vmap(lambda w: sim.step(state, w, judge=False)[0])(q)
+            return sim.judge_moves(state, news, need)
+
+        return judge_best(values, judge, feas.penalty, 1, judged_round(1))[0]
+
+    return penalty
 
 
 def judged_round(ranks: int) -> int:

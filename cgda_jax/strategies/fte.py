@@ -63,7 +63,7 @@ from cgda_jax.strategies.base import (
     from_joints,
     points_independent,
 )
-from cgda_jax.strategies.fitness import distances, polish_loss
+from cgda_jax.strategies.fitness import distances, polish_loss, polish_penalty
 from cgda_jax.strategies.refine import (
     REFINE,
     descended_candidates,
@@ -337,10 +337,13 @@ class FTEPlan(PlanBase):
         evals = jnp.asarray(u.shape[0], jnp.int32)
         if self.init_mode == "sampled":
             return (u, f, *empty[2:], evals, bad)
+        # the moves' penalties taken after the descent, every iterate's at once
+        penalty = polish_penalty(self.sim, state, self.lower, self.upper)
         cand_u, cand_err = descended_candidates(
             u, f, self.goal,
-            lambda g: polish_loss(self.sim, state, g, self.lower, self.upper),
-            n_starts=REACH_STARTS, steps=REACH_STEPS)
+            lambda g: polish_loss(self.sim, state, g, self.lower, self.upper,
+                                  judge=penalty is None),
+            n_starts=REACH_STARTS, steps=REACH_STEPS, penalty=penalty)
         return (*empty[:2], cand_u, cand_err, evals, bad)
 
 

@@ -87,13 +87,26 @@ def descend(
     method: str = "adam",
     steps: int = 100,
     learning_rate: float = 0.02,
+    penalty: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
 ) -> tuple[jax.Array, jax.Array]:
     """Minimize ``loss(u)`` from ``u0`` (D,) for `steps` optax steps (one example).
+
+    With ``penalty`` (``(values (T,), iterates (T, D)) -> penalized values
+    (T,)``, exact at least where smallest: `cgda_jax.strategies.fitness.
+    polish_penalty`), an iterate's value is its ``loss`` penalized, the penalty
+    adding nothing to the gradient (as a ``stop_gradient`` term of the loss
+    would): the iterates are descended on ``loss`` and penalized after, all
+    together (one copy of the check in the program instead of one a loss
+    evaluation, and only the iterates that can be the best judged), the best
+    chosen as the loop would.
 
     Returns:
         ``(best u, its loss)``: the best iterate seen, ``u0`` included, so the result
         is never worse than the start. Non-finite losses are never kept.
     """
+    if penalty is not None:
+        return _descend_penalized(loss, u0, penalty, method=method, steps=steps,
+                                  learning_rate=learning_rate)
     opt, step = _stepper(method, learning_rate, loss)
 
     def body(carry, _):
@@ -111,6 +124,25 @@ def descend(
     last = loss(u)
     keep = jnp.isfinite(last) & (last < best)
     return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
+
+
+def _descend_penalized(loss, u0, penalty, *, method, steps, learning_rate):
+    """`descend` with a ``penalty`` of the iterates taken after the descent."""
+    opt, step = _stepper(method, learning_rate, loss)
+
+    def body(carry, _):
+        u, state = carry
+        value, u_next, state = step(u, state)
+        return (u_next, state), (value, u)
+
+    start = loss(u0)
+    (u, _), (values, us) = jax.lax.scan(body, (u0, opt.init(u0)), None,
+                                        length=int(steps))
+    every = jnp.concatenate([u0[None], us, u[None]])  # start, steps, last
+    value = penalty(jnp.concatenate([start[None], values, loss(u)[None]]), every)
+    # the loop's choice: the first of the smallest finite values (u0 when none)
+    i = jnp.argmin(jnp.where(jnp.isfinite(value), value, jnp.inf))
+    return every[i], jnp.where(jnp.isfinite(value[i]), value[i], jnp.inf)
 
 
 def polish(
@@ -374,6 +406,7 @@ def descended_candidates(
     n_starts: int = 4,
     steps: int = 60,
     learning_rate: float = 0.05,
+    penalty: Callable[[jax.Array], jax.Array] | None = None,
 ) -> tuple[jax.Array, jax.Array]:
     """Per goal point, its `n_starts` nearest pool samples descended (adam) on the
     point's squared feature error (differentiable simulators only).
@@ -382,8 +415,9 @@ def descended_candidates(
         genes, features: the pool (S, D), (S, F) (`sample_pool`).
         goal: (N, F) goal points.
         loss_of: goal point (F,) -> loss of the genes (D,) -> squared error.
-        n_starts, steps, learning_rate: of the descent
-            (`cgda_jax.strategies.refine.descend`).
+        n_starts, steps, learning_rate, penalty: of the descent
+            (`cgda_jax.strategies.refine.descend`; ``penalty``: every point's
+            and start's iterates are judged in one batched call).
 
     Returns:
         ``(genes (N, K, D), errors (N, K))``: K = `n_starts` local minima (or
@@ -396,7 +430,8 @@ def descended_candidates(
     def point(g, starts):
         loss = loss_of(g)
         u, sq = jax.vmap(lambda s: descend(loss, s, steps=steps,
-                                           learning_rate=learning_rate))(genes[starts])
+                                           learning_rate=learning_rate,
+                                           penalty=penalty))(genes[starts])
         err = jnp.sqrt(sq)
         return u, jnp.where(jnp.isfinite(err), err, jnp.inf)
 
