@@ -315,7 +315,9 @@ class Simulator(Executions):
     def judge_moves(self, state: SimState, news: SimState,
                     need: Array | None = None) -> Array:
         """The move violations (M,) of `judge` for M states ``news`` (stacked)
-        stepped to from ``state`` with ``judge=False``: the same values, judged
+        stepped to from ``state`` with ``judge=False`` (or from M states
+        ``state``, stacked: each move its own start, e.g. a trajectory's
+        moves): the same values, judged
         together (`cgda_jax.sim.feasibility.Feasibility.moves`: the collisions
         coarse to fine, batched calls packed into one); ``need`` (M,) bool:
         only those moves' collisions checked, for a caller that discards the

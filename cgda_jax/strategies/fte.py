@@ -63,7 +63,13 @@ from cgda_jax.strategies.base import (
     from_joints,
     points_independent,
 )
-from cgda_jax.strategies.fitness import distances, polish_loss, polish_penalty
+from cgda_jax.strategies.fitness import (
+    distances,
+    judge_best,
+    judged_round,
+    polish_loss,
+    polish_penalty,
+)
 from cgda_jax.strategies.refine import (
     REFINE,
     descended_candidates,
@@ -281,9 +287,50 @@ class FTEPlan(PlanBase):
         return self.joints(u_flat.reshape(self.n_points, self.n_dof))
 
     def _fitness(self, pop):
-        out = self.map_population(lambda u: self.execution(self._trajectory(u)), pop)
-        f = jax.vmap(lambda f: self.distance(f, self.goal))(out["features"])
-        return self.penalize(f, out.get("violation"))
+        if not self.moves_apart:
+            out = self.map_population(lambda u: self.execution(self._trajectory(u)),
+                                      pop)
+            f = jax.vmap(lambda f: self.distance(f, self.goal))(out["features"])
+            return self.penalize(f, out.get("violation"))
+        (before, after), feats = self.map_population(self._moves, pop)
+        f = jax.vmap(lambda f: self.distance(f, self.goal))(feats)
+
+        def judge(idx, need):
+            # the picked trajectories' moves, judged together
+            v = jax.vmap(self.sim.judge_moves)(
+                jax.tree.map(lambda x: x[idx], before),
+                jax.tree.map(lambda x: x[idx], after),
+                jnp.broadcast_to(need[:, None], (need.shape[0], self.n_points)))
+            # summed move by move, in order, as the judged rollout sums them
+            return jax.lax.scan(lambda c, x: (c + x, None),
+                                jnp.zeros(v.shape[:1], v.dtype), v.T)[0]
+
+        if self.judge_ranks is None:
+            every = jnp.arange(f.shape[0], dtype=jnp.int32)
+            return self.penalize(f, judge(every, jnp.ones(every.shape, bool)))
+        return judge_best(f, judge, self.feasibility.penalty, self.judge_ranks,
+                          judged_round(self.judge_ranks))[0]
+
+    @property
+    def moves_apart(self) -> bool:
+        """A generation's moves judged apart from their execution, together
+        (`Simulator.judge_moves`; with ``judge = "ranked"`` only the
+        trajectories whose rank matters, `judge_best`): kinematic mode with
+        feasibility.  Else every candidate's execution judges its moves."""
+        return (self.feasibility is not None and hasattr(self.sim, "judge_moves")
+                and getattr(self.sim, "mode", "kinematic") == "kinematic")
+
+    def _moves(self, u_flat):
+        """The trajectory's moves, unjudged: the states before and after each
+        (N stacked each) and the features (N, F)."""
+
+        def one(state, w):
+            new, feats = self.advance(state, w)
+            return new, (state, new, feats)
+
+        _, (before, after, feats) = jax.lax.scan(one, self.sim.init_state(),
+                                                 self._trajectory(u_flat))
+        return (before, after), feats
 
     def _errors(self, u_flat):
         """(N,) pointwise errors of executing `u_flat` (inf where not finite)."""
