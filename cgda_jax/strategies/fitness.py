@@ -165,28 +165,29 @@ def polish_loss(sim: Any, state: Any, goal_point: Array, lower, upper, *,
 
 
 def polish_penalty(sim: Any, state: Any, lower, upper):
-    """``(values (T,), iterates (T, D)) -> values (T,)``: the squared errors
-    ``values`` of `polish_loss` (``judge=False``) of the iterates ``u`` with
+    """``(losses (..., T), iterates (..., T, D)) -> losses (..., T)``: the
+    squared errors of `polish_loss` (``judge=False``) of iterates ``u`` with
     the feasibility penalty of their moves from `state` to ``to_joints(u)``
-    added where they are judged: the best first, until the smallest value is
-    sure (`judge_best` with one rank: the smallest value and the first iterate
-    that has it are those of judging every move; the others at least as
-    large); the judged moves checked together
-    (`cgda_jax.sim.simulator.Simulator.judge_moves`: one copy of the check,
-    coarse to fine).  None where that does not apply (no feasibility,
+    added where they are judged, the best of each row first, until its
+    smallest loss is sure (`judge_best` with one rank, batched: the smallest
+    loss of a row and the first iterate that has it are those of judging every
+    move; the others at least as large), the judged moves of every row checked
+    together (`cgda_jax.sim.simulator.Simulator.judge_moves`: one copy of the
+    check, coarse to fine).  None where that does not apply (no feasibility,
     dynamic mode): `polish_loss` then judges each move itself."""
     feas = getattr(sim, "feasibility", None)
     if (feas is None or getattr(sim, "mode", "kinematic") != "kinematic"
             or not hasattr(sim, "judge_moves")):
         return None
 
-    def penalty(values, us):
-        def judge(idx, need):
-            q = to_joints(us[idx], lower, upper)
+    def penalty(losses, us):
+        def judge(idx, need):  # idx, need (..., k): the rows' picked iterates
+            u = jnp.take_along_axis(us, idx[..., None], axis=-2)
+            q = to_joints(u.reshape(-1, u.shape[-1]), lower, upper)
             news = jax.vmap(lambda w: sim.step(state, w, judge=False)[0])(q)
-            return sim.judge_moves(state, news, need)
+            return sim.judge_moves(state, news, need.reshape(-1)).reshape(idx.shape)
 
-        return judge_best(values, judge, feas.penalty, 1, judged_round(1))[0]
+        return judge_best(losses, judge, feas.penalty, 1, judged_round(1))[0]
 
     return penalty
 
@@ -240,19 +241,27 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
     With ``frozen`` (a scalar bool) True nothing is judged (a caller that
     discards the values: IE's frozen points, `cgda_jax.strategies.ie.IEPlan`).
 
+    Batched: ``fitness`` (..., P) holds populations of their own, each judged
+    as above (the rounds run while any needs one), ``judge`` given ``idx`` and
+    ``need`` (..., size) at once: one traced call of it, where a ``vmap`` of
+    this function would trace the loop's body (and the check in it) again for
+    each of its batching passes.
+
     Returns:
-        ``(fitness (P,), violation (P,))``: penalized fitness as above; the
-        judged candidates' violations, NaN where not judged.
+        ``(fitness (..., P), violation (..., P))``: penalized fitness as above;
+        the judged candidates' violations, NaN where not judged.
     """
-    n, lead = fitness.shape[0], int(lead)
+    batch, n, lead = fitness.shape[:-1], fitness.shape[-1], int(lead)
+    rows = fitness.reshape(-1, n)  # (B, n): one row unless batched
     frozen = jnp.asarray(frozen, bool)
     size = min(int(size), n - lead)
     rounds = -(-(n - lead) // size)
     first = jnp.arange(n) < lead  # judged in the first round, counted for no rank
-    key = jnp.where(first, -jnp.inf, jnp.where(jnp.isfinite(fitness), fitness, jnp.inf))
-    order = jnp.argsort(key)  # the leads, then best first (stable: ties by index)
-    order = jnp.concatenate([order, jnp.broadcast_to(order[-1:],
-                                                     (rounds * size + lead - n,))])
+    key = jnp.where(first, -jnp.inf, jnp.where(jnp.isfinite(rows), rows, jnp.inf))
+    # the leads, then best first (stable: ties by index)
+    order = jnp.argsort(key, axis=-1)
+    order = jnp.concatenate([order, jnp.broadcast_to(
+        order[:, -1:], (rows.shape[0], rounds * size + lead - n))], axis=-1)
     # each round's positions in ``order``: the first round the leads and ``size``
     # more, every later round its ``size`` (the last repeated ``lead`` times)
     at = np.stack([np.concatenate([lead + r * size + np.arange(size),
@@ -261,28 +270,32 @@ def judge_best(fitness: Array, judge: Any, penalty: float, ranks: int,
     at[0] = np.arange(size + lead)
     at = jnp.asarray(at, jnp.int32)
     need = min(int(ranks), n - lead)
+    row = jnp.arange(rows.shape[0])[:, None]
 
     def told(violation, judged):
-        return jnp.where(judged, penalized(fitness, violation, penalty),
-                         fitness + penalty)
+        return jnp.where(judged, penalized(rows, violation, penalty), rows + penalty)
 
-    def enough(carry):
+    def going(carry):  # (B,): the rows whose rounds go on
         r, violation, judged = carry
-        left = judged | ~(jnp.isfinite(fitness) | first)
-        m = jnp.min(jnp.where(left, jnp.inf, key))
+        left = judged | ~(jnp.isfinite(rows) | first)
+        m = jnp.min(jnp.where(left, jnp.inf, key), axis=-1, keepdims=True)
         ok = judged & ~first & (told(violation, judged) <= m)
-        return (jnp.sum(ok) >= need) | jnp.all(left)
-
-    def going(carry):
-        return (carry[0] < rounds) & ~enough(carry) & ~frozen
+        enough = (jnp.sum(ok, axis=-1) >= need) | jnp.all(left, axis=-1)
+        return (r < rounds) & ~enough & ~frozen
 
     def body(carry):
         r, violation, judged = carry
-        idx = order[at[r]].astype(jnp.int32)
-        need = jnp.broadcast_to(going(carry), idx.shape)
-        v = jnp.asarray(judge(idx, need), jnp.float32)
-        return r + 1, violation.at[idx].set(v), judged.at[idx].set(True)
+        idx = order[:, at[r]].astype(jnp.int32)  # (B, size + lead)
+        need = jnp.broadcast_to(going(carry)[:, None], idx.shape)
+        v = jnp.asarray(judge(idx.reshape(*batch, -1), need.reshape(*batch, -1)),
+                        jnp.float32).reshape(idx.shape)
+        v = jnp.where(need, v, violation[row, idx])  # rows done: as they were
+        return (r + 1, violation.at[row, idx].set(v),
+                judged.at[row, idx].set(judged[row, idx] | need))
 
-    carry = (jnp.int32(0), jnp.full((n,), jnp.nan, jnp.float32), jnp.zeros((n,), bool))
-    _, violation, judged = jax.lax.while_loop(going, body, carry)
-    return told(violation, judged), violation
+    carry = (jnp.int32(0), jnp.full(rows.shape, jnp.nan, jnp.float32),
+             jnp.zeros(rows.shape, bool))
+    _, violation, judged = jax.lax.while_loop(lambda c: jnp.any(going(c)), body,
+                                              carry)
+    return (told(violation, judged).reshape(fitness.shape),
+            violation.reshape(fitness.shape))

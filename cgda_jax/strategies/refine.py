@@ -44,9 +44,9 @@ import optax
 from cgda_jax.strategies.base import to_joints
 from cgda_jax.strategies.fitness import distances, feasibility_penalty, polish_loss
 
-__all__ = ["REFINE", "descend", "descended_candidates", "nearest_in_pool",
-           "nearest_samples", "pick_candidate", "polish", "polish_trajectory",
-           "reachability", "sample_pool"]
+__all__ = ["REFINE", "best_iterate", "descend", "descended_candidates",
+           "descent_path", "nearest_in_pool", "nearest_samples", "pick_candidate",
+           "polish", "polish_trajectory", "reachability", "sample_pool"]
 
 #: Names accepted by ``refine=``.
 REFINE = ("none", "adam", "lbfgs")
@@ -87,26 +87,13 @@ def descend(
     method: str = "adam",
     steps: int = 100,
     learning_rate: float = 0.02,
-    penalty: Callable[[jax.Array, jax.Array], jax.Array] | None = None,
 ) -> tuple[jax.Array, jax.Array]:
     """Minimize ``loss(u)`` from ``u0`` (D,) for `steps` optax steps (one example).
-
-    With ``penalty`` (``(values (T,), iterates (T, D)) -> penalized values
-    (T,)``, exact at least where smallest: `cgda_jax.strategies.fitness.
-    polish_penalty`), an iterate's value is its ``loss`` penalized, the penalty
-    adding nothing to the gradient (as a ``stop_gradient`` term of the loss
-    would): the iterates are descended on ``loss`` and penalized after, all
-    together (one copy of the check in the program instead of one a loss
-    evaluation, and only the iterates that can be the best judged), the best
-    chosen as the loop would.
 
     Returns:
         ``(best u, its loss)``: the best iterate seen, ``u0`` included, so the result
         is never worse than the start. Non-finite losses are never kept.
     """
-    if penalty is not None:
-        return _descend_penalized(loss, u0, penalty, method=method, steps=steps,
-                                  learning_rate=learning_rate)
     opt, step = _stepper(method, learning_rate, loss)
 
     def body(carry, _):
@@ -126,9 +113,19 @@ def descend(
     return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
 
 
-def _descend_penalized(loss, u0, penalty, *, method, steps, learning_rate):
-    """`descend` with a ``penalty`` of the iterates taken after the descent."""
-    opt, step = _stepper(method, learning_rate, loss)
+def descent_path(
+    loss: Callable[[jax.Array], jax.Array],
+    u0: jax.Array,
+    *,
+    steps: int = 100,
+    learning_rate: float = 0.02,
+) -> tuple[jax.Array, jax.Array]:
+    """Every iterate of `descend` (adam) and its loss: ``u0``, each step's and the
+    last, ``(iterates (steps + 2, D), losses (steps + 2,))``; `best_iterate` is
+    `descend`'s choice among them (for losses given a term apart first, e.g.
+    the moves' feasibility penalty judged together,
+    `cgda_jax.strategies.fitness.polish_penalty`)."""
+    opt, step = _stepper("adam", learning_rate, loss)
 
     def body(carry, _):
         u, state = carry
@@ -138,11 +135,17 @@ def _descend_penalized(loss, u0, penalty, *, method, steps, learning_rate):
     start = loss(u0)
     (u, _), (values, us) = jax.lax.scan(body, (u0, opt.init(u0)), None,
                                         length=int(steps))
-    every = jnp.concatenate([u0[None], us, u[None]])  # start, steps, last
-    value = penalty(jnp.concatenate([start[None], values, loss(u)[None]]), every)
-    # the loop's choice: the first of the smallest finite values (u0 when none)
-    i = jnp.argmin(jnp.where(jnp.isfinite(value), value, jnp.inf))
-    return every[i], jnp.where(jnp.isfinite(value[i]), value[i], jnp.inf)
+    return (jnp.concatenate([u0[None], us, u[None]]),
+            jnp.concatenate([start[None], values, loss(u)[None]]))
+
+
+def best_iterate(iterates: jax.Array, losses: jax.Array
+                 ) -> tuple[jax.Array, jax.Array]:
+    """`descend`'s choice among `descent_path`'s iterates (T, D) by their losses
+    (T,): the first of the smallest finite losses (``u0`` when none is finite;
+    its loss inf)."""
+    i = jnp.argmin(jnp.where(jnp.isfinite(losses), losses, jnp.inf))
+    return iterates[i], jnp.where(jnp.isfinite(losses[i]), losses[i], jnp.inf)
 
 
 def polish(
@@ -415,9 +418,13 @@ def descended_candidates(
         genes, features: the pool (S, D), (S, F) (`sample_pool`).
         goal: (N, F) goal points.
         loss_of: goal point (F,) -> loss of the genes (D,) -> squared error.
-        n_starts, steps, learning_rate, penalty: of the descent
-            (`cgda_jax.strategies.refine.descend`; ``penalty``: every point's
-            and start's iterates are judged in one batched call).
+        n_starts, steps, learning_rate: of the descent
+            (`cgda_jax.strategies.refine.descend`).
+        penalty: None, or ``(losses (..., T), iterates (..., T, D)) ->
+            losses`` with the feasibility penalty (`cgda_jax.strategies.fitness.
+            polish_penalty`): every point's and start's iterates
+            (`descent_path`, on ``loss_of``'s loss without it) penalized in one
+            call, then each descent's best chosen (`best_iterate`).
 
     Returns:
         ``(genes (N, K, D), errors (N, K))``: K = `n_starts` local minima (or
@@ -427,15 +434,25 @@ def descended_candidates(
     dist = jnp.where(jnp.isfinite(dist), dist, jnp.inf)
     _, idx = jax.lax.top_k(-dist, min(int(n_starts), genes.shape[0]))  # (N, K)
 
-    def point(g, starts):
-        loss = loss_of(g)
-        u, sq = jax.vmap(lambda s: descend(loss, s, steps=steps,
-                                           learning_rate=learning_rate,
-                                           penalty=penalty))(genes[starts])
-        err = jnp.sqrt(sq)
-        return u, jnp.where(jnp.isfinite(err), err, jnp.inf)
+    if penalty is None:
+        def point(g, starts):
+            loss = loss_of(g)
+            return jax.vmap(lambda s: descend(loss, s, steps=steps,
+                                              learning_rate=learning_rate))(
+                genes[starts])
 
-    return jax.vmap(point)(goal, idx)
+        u, sq = jax.vmap(point)(goal, idx)
+    else:  # every point's and start's iterates penalized together, then chosen
+        def path(g, starts):
+            loss = loss_of(g)
+            return jax.vmap(lambda s: descent_path(loss, s, steps=steps,
+                                                   learning_rate=learning_rate))(
+                genes[starts])
+
+        us, losses = jax.vmap(path)(goal, idx)  # (N, K, T, D), (N, K, T)
+        u, sq = jax.vmap(jax.vmap(best_iterate))(us, penalty(losses, us))
+    err = jnp.sqrt(sq)
+    return u, jnp.where(jnp.isfinite(err), err, jnp.inf)
 
 
 def pick_candidate(
