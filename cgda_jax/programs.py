@@ -502,6 +502,12 @@ def _load(key: str) -> jax.stages.Compiled | None:
     path = _path(content) if re.fullmatch(r"[0-9a-f]{64}", content) else None
     if path is None or not path.is_file():
         return None  # a link whose program was dropped (`_bound`): a miss
+    with _LOCK:  # read for another key in this process already
+        found = _PROGRAMS.get(content)
+        if found is not None:
+            _PROGRAMS.move_to_end(content)
+            _STATS["store_hits"] += 1
+            return found[0]
     from jax.experimental import serialize_executable
 
     try:
@@ -525,6 +531,7 @@ def _load(key: str) -> jax.stages.Compiled | None:
         return None
     with _LOCK:
         _STATS["store_hits"] += 1
+    _remember(_PROGRAMS, content, (compiled, False))
     for used in (path, link):  # recently used: dropped last
         with contextlib.suppress(OSError):
             os.utime(used)
