@@ -421,8 +421,9 @@ def descended_candidates(
         n_starts, steps, learning_rate: of the descent
             (`cgda_jax.strategies.refine.descend`).
         penalty: None, or ``(losses (..., T), iterates (..., T, D)) ->
-            losses`` with the feasibility penalty (`cgda_jax.strategies.fitness.
-            polish_penalty`): every point's and start's iterates
+            losses`` with the feasibility penalty
+            (`cgda_jax.strategies.fitness.polish_penalty`): every point's and
+            start's iterates
             (`descent_path`, on ``loss_of``'s loss without it) penalized in one
             call, then each descent's best chosen (`best_iterate`).
 
