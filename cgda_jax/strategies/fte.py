@@ -63,6 +63,7 @@ from cgda_jax.strategies.base import (
     from_joints,
     points_independent,
 )
+from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
 from cgda_jax.strategies.fitness import (
     distances,
     judge_best,
@@ -141,6 +142,8 @@ class FTEState:
             (init "sampled"; else empty).
         cand_u, cand_err: per point, the descended candidate postures (N, K, D)
             and their errors (N, K) (init "reach"; else empty).
+        pending: the try's start mean (its ``evo.best_u``) is not evaluated
+            yet: it is, with the try's first generation (`FTEPlan.mean_later`).
         done: the run is finished.
     """
 
@@ -159,6 +162,7 @@ class FTEState:
     pool_f: jax.Array
     cand_u: jax.Array
     cand_err: jax.Array
+    pending: jax.Array
     done: jax.Array
 
 
@@ -286,7 +290,10 @@ class FTEPlan(PlanBase):
     def _trajectory(self, u_flat):
         return self.joints(u_flat.reshape(self.n_points, self.n_dof))
 
-    def _fitness(self, pop):
+    def _fitness(self, pop, lead: int = 0):
+        """Fitness (P,) of the trajectories ``pop`` (P, N * D); with ``lead``
+        (judged apart only) the first is a move set judged whatever its rank
+        (`judge_best`'s lead: a restart's mean)."""
         if not self.moves_apart:
             out = self.map_population(lambda u: self.execution(self._trajectory(u)),
                                       pop)
@@ -309,7 +316,15 @@ class FTEPlan(PlanBase):
             every = jnp.arange(f.shape[0], dtype=jnp.int32)
             return self.penalize(f, judge(every, jnp.ones(every.shape, bool)))
         return judge_best(f, judge, self.feasibility.penalty, self.judge_ranks,
-                          judged_round(self.judge_ranks))[0]
+                          judged_round(self.judge_ranks), lead=lead)[0]
+
+    @property
+    def mean_later(self) -> bool:
+        """A restart's start mean is evaluated with its try's first generation,
+        in the same call of the check (`judge_best`'s lead), not at the restart
+        (a second copy of the check in the generation program): judged apart,
+        unsharded."""
+        return self.moves_apart and self.sharding is None
 
     @property
     def moves_apart(self) -> bool:
@@ -339,17 +354,24 @@ class FTEPlan(PlanBase):
         return jnp.where(jnp.isfinite(e), e, jnp.inf)
 
     # ---- tries
-    def _start(self, key, mean, params):
+    def _start(self, key, mean, params, evaluate: bool = True):
         """A try from `mean`; a mean other than the middle is evaluated too (one
-        more evaluation) and is the try's first best when valid."""
+        more evaluation; ``evaluate=False``: later, `took`) and is the try's
+        first best when valid."""
         fitness = self.sharded(self._fitness)
         evo = evolution_init(self.algo, params, key, fitness, self.n_genes, mean=mean)
-        if mean is None:
+        if mean is None or not evaluate:
             return evo
         # one execution, not a population (no batched simulator call)
         out = self.execution(self._trajectory(mean))
         f = self.penalize(self.distance(out["features"], self.goal),
                           out.get("violation"))
+        return self.took(evo, mean, f)
+
+    @staticmethod
+    def took(evo: Evolution, mean, f) -> Evolution:
+        """``evo`` with its start ``mean``'s fitness ``f`` told: the first best
+        when valid, one more evaluation."""
         take = jnp.isfinite(f) & (f < evo.best_fitness)
         return evo.replace(
             best_u=jnp.where(take, mean, evo.best_u),
@@ -359,7 +381,7 @@ class FTEPlan(PlanBase):
 
     def _restart(self, s: FTEState) -> Evolution:
         mean, key = self.restart_mean(s)
-        return self._start(key, mean, self.try_params)
+        return self._start(key, mean, self.try_params, evaluate=not self.mean_later)
 
     def _met(self, errors):
         return jnp.all(errors < self.aim_tolerance)
@@ -446,7 +468,8 @@ class FTEPlan(PlanBase):
             evo=None, key=key, tries=zero + 1, ref=None, stall=zero, best_u=None,
             best_fitness=None, best_errors=None, generations=zero,
             evaluations=evals, invalid=bad, pool_u=pool_u, pool_f=pool_f,
-            cand_u=cand_u, cand_err=cand_err, done=jnp.asarray(False))
+            cand_u=cand_u, cand_err=cand_err, pending=jnp.asarray(False),
+            done=jnp.asarray(False))
         mean = self.first_mean(s)
         evo = self._start(key, mean, self.params if mean is None else self.try_params)
         errors = jnp.where(evo.found, self._errors(evo.best_u), jnp.inf)
@@ -457,8 +480,16 @@ class FTEPlan(PlanBase):
 
     def step(self, s: FTEState):
         left = self.max_generations - s.generations
-        evo, metrics = self.evolve(s.evo, self._fitness,
-                                   lambda e: e.generation >= left)
+        stop = lambda e: e.generation >= left  # noqa: E731
+        if self.mean_later:  # the try's pending start mean judged with it
+            pop, algo_state = evolution_ask(self.algo, self.params, s.evo)
+            f = self._fitness(jnp.concatenate([s.evo.best_u[None], pop]), lead=1)
+            evo = jax.tree.map(lambda a, b: jnp.where(s.pending, a, b),
+                               self.took(s.evo, s.evo.best_u, f[0]), s.evo)
+            evo, metrics = evolution_tell(self.algo, self.params, evo, pop,
+                                          algo_state, f[1:], stop)
+        else:
+            evo, metrics = self.evolve(s.evo, self._fitness, stop)
         better = evo.best_fitness < s.best_fitness
         errors = jax.lax.cond(better, lambda: self._errors(evo.best_u),
                               lambda: s.best_errors)
@@ -481,11 +512,12 @@ class FTEPlan(PlanBase):
         again = try_end & ~done
         new = s.replace(evo=evo.replace(done=evo.done | done), ref=ref, stall=stall,
                         best_u=best_u, best_fitness=best_f, best_errors=errors,
-                        done=done)
+                        pending=jnp.asarray(False), done=done)
 
         def restart(n: FTEState) -> FTEState:
             return n.replace(
                 evo=self._restart(n), tries=n.tries + 1,
+                pending=jnp.asarray(self.mean_later),
                 ref=jnp.asarray(jnp.inf, jnp.float32), stall=jnp.zeros_like(n.stall),
                 generations=n.generations + n.evo.generation,
                 evaluations=n.evaluations + n.evo.evaluations,
