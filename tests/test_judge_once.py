@@ -403,3 +403,25 @@ def test_judge_best_batched_equals_row_by_row():
         # (jitted: XLA may fuse the penalty into one multiply-add, 1 ulp)
         np.testing.assert_allclose(np.min(got, axis=1), np.min(full, axis=1),
                                    rtol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_restarts_mean_judged_with_the_next_generation_keeps_the_run(sim):
+    """A restart's start mean evaluated with its try's first generation
+    (`FTEPlan.mean_later`, one copy of the check) against evaluated at the
+    restart by its judged rollout (the reference): the same best fitness and
+    try every generation over restarts (ranked judging), the same evaluations
+    in the end (the mean's counted one generation later)."""
+    runs = {}
+    for later in (False, True):
+        cls = type("Plan", (FTEPlan,), {"mean_later": later})
+        plan = cls(sim, jnp.asarray(GOAL), algorithm="CMA_ES", population_size=8,
+                   tolerance=0.002, max_generations=30, restarts=2, stagnation=4,
+                   init="sampled", init_samples=64)
+        c, step, seen = jax.jit(plan.init)(jax.random.key(3)), jax.jit(plan.step), []
+        for _ in range(24):
+            c, m = step(c)
+            seen.append((float(m["best_fitness"]), int(m["try"])))
+        runs[later] = (seen, int(c.evaluations + c.evo.evaluations))
+    assert runs[True] == runs[False]
+    assert runs[True][0][-1][1] == 2  # both restarts ran
