@@ -15,8 +15,16 @@ Target (issue 11): each strategy succeeds on at least 29 of 30 seeds per arm.
 ``--feasibility`` judges every move (`Simulator`'s ``feasibility=True``: the model's
 joint limits, no move over 90 degrees, the approach; the random arms' geoms do not
 collide and have no speed limits), as every experiment does by default since issue 21;
-IE then evolves each point from where the points before it leave the arm.
+IE then evolves each point from where the points before it leave the arm, and a point
+whose tries all miss backtracks (`IESettings.backtracks`). With it every success is
+also checked independently, as `bench_seeds_check.py` checks the experiments: the
+reported joints' moves by `motion_report` (4 x the postures, the step cap, limits) and
+a replay at 16 x the sub-steps (`replay_check`); ``checked`` counts the successes
+that pass both, ``backtracks`` sums the backtracks used (IE, IET).
 ``--no-polish`` skips the ``ie+adam`` row.
+
+Issue 39's IE rows: ``nice -n 10 python benchmarks/bench_arms.py --feasibility
+--no-polish --seeds 10 --joints 4 5 6 7 --strategies ie``.
 """
 
 from __future__ import annotations
@@ -30,6 +38,8 @@ from _common import print_table, report_target, write_json
 
 from cgda_jax import MarkerScene, Robot, Simulator, run_trials
 from cgda_jax.datasets.arms import arm_joints, random_arm_mjcf, reachable_goal
+from cgda_jax.experiment.compute import replay_check
+from cgda_jax.sim.motion_check import motion_report
 
 SETTINGS = {
     "ie": dict(population_size=16, max_generations=100),
@@ -47,6 +57,15 @@ def arm(n_joints: int, seed: int, feasibility: bool = False
     robot = Robot(model, arm_joints(n_joints), "marker")
     sim = Simulator(robot, MarkerScene(), substeps=4, feasibility=feasibility or None)
     return sim, reachable_goal(robot, 6, seed)
+
+
+def checked(sim: Simulator, results: list) -> int:
+    """How many successes of ``results`` pass the independent check: their
+    joints' moves feasible by `motion_report` and their replay at 16 x the
+    sub-steps within the tolerance (`replay_check`)."""
+    return sum(bool(motion_report(sim, np.asarray(r.joints))["feasible"]
+                    and replay_check(sim, r)["success"])
+               for r in results if r.success)
 
 
 def main() -> None:
@@ -75,9 +94,12 @@ def main() -> None:
                 "failed": [(s, round(1e3 * r.max_point_error, 1))
                            for s, r in enumerate(res) if not r.success],
                 "mean_tries": float(np.mean(tries)) if tries else "",
+                "backtracks": sum(r.info.get("backtracks_used", 0) for r in res),
                 "batch_run_s": res[0].wall_time_s, "compile_s": res[0].compile_time_s,
                 "total_s": total,
             })
+            if args.feasibility:
+                rows[-1]["checked"] = checked(sim, res)
             print(rows[-1], flush=True)
         # the polish: its cost and what it gives
         if "ie" in args.strategies and not args.no_polish:
@@ -91,7 +113,8 @@ def main() -> None:
             })
             print(rows[-1], flush=True)
     print_table(rows, ["joints", "strategy", "successes", "seeds", "worst_error_mm",
-                       "mean_tries", "batch_run_s", "compile_s", "failed"])
+                       "mean_tries", "backtracks", "batch_run_s", "compile_s",
+                       *(["checked"] if args.feasibility else []), "failed"])
     for r in rows:
         if r["strategy"] in ("ie", "iet", "fte"):
             need = int(np.ceil(29 / 30 * r["seeds"]))
