@@ -34,6 +34,12 @@ execution then takes them (`IEPlan.judged_execution`) and the finish program car
 no collision check either.  A run its generation budget cuts before they are fresh is
 judged again on the host (`cgda_jax.strategies.base.PlanBase.rejudge`).
 
+Backtracks (`IESettings.backtracks`, `IEPlan.backtrack`): in the sequential context a
+point that met its goal fixes where the next point starts; when the next one's tries
+all miss, the points before it are reopened (IET's rule, `backtrack_to`) and evolved
+again from random means, inside the same compiled step (the state's shapes do not
+change: per-point budgets ``IEState.entered`` and a backtrack count).
+
 Pooled points (`IEPool`, `IEPlan.pool_step`): with independent points the batched
 trials of `cgda_jax.strategies.runner.drive_ie_points` run the (trial, point)
 evolutions still going as one pool, each point's restarts started from its
