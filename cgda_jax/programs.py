@@ -23,9 +23,17 @@ key, hence a miss (traced, compiled, kept).  A stored program is the executable
 XLA compiled in the process (one JAX's persistent cache served is not stored: on
 the CPU it serializes into a program that fails in a new process), by
 ``jax.experimental.serialize_executable``, written atomically in a
-versioned file with its key and a checksum; a file that cannot be read back (cut
-short, corrupt, another version) is dropped with a warning and the program
-compiled again.  The store is bounded (`MAX_STORE_BYTES`, oldest dropped).
+versioned file named by what it computes (the key below) with a checksum; each
+key that asked for it is a small link file naming that program.  A key that
+misses but traces to a program stored before under another key (another seed,
+the package edited elsewhere: JAX's persistent cache serves the compile, so it is
+not stored again) is linked to it, and found without tracing from then on (a program JAX's
+persistent cache holds that the store never had, compiled outside a scope or
+dropped by its bound, is traced on every run: a new ``$CGDA_JAX_CACHE`` folder
+starts both afresh).  A
+file that cannot be read back (cut short, corrupt, another version) is dropped
+with a warning and the program compiled again.  The store is bounded
+(`MAX_STORE_BYTES` of programs, `MAX_LINKS` links; least recently used dropped).
 
 By what it computes (`compile_lowered`): outside a scope, a program is keyed by
 its lowered StableHLO text (constants included, no source locations), its
@@ -65,7 +73,7 @@ from typing import Any
 
 import jax
 
-__all__ = ["MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS", "STORE_VERSION",
+__all__ = ["MAX_LINKS", "MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS", "STORE_VERSION",
            "cache_stats",
            "clear_programs", "compile_ahead", "compile_jit", "compile_lowered",
            "environment_digest", "files_digest", "jit_call", "program_scope", "program_store",
@@ -82,8 +90,10 @@ RUN_ONCE_OPTIONS = {"xla_backend_optimization_level": 0}
 MAX_PROGRAMS = 64
 #: Bytes the program store on disk holds at most (oldest files dropped past it).
 MAX_STORE_BYTES = 512 * 2**20
+#: Key links the store holds at most (64 bytes each; least recently used dropped).
+MAX_LINKS = 20_000
 #: The store's file format; another version's files are misses.
-STORE_VERSION = 1
+STORE_VERSION = 2
 _MAGIC = b"cgda-program"
 
 _PROGRAMS: collections.OrderedDict[str, Any] = collections.OrderedDict()
@@ -150,25 +160,26 @@ def _xla_compile(lowered: jax.stages.Lowered) -> tuple[jax.stages.Compiled, bool
 
 
 def _compile(lowered: jax.stages.Lowered, text: str
-             ) -> tuple[jax.stages.Compiled, bool, bool]:
-    """`compile_lowered` of ``lowered`` (its text ``text``), whether the program
-    may be shared, and whether XLA compiled it in this process (`_xla_compile`)."""
+             ) -> tuple[jax.stages.Compiled, str | None, bool]:
+    """`compile_lowered` of ``lowered`` (its text ``text``), the program's key by
+    what it computes (`_key`; None: not to be shared), and whether XLA compiled
+    it in this process (`_xla_compile`)."""
     key = _key(lowered, text)
     if key is None:
         with _LOCK:
             _STATS["uncached"] += 1
-        return lowered.compile(), False, False
+        return lowered.compile(), None, False
     with _LOCK:
         found = _PROGRAMS.get(key)
         if found is not None:
             _PROGRAMS.move_to_end(key)
             _STATS["hits"] += 1
-            return found[0], True, found[1]
+            return found[0], key, found[1]
     compiled, fresh = _xla_compile(lowered)
     with _LOCK:
         _STATS["misses"] += 1
     _remember(_PROGRAMS, key, (compiled, fresh))
-    return compiled, True, fresh
+    return compiled, key, fresh
 
 
 # ------------------------------------------------------------- keyed before tracing
@@ -401,11 +412,14 @@ def _find_or_compile(key: str | None, fn: Callable, args: tuple, jit_kw: dict,
         text = lowered.as_text()
     with _LOCK:
         _STATS["traced"] += 1
-    compiled, shareable, fresh = _compile(lowered, text)
-    if key is not None and shareable:
+    compiled, content, fresh = _compile(lowered, text)
+    if key is not None and content is not None:
         _remember(_KEYED, key, compiled)
-        if fresh:
-            _save(key, compiled, set(_CUSTOM_CALL.findall(text)))
+        # stored once by what it computes; ``key`` linked to it (also when JAX's
+        # persistent cache served this compile and another key stored it fresh)
+        if (fresh and _save(content, compiled, set(_CUSTOM_CALL.findall(text)))
+                or _stored(content)):
+            _link(key, content)
     return compiled
 
 
@@ -452,20 +466,53 @@ def _prepare(targets: Iterable[str]) -> None:
         lapack.prepare_lapack_call("syevd", np.float32)
 
 
-def _path(key: str) -> pathlib.Path | None:
+def _path(content: str, kind: str = "prog") -> pathlib.Path | None:
+    """A program's file (``kind`` "prog", named by `_key`) or a key's link
+    ("key", named by the `program_scope` key)."""
     folder = _STORE[0]
-    return None if folder is None else folder / f"{key}.v{STORE_VERSION}.prog"
+    return None if folder is None else folder / f"{content}.v{STORE_VERSION}.{kind}"
+
+
+def _stored(content: str) -> bool:
+    path = _path(content)
+    return path is not None and path.is_file()
+
+
+def _link(key: str, content: str) -> None:
+    """Write that ``key`` asks for the stored program ``content``."""
+    path = _path(key, "key")
+    if path is None:
+        return
+    try:
+        _write(path, content.encode())
+    except OSError as err:
+        log.warning("program store %s not written: %s", path.parent, err)
 
 
 def _load(key: str) -> jax.stages.Compiled | None:
-    path = _path(key)
-    if path is None or not path.is_file():
+    """The program a key's link names, read from the store (None: no link, or
+    its program was dropped)."""
+    link = _path(key, "key")
+    if link is None or not link.is_file():
         return None
+    try:
+        content = link.read_text().strip()
+    except (OSError, UnicodeDecodeError):
+        content = ""
+    path = _path(content) if re.fullmatch(r"[0-9a-f]{64}", content) else None
+    if path is None or not path.is_file():
+        return None  # a link whose program was dropped (`_bound`): a miss
+    with _LOCK:  # read for another key in this process already
+        found = _PROGRAMS.get(content)
+        if found is not None:
+            _PROGRAMS.move_to_end(content)
+            _STATS["store_hits"] += 1
+            return found[0]
     from jax.experimental import serialize_executable
 
     try:
         data = path.read_bytes()
-        head = _MAGIC + f" {STORE_VERSION} {key}\n".encode()
+        head = _MAGIC + f" {STORE_VERSION} {content}\n".encode()
         digest, body = data[len(head):len(head) + 32], data[len(head) + 32:]
         if not data.startswith(head) or hashlib.sha256(body).digest() != digest:
             raise ValueError("not a complete program file of this version")
@@ -484,52 +531,69 @@ def _load(key: str) -> jax.stages.Compiled | None:
         return None
     with _LOCK:
         _STATS["store_hits"] += 1
-    with contextlib.suppress(OSError):
-        os.utime(path)  # recently used: dropped last
+    _remember(_PROGRAMS, content, (compiled, False))
+    for used in (path, link):  # recently used: dropped last
+        with contextlib.suppress(OSError):
+            os.utime(used)
     return compiled
 
 
-def _save(key: str, compiled: jax.stages.Compiled, targets: set[str]) -> None:
-    path = _path(key)
+def _save(content: str, compiled: jax.stages.Compiled, targets: set[str]) -> bool:
+    """Store a program XLA compiled here under its `_key`; whether it is stored."""
+    path = _path(content)
     if path is None or not _storable(targets):
-        return
+        return False
     from jax.experimental import serialize_executable
 
     try:
         body = pickle.dumps((*serialize_executable.serialize(compiled), targets),
                             protocol=pickle.HIGHEST_PROTOCOL)
     except Exception as err:  # noqa: BLE001 - a program that cannot be stored
-        log.debug("program %s not stored: %s", key, err)
-        return
-    data = (_MAGIC + f" {STORE_VERSION} {key}\n".encode()
-            + hashlib.sha256(body).digest() + body)
+        log.debug("program %s not stored: %s", content, err)
+        return False
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+        _write(path, _MAGIC + f" {STORE_VERSION} {content}\n".encode()
+               + hashlib.sha256(body).digest() + body)
+        _bound(path.parent, "prog", max_bytes=MAX_STORE_BYTES)
+        _bound(path.parent, "key", max_files=MAX_LINKS)
+    except OSError as err:
+        log.warning("program store %s not written: %s", path.parent, err)
+        return False
+    return True
+
+
+def _write(path: pathlib.Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (a reader sees all of it or none)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
-        _bound(path.parent)
-    except OSError as err:
-        log.warning("program store %s not written: %s", path.parent, err)
-        with contextlib.suppress(OSError, UnboundLocalError):
+    except OSError:
+        with contextlib.suppress(OSError):
             os.unlink(tmp)
+        raise
 
 
-def _bound(folder: pathlib.Path) -> None:
-    """Drop the least recently used program files past `MAX_STORE_BYTES`."""
+def _bound(folder: pathlib.Path, kind: str, *, max_bytes: int | None = None,
+           max_files: int | None = None) -> None:
+    """Drop the least recently used files of ``kind`` past ``max_bytes`` or
+    ``max_files``."""
     files = []
-    for p in folder.glob("*.prog"):
+    for p in folder.glob(f"*.{kind}"):
         with contextlib.suppress(OSError):
             st = p.stat()
             files.append((st.st_mtime, st.st_size, p))
-    total = sum(f[1] for f in files)
+    total, count = sum(f[1] for f in files), len(files)
     for _, size, p in sorted(files, key=lambda f: f[0]):
-        if total <= MAX_STORE_BYTES:
+        if ((max_bytes is None or total <= max_bytes)
+                and (max_files is None or count <= max_files)):
             break
         with contextlib.suppress(OSError):
             p.unlink()
             total -= size
+            count -= 1
 
 
 # ------------------------------------------------------------------------ digests

@@ -80,7 +80,8 @@ def store(tmp_path_factory):
     clear_programs()
     try:
         first = _run(_config(model), root / "first")
-        yield root, model, (*first, sorted((root / "store").glob("*.prog")))
+        yield root, model, (*first, sorted((root / "store").glob("*.prog")),
+                            sorted((root / "store").glob("*.key")))
     finally:
         set_program_store(before)
 
@@ -88,7 +89,8 @@ def store(tmp_path_factory):
 def test_a_config_run_again_traces_nothing_and_finds_the_same(store):
     root, model, first = store
     assert first[2]["traced"] >= 5 and first[2]["keyed_hits"] == 0
-    assert len(first[3]) == first[2]["traced"]
+    # a link per key asked; a program file per program (two keys may ask for one)
+    assert len(first[4]) == first[2]["traced"] and 0 < len(first[3]) <= len(first[4])
     again = _run(_config(model), root / "again")  # in memory
     assert again[2]["traced"] == 0 and again[2]["keyed_hits"] == first[2]["traced"]
     _same(first, again)
@@ -206,7 +208,7 @@ import numpy as np
 from cgda_jax.programs import cache_stats, compile_jit, program_scope, set_program_store
 set_program_store(sys.argv[1])
 x = jnp.asarray(np.diag([3.0, 1.0, 2.0]).astype(np.float32))
-with program_scope("a test's key"):  # CMA-ES's eigh: a LAPACK custom call
+with program_scope(sys.argv[3] if len(sys.argv) > 3 else "a test's key"):  # CMA-ES's eigh: a LAPACK custom call
     w = compile_jit("test.eigh", lambda a: jnp.linalg.eigh(a)[0], x)(x)
 s = cache_stats()
 print(np.asarray(w).tolist(), s["traced"], s["store_hits"])
@@ -240,7 +242,7 @@ def f(x, y):
     z = jnp.concatenate([x, y * 2.0, jnp.sin(x)])
     return jnp.cumsum(z.reshape(3, -1).T @ z.reshape(3, -1), axis=0).sum()
 x, y = jnp.arange(300.0), jnp.ones(300)
-with program_scope("a test's key"):
+with program_scope(sys.argv[3] if len(sys.argv) > 3 else "a test's key"):
     v = compile_jit("test.concat", f, x, y)(x, y)
 s = cache_stats()
 print(float(v), s["traced"], s["store_hits"])
@@ -265,6 +267,29 @@ def test_a_program_from_the_persistent_cache_is_not_stored(tmp_path):
     assert served[1:] == ["1", "0"] and not list((tmp_path / "served").glob("*.prog"))
     back = run(tmp_path / "fresh")  # read back from the store, run in a new process
     assert back == [fresh[0], "0", "1"]
+
+
+def test_another_key_for_a_stored_program_is_linked_to_it(tmp_path):
+    """Another key (another seed, the package edited) that traces to a program
+    stored before: JAX's persistent cache serves its compile, so nothing new is
+    stored, but the key is linked to the stored program and the next process
+    finds it without tracing."""
+    def run(key):
+        proc = subprocess.run(
+            [sys.executable, "-c", PERSISTENT, str(tmp_path / "jax"),
+             str(tmp_path / "store"), key],
+            capture_output=True, text=True, timeout=300,
+            env={**os.environ, "JAX_PLATFORMS": "cpu"})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        return proc.stdout.strip().splitlines()[-1].split()
+
+    first = run("key 1")  # compiled here: stored, linked
+    assert first[1:] == ["1", "0"]
+    second = run("key 2")  # traced; the persistent cache's compile: linked
+    assert second == [first[0], "1", "0"]
+    assert len(list((tmp_path / "store").glob("*.prog"))) == 1
+    assert len(list((tmp_path / "store").glob("*.key"))) == 2
+    assert run("key 2") == [first[0], "0", "1"]  # found by its link, not traced
 
 
 def test_cgda_keeps_programs_by_default_and_0_turns_the_store_off(tmp_path, monkeypatch):
