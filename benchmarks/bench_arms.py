@@ -10,7 +10,7 @@ of the polish (IE with ``refine="adam"``: run time with and without).
 Target (issue 11): each strategy succeeds on at least 29 of 30 seeds per arm.
 
     python benchmarks/bench_arms.py [--joints 2 3 4 5 6 7] [--seeds 30]
-        [--strategies ie iet fte] [--feasibility] [--no-polish]
+        [--strategies ie iet fte] [--feasibility] [--no-polish] [--ie-backtracks N]
 
 ``--feasibility`` judges every move (`Simulator`'s ``feasibility=True``: the model's
 joint limits, no move over 90 degrees, the approach; the random arms' geoms do not
@@ -21,7 +21,8 @@ also checked independently, as `bench_seeds_check.py` checks the experiments: th
 reported joints' moves by `motion_report` (4 x the postures, the step cap, limits) and
 a replay at 16 x the sub-steps (`replay_check`); ``checked`` counts the successes
 that pass both, ``backtracks`` sums the backtracks used (IE, IET).
-``--no-polish`` skips the ``ie+adam`` row.
+``--no-polish`` skips the ``ie+adam`` row; ``--ie-backtracks 0`` runs IE without
+backtracks (as before they existed; default: `IESettings`').
 
 Issue 39's IE rows: ``nice -n 10 python benchmarks/bench_arms.py --feasibility
 --no-polish --seeds 10 --joints 4 5 6 7 --strategies ie``.
@@ -76,14 +77,17 @@ def main() -> None:
     parser.add_argument("--tolerance", type=float, default=0.02)
     parser.add_argument("--feasibility", action="store_true")
     parser.add_argument("--no-polish", action="store_true")
+    parser.add_argument("--ie-backtracks", type=int, default=None)
     args = parser.parse_args()
+    settings = {**SETTINGS, "ie": {**SETTINGS["ie"], **(
+        {} if args.ie_backtracks is None else {"backtracks": args.ie_backtracks})}}
     rows = []
     for n in args.joints:
         sim, goal = arm(n, seed=n, feasibility=args.feasibility)
         for name in args.strategies:
             t0 = time.perf_counter()
             res = run_trials(name, sim, goal, args.seeds, tolerance=args.tolerance,
-                             **SETTINGS[name])
+                             **settings[name])
             total = time.perf_counter() - t0
             ok = sum(r.success for r in res)
             tries = [t for r in res  # IE/IET per point, FTE per run
@@ -104,7 +108,7 @@ def main() -> None:
         # the polish: its cost and what it gives
         if "ie" in args.strategies and not args.no_polish:
             res = run_trials("ie", sim, goal, args.seeds, tolerance=args.tolerance,
-                             refine="adam", **SETTINGS["ie"])
+                             refine="adam", **settings["ie"])
             rows.append({
                 "joints": n, "strategy": "ie+adam", "successes":
                 sum(r.success for r in res), "seeds": args.seeds,
@@ -122,7 +126,8 @@ def main() -> None:
                           f">= {need} of {r['seeds']}", float(r["successes"]),
                           r["successes"] >= need)
     write_json("bench_arms", {"rows": rows, "tolerance": args.tolerance,
-                              "feasibility": args.feasibility})
+                              "feasibility": args.feasibility,
+                              "ie_backtracks": args.ie_backtracks})
 
 
 if __name__ == "__main__":
