@@ -9,7 +9,7 @@ import pytest
 from cgda_jax import MarkerScene, Robot, Simulator, run_trials
 from cgda_jax.datasets.arms import arm_joints, random_arm_mjcf, reachable_goal
 from cgda_jax.strategies import run_ie
-from cgda_jax.strategies.ie import BACKTRACKS, IESettings, backtrack_to
+from cgda_jax.strategies.ie import BACKTRACKS, IEPlan, IESettings, IEState, backtrack_to
 from cgda_jax.strategies.iet import IETSettings
 
 #: small budgets: 4 tries of 60 generations a point (20 without improvement stop one)
@@ -44,6 +44,41 @@ def test_the_backtrack_rule_goes_back_further_each_time_from_one_point():
     assert IESettings().backtracks == IETSettings().backtracks == BACKTRACKS
     with pytest.raises(ValueError, match="backtracks"):
         IESettings(backtracks=-1)
+
+
+def test_which_points_a_backtrack_reopens_and_renews(arm):
+    sim, goal = arm
+    plan = IEPlan(sim, jnp.asarray(goal), backtracks=2, **SETTINGS)
+    assert plan.sequential and plan.backtracks == 2
+    assert IEPlan(sim, jnp.asarray(goal), backtracks=0, **SETTINGS).backtracks == 0
+    s = IEState(evo=None, keys=None, samples=None, tries=jnp.array([1, 2, 4]),
+                best_u=None, best_fitness=None, done=None, generations=None,
+                evaluations=None, invalid=None, entered=jnp.zeros(3, jnp.int32),
+                backtracks=jnp.int32(0), stuck=jnp.int32(-1), depth=jnp.int32(0))
+    met, miss = 0.01, 0.1  # point errors (m) within and beyond the 20 mm tolerance
+
+    def call(s, done, best_f):
+        s, reopened, renewed = plan.backtrack(s, jnp.array(done), jnp.array(best_f))
+        return s, np.asarray(reopened).tolist(), np.asarray(renewed).tolist()
+
+    # point 2 spent its tries, 0 and 1 met theirs: point 1 reopened, 1 and 2 renewed
+    s1, reopened, renewed = call(s, [True, True, True], [met, met, miss])
+    assert reopened == [False, True, False] and renewed == [False, True, True]
+    assert np.asarray(s1.entered).tolist() == [0, 2, 4]  # new budgets from here
+    assert (int(s1.backtracks), int(s1.stuck), int(s1.depth)) == (1, 2, 1)
+    # again from point 2: two points back
+    s2, reopened, renewed = call(s1, [True, True, True], [met, met, miss])
+    assert reopened == [True, True, False] and renewed == [True, True, True]
+    # the budget is spent: no more
+    s3, reopened, _ = call(s2, [True, True, True], [met, met, miss])
+    assert not any(reopened) and int(s3.backtracks) == 2
+    # nothing to do: a point before it still evolving, point 0 missing (no prefix),
+    # every point met (within the tolerance, even when its tries ran out)
+    for done, best_f in (([True, False, True], [met, miss, miss]),
+                         ([True, True, True], [miss, met, met]),
+                         ([True, True, True], [met, met, 0.019])):
+        s4, reopened, renewed = call(s, done, best_f)
+        assert not any(renewed) and int(s4.backtracks) == 0
 
 
 def test_without_backtracks_ie_stays_in_the_mirrored_branch(arm):
