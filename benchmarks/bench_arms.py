@@ -10,13 +10,22 @@ of the polish (IE with ``refine="adam"``: run time with and without).
 Target (issue 11): each strategy succeeds on at least 29 of 30 seeds per arm.
 
     python benchmarks/bench_arms.py [--joints 2 3 4 5 6 7] [--seeds 30]
-        [--strategies ie iet fte] [--feasibility] [--no-polish]
+        [--strategies ie iet fte] [--feasibility] [--no-polish] [--ie-backtracks N]
 
 ``--feasibility`` judges every move (`Simulator`'s ``feasibility=True``: the model's
 joint limits, no move over 90 degrees, the approach; the random arms' geoms do not
 collide and have no speed limits), as every experiment does by default since issue 21;
-IE then evolves each point from where the points before it leave the arm.
-``--no-polish`` skips the ``ie+adam`` row.
+IE then evolves each point from where the points before it leave the arm, and a point
+whose tries all miss backtracks (`IESettings.backtracks`). With it every success is
+also checked independently, as `bench_seeds_check.py` checks the experiments: the
+reported joints' moves by `motion_report` (4 x the postures, the step cap, limits) and
+a replay at 16 x the sub-steps (`replay_check`); ``checked`` counts the successes
+that pass both, ``backtracks`` sums the backtracks used (IE, IET).
+``--no-polish`` skips the ``ie+adam`` row; ``--ie-backtracks 0`` runs IE without
+backtracks (as before they existed; default: `IESettings`').
+
+Issue 39's IE rows: ``nice -n 10 python benchmarks/bench_arms.py --feasibility
+--no-polish --seeds 10 --joints 4 5 6 7 --strategies ie``.
 """
 
 from __future__ import annotations
@@ -30,6 +39,8 @@ from _common import print_table, report_target, write_json
 
 from cgda_jax import MarkerScene, Robot, Simulator, run_trials
 from cgda_jax.datasets.arms import arm_joints, random_arm_mjcf, reachable_goal
+from cgda_jax.experiment.compute import replay_check
+from cgda_jax.sim.motion_check import motion_report
 
 SETTINGS = {
     "ie": dict(population_size=16, max_generations=100),
@@ -49,6 +60,15 @@ def arm(n_joints: int, seed: int, feasibility: bool = False
     return sim, reachable_goal(robot, 6, seed)
 
 
+def checked(sim: Simulator, results: list) -> int:
+    """How many successes of ``results`` pass the independent check: their
+    joints' moves feasible by `motion_report` and their replay at 16 x the
+    sub-steps within the tolerance (`replay_check`)."""
+    return sum(bool(motion_report(sim, np.asarray(r.joints))["feasible"]
+                    and replay_check(sim, r)["success"])
+               for r in results if r.success)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--joints", type=int, nargs="*", default=[2, 3, 4, 5, 6, 7])
@@ -57,14 +77,17 @@ def main() -> None:
     parser.add_argument("--tolerance", type=float, default=0.02)
     parser.add_argument("--feasibility", action="store_true")
     parser.add_argument("--no-polish", action="store_true")
+    parser.add_argument("--ie-backtracks", type=int, default=None)
     args = parser.parse_args()
+    settings = {**SETTINGS, "ie": {**SETTINGS["ie"], **(
+        {} if args.ie_backtracks is None else {"backtracks": args.ie_backtracks})}}
     rows = []
     for n in args.joints:
         sim, goal = arm(n, seed=n, feasibility=args.feasibility)
         for name in args.strategies:
             t0 = time.perf_counter()
             res = run_trials(name, sim, goal, args.seeds, tolerance=args.tolerance,
-                             **SETTINGS[name])
+                             **settings[name])
             total = time.perf_counter() - t0
             ok = sum(r.success for r in res)
             tries = [t for r in res  # IE/IET per point, FTE per run
@@ -75,14 +98,17 @@ def main() -> None:
                 "failed": [(s, round(1e3 * r.max_point_error, 1))
                            for s, r in enumerate(res) if not r.success],
                 "mean_tries": float(np.mean(tries)) if tries else "",
+                "backtracks": sum(r.info.get("backtracks_used", 0) for r in res),
                 "batch_run_s": res[0].wall_time_s, "compile_s": res[0].compile_time_s,
                 "total_s": total,
             })
+            if args.feasibility:
+                rows[-1]["checked"] = checked(sim, res)
             print(rows[-1], flush=True)
         # the polish: its cost and what it gives
         if "ie" in args.strategies and not args.no_polish:
             res = run_trials("ie", sim, goal, args.seeds, tolerance=args.tolerance,
-                             refine="adam", **SETTINGS["ie"])
+                             refine="adam", **settings["ie"])
             rows.append({
                 "joints": n, "strategy": "ie+adam", "successes":
                 sum(r.success for r in res), "seeds": args.seeds,
@@ -91,7 +117,8 @@ def main() -> None:
             })
             print(rows[-1], flush=True)
     print_table(rows, ["joints", "strategy", "successes", "seeds", "worst_error_mm",
-                       "mean_tries", "batch_run_s", "compile_s", "failed"])
+                       "mean_tries", "backtracks", "batch_run_s", "compile_s",
+                       *(["checked"] if args.feasibility else []), "failed"])
     for r in rows:
         if r["strategy"] in ("ie", "iet", "fte"):
             need = int(np.ceil(29 / 30 * r["seeds"]))
@@ -99,7 +126,8 @@ def main() -> None:
                           f">= {need} of {r['seeds']}", float(r["successes"]),
                           r["successes"] >= need)
     write_json("bench_arms", {"rows": rows, "tolerance": args.tolerance,
-                              "feasibility": args.feasibility})
+                              "feasibility": args.feasibility,
+                              "ie_backtracks": args.ie_backtracks})
 
 
 if __name__ == "__main__":

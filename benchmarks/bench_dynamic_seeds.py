@@ -13,11 +13,26 @@ independent check judges it (the MuJoCo C replay at timestep / 4, the run's
 ``motion`` section); a success counts as feasible only when the replay says so.
 
     python benchmarks/bench_dynamic_seeds.py [--seeds 10] [--only clean_ie_dynamic]
+
+``--processes``: each seed as a user runs it instead, one ``cgda run CONFIG --set
+strategy.seed=S`` process after another (figures and video off; a batched call runs
+every trial in lock-step until the slowest is done, and a dynamic seed that needs
+many restarts holds the other nine), for any built-in dynamic experiment
+(``--only NAME ...``; default the two above); the table from each results folder:
+success, its replay on MuJoCo C at timestep / 4 (features within the tolerance),
+the motion report on it (`motion`: collisions on the full model, speeds, efforts,
+the executed path's depth, tracking and time at the force limit against their
+limits), and the search and process seconds.  ``--keep DIR`` keeps the folders
+(a seed whose folder holds a result is not run again).
 """
 
 from __future__ import annotations
 
 import argparse
+import pathlib
+import shutil
+import tempfile
+import time
 
 import numpy as np
 from _common import experiment_trials, print_table, report_target, write_json
@@ -62,12 +77,86 @@ def run(name: str, n_seeds: int) -> tuple[list[dict], dict]:
     return rows, summary
 
 
+def seed_processes(name: str, n_seeds: int, keep: pathlib.Path) -> list[dict]:
+    """``--processes``: seeds 0..n_seeds-1 of the built-in ``name``, one ``cgda run``
+    process each (module doc); a row a seed from its results folder."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from cgda_jax.builtin import resolve_config
+
+    config = str(resolve_config(name))
+    rows = []
+    for seed in range(n_seeds):
+        folder = keep / f"{name}-s{seed}"
+        if not (folder / "result.json").is_file():
+            if folder.exists():
+                shutil.rmtree(folder)
+            t0 = time.perf_counter()
+            proc = subprocess.run(
+                [sys.executable, "-m", "cgda_jax.cli", "run", config, "--quiet",
+                 "--set", f"strategy.seed={seed}", "--set", "output.plots=false",
+                 "--set", "output.render=false", "--out", str(folder)],
+                capture_output=True, text=True, env=dict(os.environ))
+            print(f"{name} seed {seed}: exit {proc.returncode}, "
+                  f"{time.perf_counter() - t0:.0f} s", flush=True)
+            if not (folder / "result.json").is_file():
+                rows.append({"experiment": name, "seed": seed, "success": False,
+                             "problems": proc.stderr.strip()[-300:]})
+                continue
+        r = json.loads((folder / "result.json").read_text())
+        m, replay = r["motion"], r.get("replay") or {}
+        ex = m.get("executed") or {}
+        rows.append({
+            "experiment": name, "seed": seed, "success": r["success"],
+            "max_point_error": r["max_point_error"], "tolerance": r["tolerance"],
+            "replay_error": replay.get("max_point_error"),
+            "replay_success": replay.get("success"), "replay_feasible": m["feasible"],
+            "depth_mm": 1e3 * ex["penetration_m"] if ex else None,
+            "track_deg": max(ex["tracking_deg"].values()) if ex else None,
+            "track_limit": ex.get("tracking_limit_deg"),
+            "at_limit": ex.get("saturation"), "at_limit_max": ex.get("saturation_limit"),
+            "over_90": m["moves_over_max_step"], "problems": len(m["problems"]),
+            "search_s": r["wall_time_s"], "process_s": r["total_time_s"],
+        })
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--only", choices=EXPERIMENTS, default=None)
+    parser.add_argument("--only", nargs="+", default=None, metavar="NAME",
+                        help=f"experiments (default {' '.join(EXPERIMENTS)}; with "
+                             "--processes any built-in dynamic one)")
+    parser.add_argument("--processes", action="store_true",
+                        help="each seed a `cgda run` process (module doc)")
+    parser.add_argument("--keep", type=pathlib.Path, default=None,
+                        help="with --processes: keep the results folders here")
     args = parser.parse_args()
-    names = [args.only] if args.only else list(EXPERIMENTS)
+    names = args.only or list(EXPERIMENTS)
+    if args.processes:
+        with tempfile.TemporaryDirectory() as tmp:
+            keep = args.keep or pathlib.Path(tmp)
+            rows = [row for name in names for row in seed_processes(name, args.seeds, keep)]
+        print_table(rows, ["experiment", "seed", "success", "max_point_error",
+                           "replay_error", "replay_success", "replay_feasible",
+                           "depth_mm", "track_deg", "track_limit", "at_limit",
+                           "at_limit_max", "over_90", "problems", "search_s",
+                           "process_s"])
+        for name in names:
+            mine = [r for r in rows if r["experiment"] == name]
+            checked = sum(bool(r["success"] and r.get("replay_success")
+                               and r.get("replay_feasible")) for r in mine)
+            report_target(f"{name}: successes that pass the replay and the motion "
+                          f"report, of {len(mine)} seeds", float(checked),
+                          checked >= int(np.ceil(0.9 * len(mine))))
+        write_json("bench_dynamic_seeds", {"processes": True, "rows": rows})
+        return
+    bad = sorted(set(names) - set(EXPERIMENTS))
+    if bad:
+        parser.error(f"without --processes --only takes {EXPERIMENTS}, not {bad}")
     all_rows, summaries = [], []
     for name in names:
         print(f"{name}: {args.seeds} seeds in one batched call ...", flush=True)

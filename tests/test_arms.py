@@ -54,6 +54,9 @@ def test_ie_restarts_from_sampled_postures_escape_a_local_minimum():
     assert not failed, failed
     stuck = [r for r in results if r.info["seed"] in (14, 27)]
     assert all(r.info["point_tries"][1] > 1 for r in stuck)  # it did restart
+    # independent points (no feasibility) never backtrack (`IESettings.backtracks`)
+    assert all(r.info["backtracks"] == 0 and "backtracks_used" not in r.info
+               for r in results)
 
 
 @pytest.mark.slow

@@ -300,7 +300,7 @@ class Feasibility:
         # start posture apart, computed once under a vmap over one state's
         # moves, saved ~4 % of a clean_ie generation but doubled the check's
         # compile time: a second copy of it; benchmarks/RESULTS.md)
-        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
+        d = jax.vmap(self._distances)(path)
         if not self.certify:
             return -jnp.min(d)
         # between two samples h = 1/S apart the distance changes at most at the
@@ -368,6 +368,16 @@ class Feasibility:
         return jax.vmap(self._violation)(dq, duration, approach, over)
 
     @functools.cached_property
+    def _distances(self):
+        """The check's signed distances of one posture (DoF,) -> (pairs,), as the
+        depth counts (``exact=False``), traced once: ``jax.jit``'s trace cache
+        serves every later call with the same types, and vmap batches the traced
+        program once (clean_ie's generation chunk calls it three times, under
+        the loop's and custom_vmap's batching passes: lowering 3.3 -> 2.7 s
+        CPU, the same XLA program after inlining)."""
+        return jax.jit(lambda q: self.check.distances(q, exact=False))
+
+    @functools.cached_property
     def _over_moves(self):
         """The penetration term (M,) of `moves` (q0, dq (M, DoF), need (M,)),
         batched by flattening every batch axis into the moves (`moves`)."""
@@ -427,7 +437,7 @@ class Feasibility:
             k = jnp.where(in_coarse, jnp.asarray(coarse)[e % nc],
                           jnp.asarray(rest)[e % nr])
             q = q0[move] + alphas[k][:, None] * dq[move]
-            d = jax.vmap(lambda x: self.check.distances(x, exact=False))(q)
+            d = jax.vmap(self._distances)(q)
             cbuf = jnp.where(in_coarse, jax.lax.dynamic_update_index_in_dim(
                 cbuf, d, jnp.minimum(i, n_c - 1), 0), cbuf)
             fbuf = jnp.where(in_coarse, fbuf, jax.lax.dynamic_update_index_in_dim(
@@ -475,7 +485,7 @@ class Feasibility:
         ``path`` (K, DoF) (-inf without pairs): > 0 penetrates."""
         if self.check is None:  # the geometry the moves are judged with (`worst`)
             return jnp.float32(-jnp.inf)
-        d = jax.vmap(lambda q: self.check.distances(q, exact=False))(path)
+        d = jax.vmap(self._distances)(path)
         return -jnp.min(d)
 
     def executed(self, path: Array, tracking: Array, saturation: Array) -> Array:

@@ -198,7 +198,9 @@ def run_ie(sim: Any, goal: Any, *, seed: int = 0,
 
     ``settings``: `cgda_jax.strategies.ie.IESettings`'s fields (its defaults
     otherwise). Returns an `ExecutionResult`; success = every point's executed
-    error < tolerance.
+    error < tolerance. ``info`` holds per-point generations and tries
+    (``point_tries``) and, where the points are evolved in sequence, the
+    backtracks used (``backtracks_used``, as IET's).
 
     Examples:
         >>> res = run_ie(sim, goal, tolerance=0.02)  # doctest: +SKIP

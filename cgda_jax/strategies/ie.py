@@ -34,6 +34,12 @@ execution then takes them (`IEPlan.judged_execution`) and the finish program car
 no collision check either.  A run its generation budget cuts before they are fresh is
 judged again on the host (`cgda_jax.strategies.base.PlanBase.rejudge`).
 
+Backtracks (`IESettings.backtracks`, `IEPlan.backtrack`): in the sequential context a
+point that met its goal fixes where the next point starts; when the next one's tries
+all miss, the points before it are reopened (IET's rule, `backtrack_to`) and evolved
+again from random means, inside the same compiled step (the state's shapes do not
+change: per-point budgets ``IEState.entered`` and a backtrack count).
+
 Pooled points (`IEPool`, `IEPlan.pool_step`): with independent points the batched
 trials of `cgda_jax.strategies.runner.drive_ie_points` run the (trial, point)
 evolutions still going as one pool, each point's restarts started from its
@@ -62,13 +68,15 @@ from cgda_jax.strategies.fitness import distances
 from cgda_jax.strategies.refine import REFINE, nearest_samples, polish, reachability
 from cgda_jax.strategies.settings import Settings, option
 
-__all__ = ["LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "SAMPLE_WIDTH", "STAGNATION",
-           "IEPlan", "IEPool", "IESettings", "IEState", "better_neighbour",
-           "point_keys", "position_kinematics"]
+__all__ = ["BACKTRACKS", "LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "SAMPLE_WIDTH",
+           "STAGNATION", "IEPlan", "IEPool", "IESettings", "IEState", "backtrack_to",
+           "better_neighbour", "point_keys", "position_kinematics"]
 
 #: Default restarts of a point and generations without improvement that stop a try.
 RESTARTS = 9
 STAGNATION = 40
+#: Default backtracks per run (IE with the sequential context; IET's too).
+BACKTRACKS = 8
 #: Initial search width of a local restart (from a sampled or a neighbour's
 #: posture), relative to the algorithm's own (distribution-based algorithms).
 LOCAL_STD = 0.15
@@ -77,6 +85,19 @@ RESTART_SAMPLES = 4096
 #: `IESettings.sample_positions` with `warm_start`: the samples' spread around the
 #: start posture (share of each joint's half range).
 SAMPLE_WIDTH = 0.3
+
+
+def backtrack_to(point: jax.Array, stuck: jax.Array, depth: jax.Array
+                 ) -> tuple[jax.Array, jax.Array]:
+    """The backtrack rule of IE (sequential context) and IET: ``point`` missed
+    its tolerance after every try, ``stuck`` is the point that made the last
+    backtrack and ``depth`` how many points back it went.  The k-th backtrack in a
+    row from the same point goes k points back (re-evolving only the previous
+    point rarely changes what is left: where the arm stands, what remains
+    unpainted).  Returns the first point to evolve again (>= 0) and the new
+    depth."""
+    depth = jnp.where(stuck == point, depth + 1, 1)
+    return jnp.maximum(point - depth, 0), depth
 
 
 def point_keys(key: jax.Array, n_points: int) -> jax.Array:
@@ -104,6 +125,13 @@ class IEState:
             bests of the generation whose in-order execution had the lowest
             largest point error, its errors (N) and (with feasibility) its moves'
             violations (N) (`IEPlan.keep_chain`); None otherwise.
+        entered: with backtracks (`IESettings.backtracks`, sequential context):
+            the tries each point had started when a backtrack last gave it a
+            new budget (0: never); its restarts count from there.  None
+            otherwise.
+        backtracks, stuck, depth: with backtracks: backtracks spent, the point
+            that made the last one (-1: none) and how many points back it went
+            (`backtrack_to`); None otherwise.
     """
 
     evo: Evolution
@@ -121,6 +149,10 @@ class IEState:
     chain_u: jax.Array | None = None
     chain_error: jax.Array | None = None
     chain_violation: jax.Array | None = None
+    entered: jax.Array | None = None
+    backtracks: jax.Array | None = None
+    stuck: jax.Array | None = None
+    depth: jax.Array | None = None
 
     def fresh(self) -> jax.Array:
         """Whether the last judged bests (``judged_u``) are the current ones: their
@@ -169,6 +201,19 @@ class IESettings(Settings):
             `restart_samples`), a better-solved neighbour's best posture, or a
             random mean (without samples: neighbour and random alternately); see
             `IEPlan`.
+        backtracks: with the sequential context (point i evolved from where
+            points 0..i-1 leave the arm: feasibility on, dynamic mode or a scene
+            with state), a point whose tries all stopped short of the tolerance,
+            every point before it having met its own, reopens earlier points, up
+            to this many times per run: the k-th backtrack in a row from the same
+            point reopens the k points before it (IET's rule, `backtrack_to`).
+            Their bests are discarded and each is evolved again from a random
+            mean with the full search width (so it may settle in another branch
+            of the arm's inverse kinematics); the missed point and those after it
+            get a new budget of tries and evolve on from where the reopened points
+            now leave the arm.  ``info["backtracks_used"]`` says how many were
+            spent.  0: a missed point stays missed.  Independent points (no
+            sequential context) never backtrack.
         stagnation: a try stops after this many generations without improvement
             (None: only at `max_generations`), so a stuck point restarts early.
         restart_samples: with independent points (kinematic mode, stateless
@@ -215,6 +260,7 @@ class IESettings(Settings):
     """
 
     restarts: int = option(RESTARTS, "int", 0)
+    backtracks: int = option(BACKTRACKS, "int", 0)
     stagnation: int | None = option(STAGNATION, "int", 1, none=True)
     restart_samples: int = option(RESTART_SAMPLES, "int", 0)
     warm_start: bool = option(False, "bool")
@@ -319,8 +365,12 @@ class IEPlan(PlanBase):
                                  f"divided by it), got {st.check_finer}")
             self.finer = sim.finer(int(st.check_finer))
             self.info["check_finer"] = int(st.check_finer)
+        #: backtracks per run: only points evolved in sequence have a prefix to go
+        #: back to (`backtrack`)
+        self.backtracks = int(st.backtracks) if self.sequential else 0
         self.n_nearest = min(self.restart_samples, max(1, (self.restarts + 1) // 2))
-        self.max_generations_total = self.max_generations * (1 + self.restarts)
+        self.max_generations_total = (self.max_generations * (1 + self.restarts)
+                                      * (1 + self.backtracks))
         self.unreachable = np.zeros(self.n_points, bool)
         self.reach_genes = np.zeros((self.n_points, self.n_dof), np.float32)
         self.reach_nearest = np.full(self.n_points, np.inf, np.float32)
@@ -348,7 +398,8 @@ class IEPlan(PlanBase):
         """One try of a point stops: tolerance met, its budget spent, or stalled."""
         return self.stop(evo) | self.stalled(evo)
 
-    def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None):
+    def _try(self, key, goal_point, state, t, neighbour_u=None, samples=None,
+             reopened=None):
         """Try ``t`` of a point. Try 0 starts from the mid-range mean (with
         `warm_start`: a local search at the start posture) with the point key;
         restart ``t > 0`` uses key ``fold_in(key, t)``. With restart samples,
@@ -359,7 +410,8 @@ class IEPlan(PlanBase):
         continuous, so a neighbour's posture is often in the right basin) and a
         random mean; without samples: neighbour, random, alternately.
         Without a solved neighbour a random mean replaces it. Sample and neighbour
-        restarts search locally (initial std scaled by `LOCAL_STD`)."""
+        restarts search locally (initial std scaled by `LOCAL_STD`).  A point a
+        backtrack ``reopened`` (bool) starts from a random mean, whole width."""
         k_mean, k_evo = jax.random.split(jax.random.fold_in(key, t))
         mean = jax.random.uniform(k_mean, (self.n_dof,), minval=-1.0, maxval=1.0)
         k = 0 if samples is None else samples.shape[0]
@@ -369,6 +421,8 @@ class IEPlan(PlanBase):
             use_neighbour = restart & ((t - 1) % 4 == 1)
         else:  # alternate: neighbour, random
             use_sample, use_neighbour = jnp.bool_(False), restart & ((t - 1) % 2 == 0)
+        if reopened is not None:  # `backtrack`: anywhere, another branch perhaps
+            use_sample, use_neighbour = use_sample & ~reopened, use_neighbour & ~reopened
         if neighbour_u is None:
             use_neighbour = jnp.bool_(False)
         else:
@@ -436,7 +490,11 @@ class IEPlan(PlanBase):
             **({} if not self.keeps_chain else {
                 "chain_u": jnp.full_like(best_u, jnp.nan),
                 "chain_error": jnp.full((self.n_points,), jnp.inf),
-                "chain_violation": jnp.zeros((self.n_points,))}))
+                "chain_violation": jnp.zeros((self.n_points,))}),
+            **({} if not self.backtracks else {
+                "entered": zero, "backtracks": zero[0], "stuck": zero[0] - 1,
+                "depth": zero[0]}),
+        )
 
     @property
     def judges_in_step(self) -> bool:
@@ -504,16 +562,25 @@ class IEPlan(PlanBase):
         best_f = jnp.where(better, evo.best_fitness, s.best_fitness)
         met = best_f < self.aim_tolerance
         # a try that stopped short of the tolerance restarts while tries are left
-        again = evo.done & ~met & (s.tries <= self.restarts) & ~s.done
-        if self.restarts == 0:  # never restarts (tries >= 1): nothing to trace
+        again = evo.done & ~met & self.tries_left(s) & ~s.done
+        reopened = renewed = None
+        if self.backtracks:  # a missed point reopens the points before it
+            s, reopened, renewed = self.backtrack(s, met | (evo.done & ~again),
+                                                  best_f)
+            again = again | reopened
+        if self.restarts == 0 and reopened is None:  # never restarts: no trace
             fresh = evo
         else:
             neighbours = neighbours_of(best_u, best_f)
             fresh = jax.lax.cond(  # (population-based algorithms evaluate at start)
                 jnp.any(again), lambda: jax.vmap(self._try)(
                     s.keys, goal, states, s.tries, neighbours,
-                    s.samples if self.restart_samples else None),
+                    s.samples if self.restart_samples else None, reopened),
                 lambda: evo)
+        if reopened is not None:  # their bests discarded: the new try's
+            best_u = jnp.where(reopened[:, None], fresh.best_u, best_u)
+            best_f = jnp.where(reopened, fresh.best_fitness, best_f)
+            met = best_f < self.aim_tolerance
         s = s.replace(
             generations=s.generations + jnp.where(again, evo.generation, 0),
             evaluations=s.evaluations + jnp.where(again, evo.evaluations, 0),
@@ -522,7 +589,41 @@ class IEPlan(PlanBase):
                 lambda f, e: jnp.where(again.reshape((-1,) + (1,) * (e.ndim - 1)),
                                        f, e), fresh, evo),
             tries=s.tries + again, best_u=best_u, best_fitness=best_f)
-        return s.replace(done=met | (evo.done & ~again))
+        if renewed is None:
+            return s.replace(done=met | (evo.done & ~again))
+        # a missed point given new tries restarts next generation, in its new context
+        return s.replace(done=met | (evo.done & ~again & ~renewed))
+
+    def tries_left(self, s: IEState) -> jax.Array:
+        """(N,) the points that may start another try (their budget: 1 +
+        `restarts` tries, counted since a backtrack last renewed it)."""
+        tries = s.tries if s.entered is None else s.tries - s.entered
+        return tries <= self.restarts
+
+    def backtrack(self, s: IEState, done: jax.Array, best_f: jax.Array
+                  ) -> tuple[IEState, jax.Array, jax.Array]:
+        """`IESettings.backtracks`: where the first point not finished within the
+        tolerance (the points before it finished within it) is ``done`` (N,)
+        with its tries spent and ``best_f`` (N) above the tolerance, and
+        backtracks are left, the points `backtrack_to` names before it are
+        reopened and every point from the first of them on gets a new budget of
+        tries (`IEState.entered`; a try in progress counts as its first).
+        Returns ``s`` with the backtrack counted, the reopened points (N,) (to
+        evolve again from a random mean, their bests discarded: `settle`) and
+        the renewed ones (N,); all False when no backtrack is made."""
+        k = jnp.arange(self.n_points)
+        settled = done & ((best_f < self.tolerance) | jnp.asarray(self.unreachable))
+        i = jnp.argmax(~settled)  # the first point not settled (0: all are)
+        go = done[i] & ~settled[i] & (i > 0) & (s.backtracks < self.backtracks)
+        first, depth = backtrack_to(i, s.stuck, s.depth)
+        reopened = go & (k >= first) & (k < i)
+        renewed = go & (k >= first)
+        s = s.replace(
+            entered=jnp.where(renewed, s.tries - (~done).astype(s.tries.dtype),
+                              s.entered),
+            backtracks=s.backtracks + go.astype(s.backtracks.dtype),
+            stuck=jnp.where(go, i, s.stuck), depth=jnp.where(go, depth, s.depth))
+        return s, reopened, renewed
 
     def progress(self, s):
         gens = np.asarray(s.generations + s.evo.generation)
@@ -532,6 +633,8 @@ class IEPlan(PlanBase):
             "points_met": (np.asarray(s.best_fitness) < self.tolerance
                            ).sum(axis=-1).tolist(),
             "worst_error": np.asarray(s.best_fitness).max(axis=-1).tolist(),
+            **({} if getattr(s, "backtracks", None) is None else
+               {"backtracks": np.asarray(s.backtracks).tolist()}),
         }
 
     def finish(self, s):
@@ -560,6 +663,7 @@ class IEPlan(PlanBase):
             "invalid": s.invalid + s.evo.invalid,
             "found": found,
             "tries": s.tries,
+            **({} if s.backtracks is None else {"backtracks": s.backtracks}),
         }
 
     def to_result(self, final, history, timing):
@@ -575,10 +679,13 @@ class IEPlan(PlanBase):
             point_generations=gens.tolist(),
             point_tries=final["tries"].tolist(),
             restarts=self.restarts, stagnation=self.stagnation,
+            backtracks=self.backtracks,
             invalid_evaluations=final["invalid"].sum(),
             point_invalid=final["invalid"].tolist(),
             points_without_valid=np.flatnonzero(~final["found"]).tolist(),
             **({"kept_chain": bool(final["chain"])} if "chain" in final else {}),
+            **({"backtracks_used": int(final["backtracks"])}
+               if "backtracks" in final else {}),
         )
 
     # ---- the sequential context (see the module docstring)
@@ -726,7 +833,7 @@ class IEPlan(PlanBase):
             same & jnp.isfinite(evo.best_fitness), now, evo.best_fitness))
         evo = evo.replace(done=jax.vmap(self.point_stop)(evo))
         s = s.replace(best_fitness=now, done=(now < self.aim_tolerance)
-                      | (evo.done & (s.tries > self.restarts)))
+                      | (evo.done & ~self.tries_left(s)))
         return s, evo
 
     # ---- pooled points of several trials (independent points)

@@ -34,17 +34,24 @@ from cgda_jax.strategies.base import (
 )
 from cgda_jax.strategies.evolution import evolution_ask, evolution_tell
 from cgda_jax.strategies.fitness import squared_error, total_error
-from cgda_jax.strategies.ie import LOCAL_STD, RESTART_SAMPLES, STAGNATION, IEPlan
+from cgda_jax.strategies.ie import (
+    BACKTRACKS,
+    LOCAL_STD,
+    RESTART_SAMPLES,
+    STAGNATION,
+    IEPlan,
+    backtrack_to,
+)
 from cgda_jax.strategies.refine import nearest_samples
 from cgda_jax.strategies.settings import Settings, option
 
 __all__ = ["BACKTRACKS", "LOCAL_STD", "RESTARTS", "RESTART_SAMPLES", "STAGNATION",
            "IETPlan", "IETSettings", "IETState", "tree_at", "tree_set"]
 
-#: Default restarts of a point that missed its tolerance, and backtracks per run.
-#: (Restart samples and their local search width: IE's, `cgda_jax.strategies.ie`.)
+#: Default restarts of a point that missed its tolerance.  (Backtracks per run,
+#: their rule, restart samples and their local search width: IE's,
+#: `cgda_jax.strategies.ie`.)
 RESTARTS = 6
-BACKTRACKS = 8
 
 
 @struct.dataclass
@@ -139,9 +146,10 @@ class IETSettings(Settings):
         backtracks: a point that still missed after its restarts makes the run
             re-evolve the previous point (fresh key) and try again, up to this many
             times per run; the k-th backtrack in a row from the same point
-            re-evolves the k previous points (escapes prefixes that leave no way to
-            the goal, e.g. every remaining square only reachable by sweeping across
-            another one). 0 restarts and 0 backtracks give the paper's plain
+            re-evolves the k previous points (`cgda_jax.strategies.ie.backtrack_to`,
+            IE's rule too; escapes prefixes that leave no way to the goal, e.g.
+            every remaining square only reachable by sweeping across another
+            one). 0 restarts and 0 backtracks give the paper's plain
             Algorithm 1.
         warm_start: start each point's first evolution at the previous point's
             posture (point 0: the start posture) instead of the middle of the joint
@@ -326,12 +334,9 @@ class IETPlan(PlanBase):
             return self._start(s, i, s.restart + 1)
 
         def backtrack(s):
-            # the k-th backtrack in a row from the same point goes k points back:
-            # re-evolving only the previous point rarely changes what is left
-            # (which squares remain unpainted, where the arm stands)
-            depth = jnp.where(s.stuck == i, s.depth + 1, 1)
+            first, depth = backtrack_to(i, s.stuck, s.depth)
             s = s.replace(backtracks=s.backtracks + 1, stuck=i, depth=depth)
-            return self._start(s, jnp.maximum(i - depth, 0), jnp.zeros_like(i))
+            return self._start(s, first, jnp.zeros_like(i))
 
         def stop(s):  # nothing valid to commit: every candidate diverged
             return s.replace(stopped=jnp.asarray(True))
