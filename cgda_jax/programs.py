@@ -108,7 +108,9 @@ def _key(lowered: jax.stages.Lowered, text: str) -> str | None:
     """The program's key, or None for one that must not be shared."""
     if "callback" in text:  # host callbacks: named by index, not by what they do
         return None
-    devices = [(d.platform, d.id) for d in jax.devices()]
+    # an executable runs on the devices it was compiled for: this process's (a
+    # program of process 0 of a job fails in process 1, whose device is another)
+    devices = [(d.platform, d.id) for d in jax.devices()], _local_devices()
     # every argument's type: an unused one is left out of the text, not the call
     args = [(a.shape, str(a.dtype), a.donated)
             for a in jax.tree.leaves(lowered.args_info)]
@@ -706,8 +708,9 @@ def _numerics() -> dict[str, Any]:
 def environment_digest() -> str:
     """SHA-256 of what a program depends on besides its experiment: the package's
     source (every ``cgda_jax/**/*.py``), the versions of Python, jax, jaxlib,
-    MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices, the
-    host's CPU (model, instruction sets), JAX's numerics flags and
+    MuJoCo (and MJX), evosax, optax and NumPy, the backend and its devices (this
+    process's among them: a job's processes keep programs apart), the host's CPU
+    (model, instruction sets), JAX's numerics flags and
     ``$XLA_FLAGS``."""
     flags = _numerics()
     what = repr((_source_digest(), _host(), sys.version,
@@ -715,8 +718,14 @@ def environment_digest() -> str:
                                         "evosax", "optax", "numpy")],
                  jax.default_backend(),
                  [(d.platform, d.device_kind, d.id) for d in jax.devices()],
+                 _local_devices(),
                  sorted(flags.items()), os.environ.get("XLA_FLAGS", "")))
     return hashlib.sha256(what.encode()).hexdigest()
+
+
+def _local_devices() -> tuple:
+    """This process's index and devices: a compiled program is bound to them."""
+    return jax.process_index(), [(d.platform, d.id) for d in jax.local_devices()]
 
 
 def cache_stats() -> dict[str, int]:
