@@ -426,3 +426,17 @@ def test_a_program_asked_inside_a_trace_in_its_turn_does_not_wait():
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
         prog = pool.submit(run).result(timeout=120)  # a deadlock fails here
     np.testing.assert_array_equal(prog(jnp.ones(3)), [2.0] * 3)
+
+
+def test_a_job_s_processes_keep_their_programs_apart(monkeypatch):
+    """An executable runs on the devices it was compiled for: in a cluster job,
+    process 1 must not find under a run's key the program process 0 stored
+    (it failed with "local device count is 0")."""
+    import jax
+
+    from cgda_jax.programs import environment_digest
+
+    here = environment_digest()
+    assert environment_digest() == here
+    monkeypatch.setattr(jax, "process_index", lambda: 1)
+    assert environment_digest() != here
