@@ -94,38 +94,24 @@ def descend(
         ``(best u, its loss)``: the best iterate seen, ``u0`` included, so the result
         is never worse than the start. Non-finite losses are never kept.
     """
-    opt, step = _stepper(method, learning_rate, loss)
-
-    def body(carry, _):
-        u, state, best_u, best = carry
-        value, u_next, state = step(u, state)
-        better = jnp.isfinite(value) & (value < best)
-        best_u = jnp.where(better, u, best_u)
-        best = jnp.where(better, value, best)
-        return (u_next, state, best_u, best), None
-
-    start = loss(u0)
-    start = jnp.where(jnp.isfinite(start), start, jnp.inf)
-    (u, _, best_u, best), _ = jax.lax.scan(
-        body, (u0, opt.init(u0), u0, start), None, length=int(steps))
-    last = loss(u)
-    keep = jnp.isfinite(last) & (last < best)
-    return jnp.where(keep, u, best_u), jnp.where(keep, last, best)
+    return best_iterate(*descent_path(loss, u0, method=method, steps=steps,
+                                      learning_rate=learning_rate))
 
 
 def descent_path(
     loss: Callable[[jax.Array], jax.Array],
     u0: jax.Array,
     *,
+    method: str = "adam",
     steps: int = 100,
     learning_rate: float = 0.02,
 ) -> tuple[jax.Array, jax.Array]:
-    """Every iterate of `descend` (adam) and its loss: ``u0``, each step's and the
+    """Every iterate of `descend` and its loss: ``u0``, each step's and the
     last, ``(iterates (steps + 2, D), losses (steps + 2,))``; `best_iterate` is
     `descend`'s choice among them (for losses given a term apart first, e.g.
     the moves' feasibility penalty judged together,
     `cgda_jax.strategies.fitness.polish_penalty`)."""
-    opt, step = _stepper("adam", learning_rate, loss)
+    opt, step = _stepper(method, learning_rate, loss)
 
     def body(carry, _):
         u, state = carry
