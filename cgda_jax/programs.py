@@ -27,12 +27,12 @@ versioned file named by what it computes (the key below) with a checksum; each
 key that asked for it is a small link file naming that program.  A key that
 misses but traces to a program stored before under another key (another seed,
 the package edited elsewhere: JAX's persistent cache serves the compile, so it is
-not stored again) is linked to it, and found without tracing from then on (a program JAX's
-persistent cache holds that the store never had, compiled outside a scope or
-dropped by its bound, is traced on every run: a new ``$CGDA_JAX_CACHE`` folder
-starts both afresh).  A
-file that cannot be read back (cut short, corrupt, another version) is dropped
-with a warning and the program compiled again.  The store is bounded
+not stored again) is linked to it, and found without tracing from then on (a
+program JAX's persistent cache holds that the store never had, compiled outside
+a scope or dropped by its bound, is traced on every run: a new
+``$CGDA_JAX_CACHE`` folder starts both afresh).  A file that cannot be read back
+(cut short, corrupt, another version) is dropped with a warning and the program
+compiled again.  The store is bounded
 (`MAX_STORE_BYTES` of programs, `MAX_LINKS` links; least recently used dropped).
 
 By what it computes (`compile_lowered`): outside a scope, a program is keyed by
@@ -73,7 +73,8 @@ from typing import Any
 
 import jax
 
-__all__ = ["MAX_LINKS", "MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS", "STORE_VERSION",
+__all__ = ["MAX_LINKS", "MAX_PROGRAMS", "MAX_STORE_BYTES", "RUN_ONCE_OPTIONS",
+           "STORE_VERSION",
            "cache_stats",
            "clear_programs", "compile_ahead", "compile_jit", "compile_lowered",
            "environment_digest", "files_digest", "jit_call", "program_scope", "program_store",
